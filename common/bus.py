@@ -1,0 +1,352 @@
+"""Thin Zenoh helpers: open a session from settings, publish and subscribe typed messages.
+
+Every payload is checked here, once, for all services: a sample that is too large, not msgpack,
+of the wrong shape, non-finite, or (on streams) older than ``max_age_s`` is counted per key,
+logged at a bounded rate and dropped; it never reaches a handler. Stream subscribers get the
+newest sample per key (a slow handler never holds back a producer and never sees a backlog).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
+
+import zenoh
+
+from common import codec
+from common.keys import Topic, alive_key, topic_for
+from common.messages import KeyStats, Message
+from common.settings import BusSettings, ZenohSettings
+
+log = logging.getLogger(__name__)
+M = TypeVar("M", bound=Message)
+
+HANDLER_ERROR = "handler_error"
+QUEUE_FULL = "queue_full"
+
+
+class BusUnreachable(ConnectionError):
+    """No router (or peer) could be reached with the configured endpoints and credentials."""
+
+
+def zenoh_config(z: ZenohSettings) -> zenoh.Config:
+    """A zenoh.Config from our settings; the optional raw config file is applied first."""
+    cfg = zenoh.Config.from_file(str(z.config_file)) if z.config_file else zenoh.Config()
+
+    def put(path: str, value: Any) -> None:
+        cfg.insert_json5(path, json.dumps(value))
+
+    put("mode", z.mode)
+    if z.connect:
+        put("connect/endpoints", z.connect)
+    if z.listen:
+        put("listen/endpoints", z.listen)
+    put("scouting/multicast/enabled", z.multicast_scouting)
+    put("transport/link/tx/lease", z.lease_ms)
+    put("connect/retry", {"period_init_ms": z.retry_init_ms, "period_max_ms": z.retry_max_ms,
+                          "period_increase_factor": 2})
+    if z.mode == "client":
+        put("connect/timeout_ms", z.connect_timeout_ms)
+    usrpwd: dict[str, str] = {}
+    if z.user is not None:
+        usrpwd["user"] = z.user
+    if z.password is not None:
+        usrpwd["password"] = z.password.get_secret_value()
+    if z.users_file is not None:
+        usrpwd["dictionary_file"] = str(z.users_file)
+    if usrpwd:
+        put("transport/auth/usrpwd", usrpwd)
+    tls = _tls_config(z)
+    if tls:
+        put("transport/link/tls", tls)
+    return cfg
+
+
+def _tls_config(z: ZenohSettings) -> dict[str, Any]:
+    t = z.tls
+    out: dict[str, Any] = {}
+    if t.root_ca_certificate:
+        out["root_ca_certificate"] = str(t.root_ca_certificate)
+    side = "listen" if z.mode == "router" else "connect"
+    if t.certificate:
+        out[f"{side}_certificate"] = str(t.certificate)
+    if t.private_key:
+        out[f"{side}_private_key"] = str(t.private_key)
+    if out:
+        out["enable_mtls"] = t.enable_mtls
+        out["verify_name_on_connect"] = t.verify_name_on_connect
+    return out
+
+
+def open_session(z: ZenohSettings) -> zenoh.Session:
+    """Open a Zenoh session; BusUnreachable (with the endpoints) if that fails."""
+    try:
+        return zenoh.open(zenoh_config(z))
+    except zenoh.ZError as err:
+        where = ", ".join(z.listen if z.mode == "router" else z.connect) or "(no endpoint)"
+        raise BusUnreachable(f"cannot open a Zenoh {z.mode} session on {where}: {err}") from err
+
+
+class _RateLimitedLog:
+    """Logs the first event of a kind at once, then at most one summary per ``period_s``."""
+
+    def __init__(self, period_s: float = 10.0) -> None:
+        self._period_s = period_s
+        self._last: dict[tuple[str, str], tuple[float, int]] = {}
+        self._lock = threading.Lock()
+
+    def warning(self, key: str, reason: str, detail: str) -> None:
+        now = time.monotonic()
+        with self._lock:
+            last, suppressed = self._last.get((key, reason), (-1e18, 0))
+            if now - last < self._period_s:
+                self._last[(key, reason)] = (last, suppressed + 1)
+                return
+            self._last[(key, reason)] = (now, 0)
+        more = f" (+{suppressed} more since last report)" if suppressed else ""
+        log.warning("dropped sample on %s: %s%s", key, detail, more)
+
+
+@dataclass
+class _Stats:
+    received: int = 0
+    published: int = 0
+    dropped: dict[str, int] = field(default_factory=dict)
+
+
+class Subscription:
+    """Samples of one key expression, checked by ``accept`` and handed to ``handler`` on a
+    worker thread of their own, so a slow handler never blocks Zenoh or other subscriptions."""
+
+    def __init__(self, bus: Bus, key_expr: str, accept: Callable[[str, bytes], Any | None],
+                 handler: Callable[[Any], None], *, latest: bool, queue_size: int) -> None:
+        self._bus, self._accept, self._handler, self._latest = bus, accept, handler, latest
+        self._pending: dict[str, bytes] = {}
+        self._queue: deque[tuple[str, bytes]] = deque(maxlen=queue_size)
+        self._wake = threading.Condition()
+        self._closed = False
+        self._worker = threading.Thread(target=self._run, name=f"sub:{key_expr}", daemon=True)
+        self._worker.start()
+        self._zsub = bus.session.declare_subscriber(
+            key_expr, zenoh.handlers.Callback(self._on_sample, indirect=False))
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        # Runs on Zenoh's network thread: store and return, nothing else.
+        key, payload = str(sample.key_expr), sample.payload.to_bytes()
+        with self._wake:
+            if self._latest:
+                self._pending.pop(key, None)  # re-insert: oldest key first
+                self._pending[key] = payload
+            else:
+                if len(self._queue) == self._queue.maxlen:
+                    self._bus.count_drop(key, QUEUE_FULL, "subscriber queue full, oldest dropped")
+                self._queue.append((key, payload))
+            self._wake.notify()
+
+    def _next(self) -> tuple[str, bytes] | None:
+        with self._wake:
+            while not self._closed and not self._pending and not self._queue:
+                self._wake.wait()
+            if self._closed:
+                return None
+            if self._latest:
+                key = next(iter(self._pending))
+                return key, self._pending.pop(key)
+            return self._queue.popleft()
+
+    def _run(self) -> None:
+        while (item := self._next()) is not None:
+            msg = self._accept(*item)
+            if msg is None:
+                continue
+            try:
+                self._handler(msg)
+            except Exception:  # noqa: BLE001 - a handler bug must not stop the subscription
+                self._bus.count_drop(item[0], HANDLER_ERROR, "handler raised", exc_info=True)
+
+    def close(self) -> None:
+        with self._wake:
+            self._closed = True
+            self._wake.notify_all()
+        with contextlib.suppress(zenoh.ZError):  # session already closed
+            self._zsub.undeclare()
+
+
+class Bus:
+    """A Zenoh session with our keys, codec, input checks and per-key statistics."""
+
+    def __init__(self, session: zenoh.Session, settings: BusSettings,
+                 clock: Callable[[], float] = time.time) -> None:
+        self.session = session
+        self.settings = settings
+        self.prefix = settings.prefix
+        self._clock = clock
+        self._stats: dict[str, _Stats] = {}
+        self._stats_lock = threading.Lock()
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._subscriptions: list[Subscription] = []
+        self._declared: list[Any] = []
+        self._log = _RateLimitedLog()
+
+    # --- publishing -------------------------------------------------------------------------
+
+    def publish(self, topic: Topic[M], msg: M, **params: str) -> None:
+        """Stamp ``sent_s`` and put ``msg`` on the topic's key (drop, never block, if congested)."""
+        if not isinstance(msg, topic.model):
+            raise TypeError(
+                f"{topic.path} carries {topic.model.__name__}, not {type(msg).__name__}")
+        key = topic.key(self.prefix, **params)
+        publisher = self._publishers.get(key)
+        if publisher is None:
+            publisher = self.session.declare_publisher(
+                key, encoding=zenoh.Encoding(f"{codec.CONTENT_TYPE};{topic.model.__name__}"),
+                congestion_control=zenoh.CongestionControl.DROP)
+            self._publishers[key] = publisher
+        publisher.put(codec.encode(msg, sent_s=self._clock()))
+        with self._stats_lock:
+            self._stats.setdefault(key, _Stats()).published += 1
+
+    # --- subscribing ------------------------------------------------------------------------
+
+    def subscribe(self, topic: Topic[M], handler: Callable[[M], None], *,
+                  latest: bool | None = None, max_age_s: float | None = None,
+                  queue_size: int = 1000, **params: str) -> Subscription:
+        """Call ``handler(msg)`` for every valid sample; parameters left out match any value.
+
+        ``latest`` (default: the topic is a stream) delivers only the newest sample per key and
+        drops samples older than ``max_age_s`` (default: the bus setting). Otherwise samples
+        are queued in order, at most ``queue_size``, and never dropped for age.
+        """
+        latest = topic.stream if latest is None else latest
+        if latest and max_age_s is None:
+            max_age_s = self.settings.max_age_s
+        return self._add_subscription(
+            topic.pattern(self.prefix, **params),
+            lambda key, payload: self.accept(topic, key, payload, max_age_s=max_age_s),
+            handler, latest=latest, queue_size=queue_size)
+
+    def subscribe_any(self, key_expr: str, handler: Callable[[tuple[str, Message | dict]], None],
+                      *, latest: bool = False, queue_size: int = 1000) -> Subscription:
+        """Every valid sample under ``key_expr`` as ``(key, message)``, for generic tools.
+
+        Keys of our topics are decoded with their model (invalid ones are counted and dropped);
+        other keys are handed over as plain dicts if they are msgpack maps.
+        """
+        def accept(key: str, payload: bytes) -> tuple[str, Message | dict] | None:
+            topic = topic_for(self.prefix, key)
+            if topic is not None:
+                msg = self.accept(topic, key, payload)
+                return None if msg is None else (key, msg)
+            try:
+                return key, codec.unpack(payload, max_bytes=codec.DEFAULT_MAX_BYTES)
+            except codec.DecodeError as err:
+                self.count_drop(key, err.reason, str(err))
+                return None
+
+        return self._add_subscription(key_expr, accept, handler, latest=latest,
+                                      queue_size=queue_size)
+
+    def _add_subscription(self, key_expr: str, accept: Callable[[str, bytes], Any | None],
+                          handler: Callable[[Any], None], *, latest: bool,
+                          queue_size: int) -> Subscription:
+        sub = Subscription(self, key_expr, accept, handler, latest=latest, queue_size=queue_size)
+        self._subscriptions.append(sub)
+        return sub
+
+    def accept(self, topic: Topic[M], key: str, payload: bytes,
+               *, max_age_s: float | None = None) -> M | None:
+        """Decode and check one received payload; count it; None if it was dropped."""
+        with self._stats_lock:
+            self._stats.setdefault(key, _Stats()).received += 1
+        try:
+            msg = codec.decode(topic.model, payload, max_bytes=topic.max_payload_bytes)
+        except codec.DecodeError as err:
+            self.count_drop(key, err.reason, str(err))
+            return None
+        if max_age_s is not None:
+            age = self._clock() - msg.sent_s
+            if age > max_age_s:
+                self.count_drop(key, codec.STALE, f"stale: sent {age:.3f} s ago > {max_age_s} s")
+                return None
+            if -age > self.settings.max_future_s:
+                self.count_drop(key, codec.FROM_FUTURE, f"sent {-age:.3f} s in the future "
+                                "(clock skew between hosts?)")
+                return None
+        return msg
+
+    def count_drop(self, key: str, reason: str, detail: str, exc_info: bool = False) -> None:
+        with self._stats_lock:
+            dropped = self._stats.setdefault(key, _Stats()).dropped
+            dropped[reason] = dropped.get(reason, 0) + 1
+        if exc_info:
+            log.exception("handler for %s failed", key)
+        else:
+            self._log.warning(key, reason, detail)
+
+    # --- latest-value queries and liveliness ------------------------------------------------
+
+    def serve_latest(self, topic: Topic[M], latest: Callable[[], M | None], **params: str) -> None:
+        """Answer queries on the topic's key with ``latest()`` (for late joiners)."""
+        key = topic.key(self.prefix, **params)
+
+        def reply(query: zenoh.Query) -> None:
+            msg = latest()
+            if msg is not None:
+                query.reply(key, codec.encode(msg, sent_s=self._clock()),
+                            encoding=zenoh.Encoding(codec.CONTENT_TYPE))
+
+        self._declared.append(self.session.declare_queryable(key, reply))
+
+    def query_latest(self, topic: Topic[M], timeout_s: float = 2.0, **params: str) -> list[M]:
+        """Ask every queryable of the topic for its latest value; invalid replies are dropped."""
+        out: list[M] = []
+        for reply in self.session.get(topic.pattern(self.prefix, **params), timeout=timeout_s):
+            if reply.ok is not None:
+                key = str(reply.ok.key_expr)
+                msg = self.accept(topic, key, reply.ok.payload.to_bytes())
+                if msg is not None:
+                    out.append(msg)
+        return out
+
+    def declare_alive(self, service: str, instance: str) -> None:
+        """Hold the liveliness token ``<prefix>/alive/<service>/<instance>`` until close()."""
+        token = self.session.liveliness().declare_token(alive_key(self.prefix, service, instance))
+        self._declared.append(token)
+
+    # --- health and shutdown ----------------------------------------------------------------
+
+    def key_stats(self) -> dict[str, KeyStats]:
+        with self._stats_lock:
+            return {k: KeyStats(received=s.received, published=s.published, dropped=dict(s.dropped))
+                    for k, s in self._stats.items()}
+
+    def close(self) -> None:
+        """Undeclare everything this bus declared (the session stays open)."""
+        for sub in self._subscriptions:
+            sub.close()
+        for entity in [*self._declared, *self._publishers.values()]:
+            with contextlib.suppress(zenoh.ZError):  # session already closed
+                entity.undeclare()
+        self._subscriptions.clear()
+        self._declared.clear()
+        self._publishers.clear()
+
+
+@contextmanager
+def connect(settings: BusSettings) -> Iterator[Bus]:
+    """Open a session and a Bus on it; both are closed on exit."""
+    session = open_session(settings.zenoh)
+    bus = Bus(session, settings)
+    try:
+        yield bus
+    finally:
+        bus.close()
+        session.close()

@@ -1,0 +1,127 @@
+"""Every key expression of the bus, each defined once and next to the model it carries.
+
+Keys are relative to a configurable prefix (default ``stb``)::
+
+    PTZ_STATE.key("stb", camera="ptz1")   # "stb/ptz/ptz1/state"   (publish)
+    PTZ_STATE.pattern("stb")              # "stb/ptz/*/state"      (subscribe)
+"""
+
+from __future__ import annotations
+
+import re
+import string
+from dataclasses import dataclass
+from typing import Generic, TypeVar
+
+from common import messages as m
+
+M = TypeVar("M", bound=m.Message)
+
+DEFAULT_PREFIX = "stb"
+_CHUNK = re.compile(r"^[a-z0-9_.-]+$")
+_PARAM_VALUE = re.compile(r"^[A-Za-z0-9_.-]+$")
+MIB = 1024 * 1024
+
+
+def check_prefix(prefix: str) -> str:
+    """Return ``prefix`` if it is one or more lowercase chunks without wildcards, else raise."""
+    if not prefix or not all(_CHUNK.match(chunk) for chunk in prefix.split("/")):
+        raise ValueError(
+            f"bad key prefix {prefix!r}: use lowercase chunks of a-z 0-9 _ . - separated by '/'"
+        )
+    return prefix
+
+
+@dataclass(frozen=True)
+class Topic(Generic[M]):
+    """A key expression template and the model of its payload.
+
+    ``stream`` marks a periodic stream: subscribers get the latest value per key and samples
+    older than the configured age are dropped before they reach control logic.
+    """
+
+    path: str
+    model: type[M]
+    description: str
+    stream: bool = True
+    max_payload_bytes: int = 64 * 1024
+
+    @property
+    def params(self) -> tuple[str, ...]:
+        return tuple(f for _, f, _, _ in string.Formatter().parse(self.path) if f)
+
+    def key(self, prefix: str, **params: str) -> str:
+        """The concrete key to publish on; every parameter is required."""
+        if set(params) != set(self.params):
+            raise ValueError(f"{self.path} needs parameters {self.params}, got {sorted(params)}")
+        for name, value in params.items():
+            if not _PARAM_VALUE.match(value):
+                raise ValueError(f"bad {name} {value!r} for {self.path}: use A-Z a-z 0-9 _ . -")
+        return f"{prefix}/{self.path.format(**params)}"
+
+    def pattern(self, prefix: str, **params: str) -> str:
+        """A key expression to subscribe to; parameters left out match any value."""
+        filled = {name: params.get(name, "*") for name in self.params}
+        return f"{prefix}/{self.path.format(**filled)}"
+
+    def match(self, prefix: str, key: str) -> dict[str, str] | None:
+        """The parameters of a concrete ``key`` if it belongs to this topic, else None."""
+        regex = re.escape(f"{prefix}/{self.path}")
+        for name in self.params:
+            regex = regex.replace(re.escape("{" + name + "}"), f"(?P<{name}>[^/]+)")
+        found = re.fullmatch(regex, key)
+        return found.groupdict() if found else None
+
+
+TRACKER_MARKERS = Topic("tracker/markers", m.MarkerFrame, "every mocap frame's 3-D markers",
+                        max_payload_bytes=256 * 1024)
+TRACKER_ROBOT = Topic("tracker/robot", m.RobotPosition, "robot marker position and velocity")
+PTZ_STATE = Topic("ptz/{camera}/state", m.PtzState, "pan, tilt, zoom and aim error of a camera")
+PTZ_DETECTIONS = Topic("ptz/{camera}/detections", m.MarkerDetections,
+                       "markers detected in a PTZ snapshot (calibration mode)")
+CALIB_POSE = Topic("calib/{camera}/pose", m.CameraPose,
+                   "calibrated camera pose; also answered as a queryable", stream=False)
+GANTRY_FRAME = Topic("gantry/camera/frame", m.CameraFrame, "raw tracking-camera frames",
+                     max_payload_bytes=8 * MIB)
+GANTRY_DETECTIONS = Topic("gantry/detections", m.MarkerDetections,
+                          "markers detected in a tracking-camera frame")
+GANTRY_ESTIMATE = Topic("gantry/estimate", m.RobotEstimate, "filtered robot position")
+GANTRY_SETPOINT = Topic("gantry/setpoint", m.CraneSetpoint,
+                        "crane setpoints, 4 Hz; only the gantry service may put them")
+GANTRY_STATE = Topic("gantry/state", m.CraneState, "crane position and the gantry's status")
+TRUTH_ROBOT = Topic("sim/truth/robot/{robot}", m.RobotTruth, "sim only: true robot marker")
+TRUTH_CRANE = Topic("sim/truth/crane", m.CraneTruth, "sim only: true crane position")
+TRUTH_PTZ = Topic("sim/truth/ptz/{camera}", m.PtzTruth, "sim only: true camera pan/tilt/zoom")
+HEALTH = Topic("health/{service}/{instance}", m.ServiceHealth,
+               "each service's health, 1 Hz", stream=False)
+
+ALL_TOPICS: tuple[Topic, ...] = (
+    TRACKER_MARKERS, TRACKER_ROBOT, PTZ_STATE, PTZ_DETECTIONS, CALIB_POSE, GANTRY_FRAME,
+    GANTRY_DETECTIONS, GANTRY_ESTIMATE, GANTRY_SETPOINT, GANTRY_STATE, TRUTH_ROBOT, TRUTH_CRANE,
+    TRUTH_PTZ, HEALTH,
+)
+
+ALIVE = "alive/{service}/{instance}"
+"""Liveliness tokens (no payload): present while the service runs and reaches the router."""
+
+
+def alive_key(prefix: str, service: str, instance: str) -> str:
+    return f"{prefix}/{ALIVE.format(service=service, instance=instance)}"
+
+
+def alive_pattern(prefix: str) -> str:
+    return f"{prefix}/alive/**"
+
+
+def parse_alive(prefix: str, key: str) -> tuple[str, str] | None:
+    """(service, instance) of a liveliness key, or None if it is not one."""
+    parts = key.split("/")
+    base = prefix.split("/")
+    if len(parts) != len(base) + 3 or parts[: len(base)] != base or parts[len(base)] != "alive":
+        return None
+    return parts[-2], parts[-1]
+
+
+def topic_for(prefix: str, key: str) -> Topic | None:
+    """The topic a concrete key belongs to, or None."""
+    return next((t for t in ALL_TOPICS if t.match(prefix, key) is not None), None)

@@ -1,0 +1,240 @@
+"""Every message that crosses the bus: one frozen pydantic model per key expression.
+
+Conventions (see docs/wire-format.md, which is generated from this module):
+
+* units are in field names: ``_mm``, ``_deg``, ``_px``, ``_s``, ``_mm_s``;
+* world frame: x, y horizontal, z up, millimetres (the mocap's frame);
+* every message carries ``measured_s`` (when the value was *measured*, UNIX seconds, wall clock)
+  and ``sent_s`` (when it was published; filled in by the bus, so producers leave it at 0);
+* decoding is strict: no extra or missing fields, no NaN or infinity, no silent type coercion.
+  Missing data is left out (an absent marker), never sent as NaN.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+Name = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")]
+
+
+class Message(BaseModel):
+    """Base of every bus message: frozen, strict, finite, with its two time stamps."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True, allow_inf_nan=False)
+
+    measured_s: float = Field(description="time of measurement, UNIX seconds (wall clock)")
+    sent_s: float = Field(0.0, description="time of publication, UNIX seconds; set by the bus")
+
+
+# --- tracker ----------------------------------------------------------------------------------
+
+
+class Marker(BaseModel):
+    """One 3-D marker of a mocap frame, in the world frame."""
+
+    model_config = Message.model_config
+
+    label: str = Field("", max_length=64, description='QTM label; "" for an unlabelled marker')
+    id: int = Field(0, ge=0, description="QTM id of an unlabelled marker; 0 for labelled ones")
+    x_mm: float
+    y_mm: float
+    z_mm: float
+
+
+class MarkerFrame(Message):
+    """All markers seen in one mocap frame. Markers the mocap lost are absent."""
+
+    frame: int = Field(ge=0, description="mocap frame number")
+    markers: list[Marker] = Field(max_length=1000)
+
+
+class RobotPosition(Message):
+    """The robot marker's position and velocity, in the world frame."""
+
+    label: str = Field("", max_length=64, description='marker label; "" if picked by motion')
+    x_mm: float
+    y_mm: float
+    z_mm: float
+    vx_mm_s: float
+    vy_mm_s: float
+    vz_mm_s: float
+
+
+# --- marker detections (PTZ calibration mode and the gantry's tracking camera) ---------------
+
+
+class DetectedMarker(BaseModel):
+    """One bright round region found by the paper's detector (§2.1)."""
+
+    model_config = Message.model_config
+
+    u_px: float = Field(description="column of the centroid, 0 = left edge")
+    v_px: float = Field(description="row of the centroid, 0 = top edge")
+    radius_long_px: float = Field(ge=0)
+    radius_short_px: float = Field(ge=0)
+    angle_deg: float = Field(ge=-180, le=180, description="direction of the long axis")
+    roundness: float = Field(ge=1, description="radius_long / radius_short")
+    area_px: int = Field(ge=0)
+
+
+class MarkerDetections(Message):
+    """The detector's result for one camera image (``measured_s`` = capture time)."""
+
+    camera: Name
+    status: Literal["ok", "none", "too_many"]
+    threshold: int = Field(ge=0, le=255, description="gray threshold finally used")
+    width_px: int = Field(gt=0)
+    height_px: int = Field(gt=0)
+    markers: list[DetectedMarker] = Field(max_length=256)
+
+
+# --- PTZ ----------------------------------------------------------------------------------------
+
+PtzStatus = Literal["waiting_for_pose", "tracking", "idle", "calibrating", "camera_unreachable"]
+
+
+class PtzState(Message):
+    """What a PTZ camera reports and how well it points at the robot."""
+
+    camera: Name
+    status: PtzStatus
+    pan_deg: float = Field(ge=-180, le=180)
+    tilt_deg: float = Field(ge=-90, le=90)
+    zoom: int = Field(ge=1, le=19999, description="VAPIX zoom step, 1 = wide")
+    focal_mm: float = Field(gt=0, description="focal length for that zoom step")
+    aim_error_deg: float = Field(
+        ge=0, description="angle between the optical axis and the robot; 0 if not tracking"
+    )
+
+
+# --- calibration --------------------------------------------------------------------------------
+
+
+class CameraPose(Message):
+    """A camera's calibrated pose T_world_camera (paper eq. 1: R = Rx·Ry·Rz; x = optical axis)."""
+
+    camera: Name
+    x_mm: float
+    y_mm: float
+    z_mm: float
+    rx_deg: float
+    ry_deg: float
+    rz_deg: float
+    focal_mm: float = Field(gt=0, description="focal length the pose was fitted with")
+    mean_error_px: float = Field(ge=0, description="mean reprojection error over the inliers")
+    passpoints: int = Field(ge=0, description="passpoints used (inliers)")
+    time_offset_s: float = Field(0.0, description="camera clock minus mocap clock, if fitted")
+
+
+# --- gantry -------------------------------------------------------------------------------------
+
+
+class CameraFrame(Message):
+    """A raw tracking-camera image from a camera host (``measured_s`` = capture time)."""
+
+    camera: Name
+    seq: int = Field(ge=0, description="frame counter of the camera host")
+    width_px: int = Field(gt=0, le=8192)
+    height_px: int = Field(gt=0, le=8192)
+    encoding: Literal["mono8", "jpeg"] = Field(description="mono8: row-major uint8 pixels")
+    data: bytes
+
+
+Algorithm = Literal["basic", "pf-position", "pf-position-gauss", "pf-velocity", "default"]
+
+
+class RobotEstimate(Message):
+    """The gantry's estimate of the robot marker (``measured_s`` = capture time of its frame)."""
+
+    algorithm: Algorithm
+    valid: bool = Field(description="False while the marker is lost")
+    x_mm: float
+    y_mm: float
+    z_mm: float
+    vx_mm_s: float
+    vy_mm_s: float
+
+
+class CraneSetpoint(Message):
+    """Where the crane shall go. Only the gantry service may publish it."""
+
+    seq: int = Field(ge=0, description="increases by one per setpoint of one gantry run")
+    x_mm: float
+    y_mm: float
+    hold: bool = Field(description="True: stay where you are (no valid estimate)")
+
+
+CraneStatus = Literal["idle", "tracking", "holding", "stale", "fault", "unreachable"]
+
+
+class CraneState(Message):
+    """The crane as its controller reports it, and what the gantry service is doing."""
+
+    status: CraneStatus
+    x_mm: float
+    y_mm: float
+    target_x_mm: float
+    target_y_mm: float
+    enabled: bool
+    moving: bool
+    fault_bits: int = Field(ge=0, le=0xFFFF, description="controller fault register")
+
+
+# --- simulation ground truth (tests and evaluation only) ----------------------------------------
+
+
+class RobotTruth(Message):
+    """Where the simulated robot marker really is."""
+
+    robot: Name
+    x_mm: float
+    y_mm: float
+    z_mm: float
+    vx_mm_s: float
+    vy_mm_s: float
+
+
+class CraneTruth(Message):
+    """Where the simulated crane really is."""
+
+    x_mm: float
+    y_mm: float
+    vx_mm_s: float
+    vy_mm_s: float
+
+
+class PtzTruth(Message):
+    """A simulated PTZ camera's real pan, tilt and zoom."""
+
+    camera: Name
+    pan_deg: float
+    tilt_deg: float
+    zoom: int = Field(ge=1, le=19999)
+
+
+# --- health -------------------------------------------------------------------------------------
+
+
+class KeyStats(BaseModel):
+    """Traffic of one key expression as one service sees it."""
+
+    model_config = Message.model_config
+
+    received: int = Field(ge=0)
+    published: int = Field(ge=0)
+    dropped: dict[str, int] = Field(description="dropped samples by reason, e.g. not_msgpack")
+
+
+class ServiceHealth(Message):
+    """Published by every service once per second."""
+
+    service: Name
+    instance: Name
+    host: str = Field(max_length=255)
+    pid: int = Field(ge=0)
+    started_s: float
+    status: Literal["ok", "degraded", "stopping"]
+    detail: str = Field("", max_length=500, description="why degraded, if it is")
+    keys: dict[str, KeyStats] = Field(description="per concrete key expression")

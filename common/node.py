@@ -1,0 +1,115 @@
+"""What every service process does around its own work: connect, announce, report, stop cleanly.
+
+``run_node`` opens the session, holds the liveliness token ``<prefix>/alive/<service>/<instance>``,
+publishes ``ServiceHealth`` once per ``health_period_s`` (with the bus's per-key counters), turns
+SIGINT/SIGTERM into ``node.stop`` and closes everything on the way out.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import socket
+import threading
+import time
+from collections.abc import Callable
+from types import FrameType
+
+from common import keys
+from common.bus import Bus, BusUnreachable, open_session
+from common.messages import ServiceHealth
+from common.settings import ServiceSettings
+
+log = logging.getLogger(__name__)
+
+EXIT_OK = 0
+EXIT_UNREACHABLE = 3
+
+
+class Node:
+    """A running service as its own code sees it: the bus, a stop event and a status."""
+
+    def __init__(self, service: str, settings: ServiceSettings, bus: Bus) -> None:
+        self.service = service
+        self.settings = settings
+        self.bus = bus
+        self.stop = threading.Event()
+        self.started_s = time.time()
+        self._status: tuple[str, str] = ("ok", "")
+
+    def set_status(self, status: str, detail: str = "") -> None:
+        """``ok`` or ``degraded`` (with a reason); shows in the published health."""
+        if (status, detail) != self._status:
+            log.info("status %s%s", status, f": {detail}" if detail else "")
+        self._status = (status, detail)
+
+    def health(self) -> ServiceHealth:
+        status, detail = ("stopping", "") if self.stop.is_set() else self._status
+        return ServiceHealth(
+            measured_s=time.time(), service=self.service, instance=self.settings.instance,
+            host=socket.gethostname()[:255], pid=os.getpid(), started_s=self.started_s,
+            status=status, detail=detail[:500], keys=self.bus.key_stats())
+
+    def publish_health(self) -> None:
+        self.bus.publish(keys.HEALTH, self.health(), service=self.service,
+                         instance=self.settings.instance)
+
+
+def configure_logging(level: str) -> None:
+    logging.basicConfig(level=level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+
+
+def run_node(service: str, settings: ServiceSettings, body: Callable[[Node], None]) -> int:
+    """Run ``body(node)`` as service ``service`` until it returns or a signal stops it.
+
+    ``body`` must return soon after ``node.stop`` is set. Returns the process exit code.
+    """
+    try:
+        session = open_session(settings.zenoh_settings())
+    except BusUnreachable as err:
+        log.error("%s", err)
+        return EXIT_UNREACHABLE
+    bus = Bus(session, settings.bus)
+    node = Node(service, settings, bus)
+    restore = stop_on_signals(node.stop)
+    health = threading.Thread(target=_health_loop, args=(node,), name="health", daemon=True)
+    try:
+        bus.declare_alive(service, settings.instance)
+        health.start()
+        log.info("%s/%s running (prefix %s)", service, settings.instance, bus.prefix)
+        body(node)
+    finally:
+        node.stop.set()
+        health.join(timeout=2)
+        _try(node.publish_health)
+        bus.close()
+        session.close()
+        restore()
+        log.info("%s/%s stopped", service, settings.instance)
+    return EXIT_OK
+
+
+def _health_loop(node: Node) -> None:
+    while not node.stop.wait(node.settings.bus.health_period_s):
+        _try(node.publish_health)
+
+
+def _try(action: Callable[[], None]) -> None:
+    try:
+        action()
+    except Exception:  # noqa: BLE001 - health reporting must never kill the service
+        log.debug("health publication failed", exc_info=True)
+
+
+def stop_on_signals(stop: threading.Event) -> Callable[[], None]:
+    """Set ``stop`` on SIGINT/SIGTERM (main thread only); returns a function that undoes it."""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+
+    def handler(signum: int, _frame: FrameType | None) -> None:
+        log.info("received %s, stopping", signal.Signals(signum).name)
+        stop.set()
+
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    return lambda: [signal.signal(s, h) for s, h in previous.items()] and None

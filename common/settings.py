@@ -1,0 +1,190 @@
+"""Settings of every service: one lab config file plus environment variables, validated once.
+
+Precedence, lowest first: defaults < the lab file (``[bus]`` for everyone, then the service's own
+``[<section>]`` table) < environment (``STB_BUS__<FIELD>`` for everyone, then
+``STB_<SECTION>__<FIELD>``; nested fields with ``__``; lists and tables as JSON) < command-line
+overrides. With no configuration at all a service runs against the simulator on loopback.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, ClassVar, Literal, TypeVar
+
+from pydantic import BaseModel, ConfigDict, Field, SecretStr, ValidationError, field_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from common.keys import DEFAULT_PREFIX, check_prefix
+
+S = TypeVar("S", bound="ServiceSettings")
+
+CONFIG_ENV = "STB_LAB"
+LogLevel = Literal["DEBUG", "INFO", "WARNING", "ERROR"]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class TlsSettings(_Strict):
+    """TLS for links to the router (``tls/`` endpoints); paths to PEM files."""
+
+    root_ca_certificate: Path | None = None
+    certificate: Path | None = Field(None, description="own certificate (router: listen side)")
+    private_key: Path | None = None
+    enable_mtls: bool = False
+    verify_name_on_connect: bool = True
+
+
+class ZenohSettings(_Strict):
+    """How a node joins the Zenoh network."""
+
+    mode: Literal["client", "peer", "router"] = "client"
+    connect: list[str] = Field(default_factory=lambda: ["tcp/127.0.0.1:7447"])
+    listen: list[str] = Field(default_factory=list)
+    multicast_scouting: bool = False
+    user: str | None = None
+    password: SecretStr | None = None
+    users_file: Path | None = Field(None, description="router only: 'user:password' lines")
+    tls: TlsSettings = TlsSettings()
+    config_file: Path | None = Field(
+        None, description="a Zenoh JSON5/YAML config applied first (e.g. access control)"
+    )
+    lease_ms: int = Field(2000, ge=200, description="how soon peers notice that we are gone")
+    connect_timeout_ms: int = Field(
+        10_000, ge=-1, description="client start-up: wait this long for a router (-1: forever)"
+    )
+    retry_init_ms: int = Field(100, ge=10)
+    retry_max_ms: int = Field(500, ge=10)
+
+    @field_validator("connect", "listen")
+    @classmethod
+    def _endpoints_look_right(cls, endpoints: list[str]) -> list[str]:
+        for endpoint in endpoints:
+            proto, sep, addr = endpoint.partition("/")
+            if not sep or not proto or not addr:
+                raise ValueError(f"endpoint {endpoint!r} is not '<proto>/<address>:<port>'")
+        return endpoints
+
+
+class BusSettings(_Strict):
+    """Key prefix, input limits and the Zenoh link, shared by every service of a lab."""
+
+    prefix: str = DEFAULT_PREFIX
+    max_age_s: float = Field(
+        0.5, gt=0, description="stream samples older than this are dropped (needs synced clocks)"
+    )
+    max_future_s: float = Field(0.5, gt=0, description="tolerated clock skew into the future")
+    health_period_s: float = Field(1.0, gt=0)
+    zenoh: ZenohSettings = ZenohSettings()
+
+    @field_validator("prefix")
+    @classmethod
+    def _prefix_is_a_key(cls, prefix: str) -> str:
+        return check_prefix(prefix)
+
+
+class ServiceSettings(BaseSettings):
+    """Base of every service's settings; subclasses set ``section`` and add their fields."""
+
+    model_config = SettingsConfigDict(extra="forbid", frozen=True, validate_default=True)
+    section: ClassVar[str] = "service"
+
+    instance: str = Field("main", pattern=r"^[A-Za-z0-9_.-]{1,64}$")
+    log_level: LogLevel = "INFO"
+    bus: BusSettings = BusSettings()
+
+    def zenoh_settings(self) -> ZenohSettings:
+        """How this service joins the bus (the router overrides this)."""
+        return self.bus.zenoh
+
+    @classmethod
+    def settings_customise_sources(cls, settings_cls, init_settings, **_ignored):  # type: ignore[no-untyped-def]
+        # Environment and files are merged by load_settings() in a documented order;
+        # constructing with keywords (tests) reads nothing else.
+        return (init_settings,)
+
+
+class ConfigError(Exception):
+    """Bad configuration: the message names every bad field and where it may come from."""
+
+
+def load_settings(
+    cls: type[S],
+    config_file: Path | None = None,
+    overrides: Mapping[str, Any] | None = None,
+    environ: Mapping[str, str] | None = None,
+) -> S:
+    """Build ``cls`` from the lab file, the environment and ``overrides``; see module doc."""
+    environ = os.environ if environ is None else environ
+    if config_file is None and environ.get(CONFIG_ENV):
+        config_file = Path(environ[CONFIG_ENV])
+    merged: dict[str, Any] = {}
+    if config_file is not None:
+        lab = read_lab_file(config_file)
+        _deep_merge(merged, {"bus": lab.get("bus", {})})
+        _deep_merge(merged, lab.get(cls.section, {}))
+    _deep_merge(merged, {"bus": _env("STB_BUS__", environ)})
+    _deep_merge(merged, _env(f"STB_{cls.section.upper()}__", environ))
+    _deep_merge(merged, dict(overrides or {}))
+    try:
+        return cls(**merged)
+    except ValidationError as err:
+        raise ConfigError(describe_errors(err, cls.section, config_file)) from None
+
+
+def read_lab_file(path: Path) -> dict[str, Any]:
+    """The lab file as a dict; ConfigError if it is missing or not TOML."""
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except OSError as err:
+        raise ConfigError(f"cannot read lab config {path}: {err.strerror}") from None
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"lab config {path} is not valid TOML: {err}") from None
+
+
+def describe_errors(err: ValidationError, section: str, config_file: Path | None) -> str:
+    where = f"[{section}] of {config_file}" if config_file else "the defaults"
+    lines = [f"invalid {section} settings (from {where}, STB_{section.upper()}__* or flags):"]
+    for e in err.errors():
+        field = ".".join(str(p) for p in e["loc"]) or "<settings>"
+        got = "" if e["type"] == "missing" else f" (got {e.get('input')!r})"
+        lines.append(f"  {section}.{field}: {e['msg']}{got}")
+    return "\n".join(lines)
+
+
+def _env(prefix: str, environ: Mapping[str, str]) -> dict[str, Any]:
+    """Nested dict from variables ``<prefix>A__B=value``; values starting with [ { " are JSON."""
+    out: dict[str, Any] = {}
+    for name, value in environ.items():
+        if not name.upper().startswith(prefix):
+            continue
+        *parents, leaf = name[len(prefix):].lower().split("__")
+        target = out
+        for parent in parents:
+            target = target.setdefault(parent, {})
+        target[leaf] = _maybe_json(value)
+    return out
+
+
+def _maybe_json(value: str) -> Any:
+    if value[:1] in ("[", "{", '"'):
+        try:
+            return json.loads(value)
+        except json.JSONDecodeError:
+            return value
+    return value
+
+
+def _deep_merge(into: dict[str, Any], new: Mapping[str, Any]) -> dict[str, Any]:
+    for key, value in new.items():
+        if isinstance(value, Mapping) and isinstance(into.get(key), dict):
+            _deep_merge(into[key], value)
+        else:
+            into[key] = dict(value) if isinstance(value, Mapping) else value
+    return into

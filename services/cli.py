@@ -1,0 +1,98 @@
+"""The ``stb`` command: ``stb <service>``, ``stb up``, ``stb monitor``, ``stb config check``."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+import threading
+from collections.abc import Sequence
+from pathlib import Path
+
+from common.node import configure_logging, stop_on_signals
+from common.settings import ConfigError, load_settings, read_lab_file
+from services.entry import EXIT_CONFIG, base_parser, overrides_from
+from services.registry import SERVICES, TOOLS, settings_class
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help"):
+        print(_usage())
+        return 0 if argv else 2
+    command, rest = argv[0], argv[1:]
+    if command in SERVICES:
+        return importlib.import_module(f"services.{command}.__main__").main(rest)
+    if command == "monitor":
+        from services.monitor.__main__ import main as monitor_main
+
+        return monitor_main(rest)
+    if command == "up":
+        return _up(rest)
+    if command == "config":
+        return _config(rest)
+    print(f"stb: unknown command {command!r}\n\n{_usage()}", file=sys.stderr)
+    return 2
+
+
+def _usage() -> str:
+    lines = ["usage: stb COMMAND [--lab FILE] [options]   (stb COMMAND --help for more)", "",
+             "services:"]
+    lines += [f"  {name:<10} {info.description}" for name, info in SERVICES.items()]
+    lines += ["", "tools:"] + [f"  {name:<10} {info.description}" for name, info in TOOLS.items()]
+    return "\n".join(lines)
+
+
+def _up(argv: list[str]) -> int:
+    from services import supervisor
+
+    parser = base_parser("stb up", supervisor.__doc__ or "")
+    parser.add_argument("--only", help="comma-separated services, e.g. router,sim")
+    parser.add_argument("--no-view", action="store_true", help="log lines instead of a live table")
+    args = parser.parse_args(argv)
+    try:
+        overrides = overrides_from(args)
+        if args.only:
+            overrides["services"] = args.only.split(",")
+        settings = load_settings(supervisor.UpSettings, args.lab, overrides)
+    except ConfigError as err:
+        print(f"stb up: {err}", file=sys.stderr)
+        return EXIT_CONFIG
+    configure_logging(settings.log_level)
+    stop = threading.Event()
+    restore = stop_on_signals(stop)
+    try:
+        view = not args.no_view and sys.stdout.isatty()
+        return supervisor.run(settings, args.lab, stop, view=view)
+    finally:
+        restore()
+
+
+def _config(argv: list[str]) -> int:
+    """``stb config check --lab FILE``: validate every section a service would read."""
+    parser = argparse.ArgumentParser(prog="stb config")
+    parser.add_argument("action", choices=["check"])
+    parser.add_argument("--lab", type=Path, required=True)
+    args = parser.parse_args(argv)
+    try:
+        sections = read_lab_file(args.lab)
+    except ConfigError as err:
+        print(f"stb config: {err}", file=sys.stderr)
+        return EXIT_CONFIG
+    known = {name: info for name, info in {**SERVICES, **TOOLS}.items() if info.settings}
+    errors = [f"unknown section [{name}] (known: bus, {', '.join(sorted(known))})"
+              for name in sorted(set(sections) - set(known) - {"bus"})]
+    for info in known.values():
+        try:
+            load_settings(settings_class(info), args.lab, environ={})
+        except ConfigError as err:
+            errors.append(str(err))
+    for error in errors:
+        print(error, file=sys.stderr)
+    if not errors:
+        print(f"{args.lab}: ok")
+    return EXIT_CONFIG if errors else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

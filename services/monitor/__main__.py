@@ -1,0 +1,97 @@
+"""``stb monitor [--raw KEYEXPR] [--duration S]``: a remote monitoring subscriber.
+
+Without ``--raw`` it redraws a table of alive services and of every key's latest value, rate
+and age once per second. With ``--raw`` it prints every valid sample under KEYEXPR as one JSON
+line. It joins the bus as a client (``--connect tcp/ROUTER:7447``) and never publishes.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from collections.abc import Sequence
+
+import zenoh
+
+from common import keys
+from common.bus import Bus, BusUnreachable, open_session
+from common.node import configure_logging, stop_on_signals
+from common.settings import ConfigError, load_settings
+from services.entry import EXIT_CONFIG, base_parser, overrides_from
+from services.monitor.settings import MonitorSettings
+from services.monitor.view import LabView, json_line
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = base_parser("stb monitor", __doc__ or "")
+    parser.add_argument("--raw", metavar="KEYEXPR", help="print samples under KEYEXPR as JSON")
+    parser.add_argument("--duration", type=float, help="stop after this many seconds")
+    args = parser.parse_args(argv)
+    try:
+        settings = load_settings(MonitorSettings, args.lab, overrides_from(args))
+    except ConfigError as err:
+        print(f"stb monitor: {err}", file=sys.stderr)
+        return EXIT_CONFIG
+    configure_logging(settings.log_level)
+    try:
+        session = open_session(settings.zenoh_settings())
+    except BusUnreachable as err:
+        print(f"stb monitor: {err}", file=sys.stderr)
+        return 3
+    stop = threading.Event()
+    restore = stop_on_signals(stop)
+    bus = Bus(session, settings.bus)
+    try:
+        if args.raw:
+            _raw(bus, args.raw, stop, args.duration)
+        else:
+            _table(bus, settings, stop, args.duration)
+    finally:
+        bus.close()
+        session.close()
+        restore()
+    return 0
+
+
+def _raw(bus: Bus, key_expr: str, stop: threading.Event, duration: float | None) -> None:
+    def show(item: tuple[str, object]) -> None:
+        print(json_line(*item), flush=True)  # type: ignore[arg-type]
+
+    bus.subscribe_any(key_expr, show)
+    stop.wait(duration)
+
+
+def _table(bus: Bus, settings: MonitorSettings, stop: threading.Event,
+           duration: float | None) -> None:
+    view = LabView()
+    lock = threading.Lock()
+
+    def on_sample(item: tuple[str, object]) -> None:
+        with lock:
+            view.on_sample(item[0], item[1], time.time())  # type: ignore[arg-type]
+
+    def on_alive(sample: zenoh.Sample) -> None:
+        parsed = keys.parse_alive(bus.prefix, str(sample.key_expr))
+        if parsed:
+            with lock:
+                view.on_alive(*parsed, alive=sample.kind == zenoh.SampleKind.PUT)
+
+    bus.subscribe_any(f"{bus.prefix}/**", on_sample, latest=True)
+    token_sub = bus.session.liveliness().declare_subscriber(
+        keys.alive_pattern(bus.prefix), on_alive, history=True)
+    deadline = None if duration is None else time.monotonic() + duration
+    tty = sys.stdout.isatty()
+    try:
+        while not stop.wait(settings.refresh_s):
+            with lock:
+                text = view.render(time.time())
+            print(("\x1b[H\x1b[2J" if tty else "") + text + ("" if tty else "\n---"), flush=True)
+            if deadline is not None and time.monotonic() > deadline:
+                break
+    finally:
+        token_sub.undeclare()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

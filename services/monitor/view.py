@@ -1,0 +1,105 @@
+"""What the monitor shows, as pure functions of what it has received (no I/O, no clock)."""
+
+from __future__ import annotations
+
+import base64
+import json
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+from pydantic import BaseModel
+
+RATE_WINDOW_S = 5.0
+
+
+def to_plain(msg: BaseModel | dict) -> dict[str, Any]:
+    """A JSON-ready dict of a message; bytes become base64 strings."""
+    data = msg.model_dump() if isinstance(msg, BaseModel) else dict(msg)
+    return _plain(data)
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, bytes):
+        return base64.b64encode(value).decode("ascii")
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    return value
+
+
+def json_line(key: str, msg: BaseModel | dict) -> str:
+    """One ``--raw`` output line: the key, the model name and every field."""
+    kind = type(msg).__name__ if isinstance(msg, BaseModel) else "msgpack"
+    return json.dumps({"key": key, "type": kind, **to_plain(msg)}, allow_nan=False)
+
+
+def summary(msg: BaseModel | dict, width: int = 60) -> str:
+    """A short one-line digest of a message for the table."""
+    parts = []
+    for name, value in to_plain(msg).items():
+        if name in ("measured_s", "sent_s"):
+            continue
+        if isinstance(value, float):
+            value = f"{value:.1f}"
+        elif isinstance(value, list):
+            value = f"[{len(value)}]"
+        elif isinstance(value, dict):
+            value = f"{{{len(value)}}}"
+        elif isinstance(value, str) and len(value) > 16:
+            value = f"<{len(value)} chars>"
+        parts.append(f"{name}={value}")
+    text = " ".join(parts)
+    return text if len(text) <= width else text[: width - 1] + "…"
+
+
+@dataclass
+class KeyView:
+    latest: BaseModel | dict
+    received_s: deque[float] = field(default_factory=deque)
+
+    def add(self, msg: BaseModel | dict, now_s: float) -> None:
+        self.latest = msg
+        self.received_s.append(now_s)
+        while self.received_s and now_s - self.received_s[0] > RATE_WINDOW_S:
+            self.received_s.popleft()
+
+    def rate_hz(self, now_s: float) -> float:
+        recent = [t for t in self.received_s if now_s - t <= RATE_WINDOW_S]
+        if len(recent) < 2:
+            return 0.0
+        return (len(recent) - 1) / max(recent[-1] - recent[0], 1e-9)
+
+    def age_s(self, now_s: float) -> float:
+        return now_s - self.received_s[-1] if self.received_s else float("inf")
+
+
+@dataclass
+class LabView:
+    """Everything the monitor knows: alive services and the latest sample of every key."""
+
+    alive: set[tuple[str, str]] = field(default_factory=set)
+    keys: dict[str, KeyView] = field(default_factory=dict)
+
+    def on_sample(self, key: str, msg: BaseModel | dict, now_s: float) -> None:
+        view = self.keys.get(key)
+        if view is None:
+            self.keys[key] = view = KeyView(msg)
+        view.add(msg, now_s)
+
+    def on_alive(self, service: str, instance: str, alive: bool) -> None:
+        (self.alive.add if alive else self.alive.discard)((service, instance))
+
+    def render(self, now_s: float) -> str:
+        lines = [f"alive services ({len(self.alive)}):"]
+        lines += [f"  {s}/{i}" for s, i in sorted(self.alive)] or ["  (none)"]
+        lines.append("")
+        lines.append(f"{'key':<36} {'rate Hz':>8} {'age s':>7}  latest")
+        for key in sorted(self.keys):
+            view = self.keys[key]
+            lines.append(f"{key:<36} {view.rate_hz(now_s):8.1f} {view.age_s(now_s):7.1f}  "
+                         f"{summary(view.latest)}")
+        if not self.keys:
+            lines.append("(no samples yet)")
+        return "\n".join(lines)

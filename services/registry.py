@@ -1,0 +1,41 @@
+"""The services the ``stb`` command knows, and which of them ``stb up`` runs by default.
+
+A service is a package ``services.<name>`` whose ``__main__`` has ``main(argv)`` and whose
+``settings`` module holds its settings class. It is listed here once it exists; ``stb up`` runs
+``DEFAULT_UP`` unless the lab file's ``[up] services`` says otherwise.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+
+from common.settings import ServiceSettings
+
+
+@dataclass(frozen=True)
+class ServiceInfo:
+    description: str
+    settings: str  # "module:Class"
+
+
+SERVICES: dict[str, ServiceInfo] = {
+    "router": ServiceInfo("embedded Zenoh router (lab: eclipse/zenoh or this)",
+                          "services.router.settings:RouterSettings"),
+}
+
+TOOLS: dict[str, ServiceInfo] = {
+    "up": ServiceInfo("run the router and every service as supervised processes",
+                      "services.supervisor:UpSettings"),
+    "monitor": ServiceInfo("live table of alive services and every key's latest value; --raw",
+                           "services.monitor.settings:MonitorSettings"),
+    "config": ServiceInfo("check a lab config file: stb config check --lab FILE", ""),
+}
+
+DEFAULT_UP: tuple[str, ...] = ("router",)
+"""What ``stb up`` starts when the lab file does not say: everything that exists so far."""
+
+
+def settings_class(info: ServiceInfo) -> type[ServiceSettings]:
+    module, _, name = info.settings.partition(":")
+    return getattr(importlib.import_module(module), name)

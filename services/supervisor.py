@@ -1,0 +1,211 @@
+"""``stb up``: the router and every service as separate processes, restarted when they die.
+
+Like compose's ``restart: unless-stopped``: a process that exits is started again after a delay
+that doubles from ``restart_initial_s`` up to ``restart_max_s`` and goes back to the start once a
+process has run for ``stable_after_s``. Ctrl-C (or SIGTERM) stops the services, then the router.
+Each child's output goes to ``<log_dir>/<service>-<instance>.log``.
+"""
+
+from __future__ import annotations
+
+import logging
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import zenoh
+from pydantic import Field, field_validator
+
+from common import keys
+from common.bus import BusUnreachable, open_session
+from common.settings import ServiceSettings
+from services.registry import DEFAULT_UP, SERVICES
+
+log = logging.getLogger(__name__)
+
+
+class UpSettings(ServiceSettings):
+    section = "up"
+
+    services: list[str] = Field(
+        default_factory=lambda: list(DEFAULT_UP),
+        description="'name' or 'name:instance'; include 'router' for the embedded router")
+    log_dir: Path = Path("run/logs")
+    restart_initial_s: float = Field(0.2, gt=0)
+    restart_max_s: float = Field(10.0, gt=0)
+    stable_after_s: float = Field(10.0, gt=0)
+    stop_timeout_s: float = Field(5.0, gt=0)
+
+    @field_validator("services")
+    @classmethod
+    def _known(cls, specs: list[str]) -> list[str]:
+        for spec in specs:
+            if spec.partition(":")[0] not in SERVICES:
+                raise ValueError(f"unknown service {spec!r}; known: {', '.join(SERVICES)}")
+        return specs
+
+
+def next_delay(previous_s: float | None, ran_for_s: float, settings: UpSettings) -> float:
+    """Restart delay after a process that ran ``ran_for_s`` exited (pure)."""
+    if previous_s is None or ran_for_s >= settings.stable_after_s:
+        return settings.restart_initial_s
+    return min(previous_s * 2, settings.restart_max_s)
+
+
+@dataclass
+class Child:
+    service: str
+    instance: str
+    process: subprocess.Popen | None = None
+    started_at: float = 0.0
+    restart_at: float | None = 0.0
+    delay_s: float | None = None
+    restarts: int = 0
+    last_exit: int | None = None
+    alive: bool = False
+    log_file: object = field(default=None, repr=False)
+
+    @property
+    def name(self) -> str:
+        return f"{self.service}/{self.instance}"
+
+
+class Supervisor:
+    def __init__(self, settings: UpSettings, lab: Path | None) -> None:
+        self.settings = settings
+        self.lab = lab
+        self.children = [Child(*_split(spec)) for spec in settings.services]
+        # The router goes first and stops last.
+        self.children.sort(key=lambda c: c.service != "router")
+        self._lock = threading.Lock()
+
+    def argv(self, child: Child) -> list[str]:
+        argv = [sys.executable, "-m", f"services.{child.service}", "--instance", child.instance]
+        return argv + (["--lab", str(self.lab)] if self.lab else [])
+
+    def poll(self, now: float) -> None:
+        """Start what is due, notice what has exited; call every few tens of ms."""
+        for child in self.children:
+            if child.process is not None and child.process.poll() is not None:
+                self._exited(child, now)
+            if child.process is None and child.restart_at is not None and now >= child.restart_at:
+                self._start(child, now)
+
+    def _start(self, child: Child, now: float) -> None:
+        self.settings.log_dir.mkdir(parents=True, exist_ok=True)
+        path = self.settings.log_dir / f"{child.service}-{child.instance}.log"
+        child.log_file = open(path, "ab")  # noqa: SIM115 - kept open while the child runs
+        child.process = subprocess.Popen(self.argv(child), stdout=child.log_file,
+                                         stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        child.started_at, child.restart_at = now, None
+        log.info("started %s (pid %d), log %s", child.name, child.process.pid, path)
+
+    def _exited(self, child: Child, now: float) -> None:
+        assert child.process is not None
+        child.last_exit = child.process.returncode
+        child.process = None
+        child.log_file.close()  # type: ignore[attr-defined]
+        child.delay_s = next_delay(child.delay_s, now - child.started_at, self.settings)
+        child.restart_at = now + child.delay_s
+        child.restarts += 1
+        log.warning("%s exited with %s; restarting in %.1f s", child.name, child.last_exit,
+                    child.delay_s)
+
+    def stop_all(self) -> None:
+        """SIGTERM the services, then the router; SIGKILL what is still there after the timeout."""
+        for group in ([c for c in self.children if c.service != "router"],
+                      [c for c in self.children if c.service == "router"]):
+            running = [c for c in group if c.process is not None]
+            for child in running:
+                child.restart_at = None
+                child.process.send_signal(signal.SIGTERM)  # type: ignore[union-attr]
+            for child in running:
+                try:
+                    child.process.wait(self.settings.stop_timeout_s)  # type: ignore[union-attr]
+                except subprocess.TimeoutExpired:
+                    log.warning("%s did not stop in time, killing it", child.name)
+                    child.process.kill()  # type: ignore[union-attr]
+                    child.process.wait()  # type: ignore[union-attr]
+                child.log_file.close()  # type: ignore[attr-defined]
+                child.process = None
+
+    def set_alive(self, service: str, instance: str, alive: bool) -> None:
+        with self._lock:
+            for child in self.children:
+                if (child.service, child.instance) == (service, instance):
+                    child.alive = alive
+
+    def state(self) -> tuple:
+        """What changes when something worth reporting happens."""
+        return tuple((c.name, c.process is not None and c.process.pid, c.alive, c.restarts)
+                     for c in self.children)
+
+    def render(self, now: float) -> str:
+        lines = [f"{'service':<24} {'pid':>7}  {'state':<22} {'restarts':>8}  last exit"]
+        for c in self.children:
+            if c.process is None:
+                wait = max(0.0, (c.restart_at or now) - now)
+                state = "stopped" if c.restart_at is None else f"restarting in {wait:.1f} s"
+            else:
+                state = "alive" if c.alive else "starting"
+            pid = str(c.process.pid) if c.process else "-"
+            exit_code = "-" if c.last_exit is None else str(c.last_exit)
+            lines.append(f"{c.name:<24} {pid:>7}  {state:<22} {c.restarts:>8}  {exit_code}")
+        return "\n".join(lines)
+
+
+def _split(spec: str) -> tuple[str, str]:
+    service, _, instance = spec.partition(":")
+    return service, instance or "main"
+
+
+def watch_alive(supervisor: Supervisor, settings: UpSettings, stop: threading.Event) -> None:
+    """Follow the liveliness tokens (retrying until the router is up) until ``stop``."""
+    session = None
+    while session is None and not stop.is_set():
+        try:
+            session = open_session(settings.zenoh_settings())
+        except BusUnreachable:
+            stop.wait(0.5)
+    if session is None:
+        return
+    prefix = settings.bus.prefix
+
+    def on_token(sample: zenoh.Sample) -> None:
+        parsed = keys.parse_alive(prefix, str(sample.key_expr))
+        if parsed:
+            supervisor.set_alive(*parsed, alive=sample.kind == zenoh.SampleKind.PUT)
+
+    try:
+        session.liveliness().declare_subscriber(keys.alive_pattern(prefix), on_token, history=True)
+        stop.wait()
+    finally:
+        session.close()
+
+
+def run(settings: UpSettings, lab: Path | None, stop: threading.Event, *, view: bool) -> int:
+    supervisor = Supervisor(settings, lab)
+    watcher = threading.Thread(target=watch_alive, args=(supervisor, settings, stop), daemon=True)
+    watcher.start()
+    last_view, last_state = 0.0, None
+    try:
+        while not stop.wait(0.05):
+            now = time.monotonic()
+            supervisor.poll(now)
+            if view and now - last_view >= 1.0:
+                print("\x1b[H\x1b[2J" + "stb up — Ctrl-C stops everything\n\n"
+                      + supervisor.render(now), flush=True)
+                last_view = now
+            elif not view and supervisor.state() != last_state:
+                last_state = supervisor.state()
+                log.info("status\n%s", supervisor.render(now))
+    finally:
+        log.info("stopping all services")
+        supervisor.stop_all()
+        stop.set()
+        watcher.join(timeout=3)
+    return 0

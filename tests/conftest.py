@@ -1,0 +1,76 @@
+"""Shared fixtures: real Zenoh sessions on loopback, each test set on its own free ports."""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from common.bus import Bus, open_session
+from common.settings import BusSettings, ZenohSettings
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def client_settings(endpoint: str, **bus: object) -> BusSettings:
+    return BusSettings(zenoh=ZenohSettings(mode="client", connect=[endpoint]), **bus)
+
+
+def wait_for(predicate: Callable[[], object], timeout: float = 5.0, period: float = 0.02) -> object:
+    """Poll ``predicate`` until it returns something truthy; fail the test on timeout."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(period)
+    pytest.fail(f"condition not met within {timeout} s: {predicate}")
+
+
+@pytest.fixture(scope="module")
+def router_endpoint() -> Iterator[str]:
+    """An in-process Zenoh router on a free loopback port (multicast scouting off)."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    session = open_session(ZenohSettings(mode="router", listen=[endpoint], connect=[]))
+    try:
+        yield endpoint
+    finally:
+        session.close()
+
+
+@pytest.fixture
+def make_bus(router_endpoint: str) -> Iterator[Callable[..., Bus]]:
+    """Factory of client Buses on the module's router; all closed after the test."""
+    opened: list[tuple[Bus, zenoh.Session]] = []
+
+    def make(**bus_settings: object) -> Bus:
+        settings = client_settings(router_endpoint, **bus_settings)
+        session = open_session(settings.zenoh)
+        bus = Bus(session, settings)
+        opened.append((bus, session))
+        return bus
+
+    yield make
+    for bus, session in opened:
+        bus.close()
+        session.close()
+
+
+def stb_process(*args: str, **popen: object) -> subprocess.Popen:
+    """Start ``python -m services.cli ARGS`` with the project on the path."""
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", **popen.pop("env", {})}  # type: ignore[dict-item]
+    return subprocess.Popen([sys.executable, "-m", "services.cli", *args], cwd=ROOT, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen)
