@@ -31,6 +31,7 @@ M = TypeVar("M", bound=Message)
 
 HANDLER_ERROR = "handler_error"
 QUEUE_FULL = "queue_full"
+SUPERSEDED = "superseded"  # a newer sample of the same key came before the handler was free
 
 
 class BusUnreachable(ConnectionError):
@@ -141,9 +142,11 @@ class Subscription:
     def _on_sample(self, sample: zenoh.Sample) -> None:
         # Runs on Zenoh's network thread: store and return, nothing else.
         key, payload = str(sample.key_expr), sample.payload.to_bytes()
+        self._bus.count_received(key)
         with self._wake:
             if self._latest:
-                self._pending.pop(key, None)  # re-insert: oldest key first
+                if self._pending.pop(key, None) is not None:  # re-inserted: oldest key first
+                    self._bus.count_drop(key, SUPERSEDED, "", log_it=False)
                 self._pending[key] = payload
             else:
                 if len(self._queue) == self._queue.maxlen:
@@ -263,9 +266,7 @@ class Bus:
 
     def accept(self, topic: Topic[M], key: str, payload: bytes,
                *, max_age_s: float | None = None) -> M | None:
-        """Decode and check one received payload; count it; None if it was dropped."""
-        with self._stats_lock:
-            self._stats.setdefault(key, _Stats()).received += 1
+        """Decode and check one received payload; None (and counted) if it was dropped."""
         try:
             msg = codec.decode(topic.model, payload, max_bytes=topic.max_payload_bytes)
         except codec.DecodeError as err:
@@ -282,13 +283,18 @@ class Bus:
                 return None
         return msg
 
-    def count_drop(self, key: str, reason: str, detail: str, exc_info: bool = False) -> None:
+    def count_received(self, key: str) -> None:
+        with self._stats_lock:
+            self._stats.setdefault(key, _Stats()).received += 1
+
+    def count_drop(self, key: str, reason: str, detail: str, *, exc_info: bool = False,
+                   log_it: bool = True) -> None:
         with self._stats_lock:
             dropped = self._stats.setdefault(key, _Stats()).dropped
             dropped[reason] = dropped.get(reason, 0) + 1
         if exc_info:
             log.exception("handler for %s failed", key)
-        else:
+        elif log_it:
             self._log.warning(key, reason, detail)
 
     # --- latest-value queries and liveliness ------------------------------------------------
@@ -311,6 +317,7 @@ class Bus:
         for reply in self.session.get(topic.pattern(self.prefix, **params), timeout=timeout_s):
             if reply.ok is not None:
                 key = str(reply.ok.key_expr)
+                self.count_received(key)
                 msg = self.accept(topic, key, reply.ok.payload.to_bytes())
                 if msg is not None:
                     out.append(msg)

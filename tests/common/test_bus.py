@@ -1,0 +1,208 @@
+"""The bus over real Zenoh sessions on loopback: delivery, bad input, staleness, latest-first."""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from collections.abc import Callable
+
+import msgpack
+import pytest
+
+from common import codec, keys
+from common import messages as m
+from common.bus import Bus
+from common.node import Node
+from common.settings import ServiceSettings
+from common.wiredoc import EXAMPLES
+from tests.common.test_codec import BAD
+from tests.conftest import wait_for
+
+SETTLE_S = 0.3  # subscription declarations need a moment to reach the publisher via the router
+
+
+def _robot(x_mm: float = 1.0, measured_s: float | None = None) -> m.RobotPosition:
+    return EXAMPLES[m.RobotPosition].model_copy(
+        update={"x_mm": x_mm, "measured_s": measured_s or time.time()})
+
+
+def test_typed_message_arrives_with_both_time_stamps(make_bus: Callable[..., Bus]) -> None:
+    producer, consumer = make_bus(), make_bus()
+    got: queue.Queue[m.RobotPosition] = queue.Queue()
+    consumer.subscribe(keys.TRACKER_ROBOT, got.put)
+    time.sleep(SETTLE_S)
+    sent = _robot(x_mm=42.0, measured_s=time.time() - 0.05)
+    before = time.time()
+    producer.publish(keys.TRACKER_ROBOT, sent)
+    msg = got.get(timeout=2)
+    assert msg.x_mm == 42.0 and msg.measured_s == sent.measured_s
+    assert before <= msg.sent_s <= time.time()
+    assert consumer.key_stats()["stb/tracker/robot"].received == 1
+    assert producer.key_stats()["stb/tracker/robot"].published == 1
+
+
+def test_publish_refuses_the_wrong_model(make_bus: Callable[..., Bus]) -> None:
+    with pytest.raises(TypeError, match="carries RobotPosition"):
+        make_bus().publish(keys.TRACKER_ROBOT, EXAMPLES[m.CraneSetpoint])
+
+
+@pytest.mark.parametrize("case", BAD, ids=list(BAD))
+def test_bad_payload_is_dropped_counted_and_the_next_good_one_arrives(
+        make_bus: Callable[..., Bus], case: str) -> None:
+    producer, consumer = make_bus(), make_bus()
+    got: queue.Queue[m.RobotPosition] = queue.Queue()
+    consumer.subscribe(keys.TRACKER_ROBOT, got.put)
+    time.sleep(SETTLE_S)
+    payload, reason = BAD[case]
+    producer.session.put("stb/tracker/robot", payload)
+    wait_for(lambda: consumer.key_stats().get("stb/tracker/robot"))
+    producer.publish(keys.TRACKER_ROBOT, _robot(x_mm=7.0))
+    assert got.get(timeout=2).x_mm == 7.0
+    assert got.empty()
+    stats = consumer.key_stats()["stb/tracker/robot"]
+    assert stats.dropped == {reason: 1} and stats.received == 2
+
+
+def test_stale_and_future_samples_never_reach_the_handler(make_bus: Callable[..., Bus]) -> None:
+    producer, consumer = make_bus(), make_bus(max_age_s=0.2, max_future_s=0.2)
+    got: queue.Queue[m.RobotPosition] = queue.Queue()
+    consumer.subscribe(keys.TRACKER_ROBOT, got.put)
+    time.sleep(SETTLE_S)
+    now = time.time()
+    for x_mm, sent_s in ((1.0, now - 1.0), (2.0, now + 1.0)):
+        producer.session.put("stb/tracker/robot", codec.encode(_robot(x_mm), sent_s=sent_s))
+        wait_for(lambda: sum(consumer.key_stats()["stb/tracker/robot"].dropped.values())
+                 == x_mm if "stb/tracker/robot" in consumer.key_stats() else False)
+    producer.publish(keys.TRACKER_ROBOT, _robot(3.0))
+    assert got.get(timeout=2).x_mm == 3.0
+    assert consumer.key_stats()["stb/tracker/robot"].dropped == {"stale": 1, "from_future": 1}
+
+
+def test_slow_consumer_gets_the_latest_value_and_never_holds_back_the_producer(
+        make_bus: Callable[..., Bus]) -> None:
+    producer, consumer = make_bus(), make_bus()
+    seen: list[float] = []
+    last = threading.Event()
+
+    def slow(msg: m.RobotPosition) -> None:
+        time.sleep(0.05)
+        seen.append(msg.x_mm)
+        if msg.x_mm == 499:
+            last.set()
+
+    consumer.subscribe(keys.TRACKER_ROBOT, slow)
+    time.sleep(SETTLE_S)
+    start = time.perf_counter()
+    for i in range(500):
+        producer.publish(keys.TRACKER_ROBOT, _robot(float(i)))
+    publish_s = time.perf_counter() - start
+    assert last.wait(3), "the newest sample must arrive"
+    assert publish_s < 0.5 * 500 * 0.05, "the producer must not wait for the consumer"
+    assert len(seen) < 50, f"a slow consumer sees latest values, not a backlog ({len(seen)})"
+    assert seen == sorted(seen)
+
+
+def test_latest_value_is_kept_per_key(make_bus: Callable[..., Bus]) -> None:
+    producer, consumer = make_bus(), make_bus()
+    got: list[str] = []
+    gate = threading.Event()
+
+    def handler(msg: m.PtzState) -> None:
+        gate.wait(2)
+        got.append(msg.camera)
+
+    consumer.subscribe(keys.PTZ_STATE, handler)
+    time.sleep(SETTLE_S)
+    state = EXAMPLES[m.PtzState]
+    for camera in ("ptz1", "ptz2", "ptz1", "ptz2"):
+        producer.publish(keys.PTZ_STATE, state.model_copy(
+            update={"camera": camera, "measured_s": time.time()}), camera=camera)
+    time.sleep(0.2)
+    gate.set()
+    wait_for(lambda: len(got) >= 2)
+    time.sleep(0.2)
+    assert sorted(got[-2:]) == ["ptz1", "ptz2"], "one camera must not hide the other"
+    assert len(got) <= 3
+
+
+def test_handler_error_is_counted_and_the_subscription_goes_on(
+        make_bus: Callable[..., Bus]) -> None:
+    producer, consumer = make_bus(), make_bus()
+    got: queue.Queue[float] = queue.Queue()
+
+    def fragile(msg: m.RobotPosition) -> None:
+        if msg.x_mm < 0:
+            raise RuntimeError("bug in a handler")
+        got.put(msg.x_mm)
+
+    consumer.subscribe(keys.TRACKER_ROBOT, fragile)
+    time.sleep(SETTLE_S)
+    producer.publish(keys.TRACKER_ROBOT, _robot(-1.0))
+    wait_for(lambda: consumer.key_stats().get("stb/tracker/robot"))
+    time.sleep(0.1)
+    producer.publish(keys.TRACKER_ROBOT, _robot(5.0))
+    assert got.get(timeout=2) == 5.0
+    assert consumer.key_stats()["stb/tracker/robot"].dropped == {"handler_error": 1}
+
+
+def test_ordered_subscription_delivers_every_sample(make_bus: Callable[..., Bus]) -> None:
+    producer, consumer = make_bus(), make_bus()
+    got: list[int] = []
+    consumer.subscribe(keys.GANTRY_SETPOINT, lambda s: got.append(s.seq), latest=False)
+    time.sleep(SETTLE_S)
+    for seq in range(50):
+        producer.publish(keys.GANTRY_SETPOINT, EXAMPLES[m.CraneSetpoint].model_copy(
+            update={"seq": seq, "measured_s": time.time()}))
+    wait_for(lambda: len(got) == 50)
+    assert got == list(range(50))
+
+
+def test_late_joiner_gets_the_latest_pose_by_query(make_bus: Callable[..., Bus]) -> None:
+    calib, ptz = make_bus(), make_bus()
+    pose = EXAMPLES[m.CameraPose]
+    calib.serve_latest(keys.CALIB_POSE, lambda: pose, camera="ptz1")
+    time.sleep(SETTLE_S)
+    answers = ptz.query_latest(keys.CALIB_POSE, camera="ptz1")
+    assert [a.model_copy(update={"sent_s": 0.0}) for a in answers] == [pose]
+
+
+def test_prefix_separates_two_labs(make_bus: Callable[..., Bus]) -> None:
+    lab_a, lab_b = make_bus(prefix="laba"), make_bus(prefix="labb")
+    got: queue.Queue[m.RobotPosition] = queue.Queue()
+    lab_b.subscribe(keys.TRACKER_ROBOT, got.put)
+    time.sleep(SETTLE_S)
+    lab_a.publish(keys.TRACKER_ROBOT, _robot())
+    with pytest.raises(queue.Empty):
+        got.get(timeout=0.5)
+
+
+def test_generic_subscription_decodes_known_and_unknown_keys(
+        make_bus: Callable[..., Bus]) -> None:
+    producer, monitor = make_bus(), make_bus()
+    got: queue.Queue = queue.Queue()
+    monitor.subscribe_any("stb/**", got.put)
+    time.sleep(SETTLE_S)
+    producer.publish(keys.TRACKER_ROBOT, _robot(9.0))
+    producer.session.put("stb/custom/thing", msgpack.packb({"a": 1}))
+    items = dict(got.get(timeout=2) for _ in range(2))
+    assert items["stb/tracker/robot"].x_mm == 9.0
+    assert items["stb/custom/thing"] == {"a": 1}
+
+
+def test_drop_counts_show_in_the_published_health(make_bus: Callable[..., Bus]) -> None:
+    bus, attacker, watcher = make_bus(health_period_s=0.2), make_bus(), make_bus()
+    node = Node("gantry", ServiceSettings(), bus)
+    healths: queue.Queue[m.ServiceHealth] = queue.Queue()
+    watcher.subscribe(keys.HEALTH, healths.put, latest=False, service="gantry")
+    bus.subscribe(keys.GANTRY_FRAME, lambda frame: None)
+    time.sleep(SETTLE_S)
+    for n, payload in enumerate((b"not msgpack at all", msgpack.packb({"camera": "x"})), 1):
+        attacker.session.put("stb/gantry/camera/frame", payload)
+        wait_for(lambda n=n: "stb/gantry/camera/frame" in bus.key_stats() and sum(
+            bus.key_stats()["stb/gantry/camera/frame"].dropped.values()) == n)
+    node.publish_health()
+    health = healths.get(timeout=2)
+    assert health.service == "gantry" and health.status == "ok"
+    assert health.keys["stb/gantry/camera/frame"].dropped == {"not_msgpack": 1,
+                                                              "missing_field": 1}

@@ -1,0 +1,87 @@
+"""Settings: defaults < lab file < environment < flags; errors name the field."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from common.settings import ConfigError, load_settings
+from services.router.settings import RouterSettings
+from services.supervisor import UpSettings
+
+
+def _lab(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "lab.toml"
+    path.write_text(text)
+    return path
+
+
+def test_defaults_run_against_loopback() -> None:
+    s = load_settings(RouterSettings, environ={})
+    assert s.bus.prefix == "stb"
+    assert s.bus.zenoh.connect == ["tcp/127.0.0.1:7447"]
+    assert s.bus.zenoh.multicast_scouting is False
+    assert s.zenoh_settings().listen == ["tcp/127.0.0.1:7447"]
+
+
+def test_precedence_file_then_env_then_flags(tmp_path: Path) -> None:
+    lab = _lab(tmp_path, """
+[bus]
+prefix = "lab"
+max_age_s = 0.3
+[bus.zenoh]
+connect = ["tcp/10.0.0.1:7447"]
+[router]
+instance = "from-file"
+log_level = "DEBUG"
+[router.bus]
+max_age_s = 0.4
+""")
+    env = {"STB_ROUTER__INSTANCE": "from-env", "STB_BUS__ZENOH__LEASE_MS": "3000",
+           "STB_ROUTER__LISTEN": '["tcp/0.0.0.0:7447"]'}
+    s = load_settings(RouterSettings, lab, {"log_level": "ERROR"}, environ=env)
+    assert s.bus.prefix == "lab"                       # shared [bus]
+    assert s.bus.max_age_s == 0.4                      # [router.bus] beats [bus]
+    assert s.bus.zenoh.connect == ["tcp/10.0.0.1:7447"]
+    assert s.bus.zenoh.lease_ms == 3000                # STB_BUS__ env
+    assert s.instance == "from-env"                    # env beats file
+    assert s.listen == ["tcp/0.0.0.0:7447"]            # JSON env value
+    assert s.log_level == "ERROR"                      # flags beat everything
+
+
+def test_lab_file_named_by_environment(tmp_path: Path) -> None:
+    lab = _lab(tmp_path, '[router]\ninstance = "r2"\n')
+    assert load_settings(RouterSettings, environ={"STB_LAB": str(lab)}).instance == "r2"
+
+
+@pytest.mark.parametrize(("text", "env", "field"), [
+    ('[router]\nlisten = 5\n', {}, "router.listen"),
+    ('[router]\nlisen = ["tcp/x:1"]\n', {}, "router.lisen"),
+    ('[bus]\nprefix = "Bad/*"\n', {}, "router.bus.prefix"),
+    ('[bus.zenoh]\nmode = "clinet"\n', {}, "router.bus.zenoh.mode"),
+    ('[bus.zenoh]\nconnect = ["127.0.0.1:7447"]\n', {}, "router.bus.zenoh.connect"),
+    ("", {"STB_ROUTER__BUS__MAX_AGE_S": "-1"}, "router.bus.max_age_s"),
+])
+def test_bad_setting_names_the_field(tmp_path: Path, text: str, env: dict, field: str) -> None:
+    with pytest.raises(ConfigError) as err:
+        load_settings(RouterSettings, _lab(tmp_path, text), environ=env)
+    assert field in str(err.value)
+
+
+def test_unreadable_or_invalid_lab_file(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="cannot read"):
+        load_settings(RouterSettings, tmp_path / "missing.toml", environ={})
+    with pytest.raises(ConfigError, match="not valid TOML"):
+        load_settings(RouterSettings, _lab(tmp_path, "[router\n"), environ={})
+
+
+def test_up_refuses_unknown_services() -> None:
+    with pytest.raises(ConfigError, match="unknown service 'gantri'"):
+        load_settings(UpSettings, overrides={"services": ["router", "gantri"]}, environ={})
+
+
+def test_example_lab_file_is_valid() -> None:
+    example = Path(__file__).resolve().parents[2] / "config" / "lab.example.toml"
+    for cls in (RouterSettings, UpSettings):
+        load_settings(cls, example, environ={})
