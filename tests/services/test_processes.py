@@ -1,0 +1,239 @@
+"""Entry points as real processes: liveliness, clean stop, config errors, stb up, stb monitor."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from common import keys
+from common import messages as m
+from common.bus import Bus, BusUnreachable, open_session
+from common.wiredoc import EXAMPLES
+from tests.conftest import client_settings, free_port, stb_process, wait_for
+
+
+class AliveWatcher:
+    """Records liveliness PUT/DELETE events under stb/alive/** with their arrival times."""
+
+    def __init__(self, session: zenoh.Session) -> None:
+        self.events: list[tuple[float, str, str]] = []
+        self._lock = threading.Lock()
+        self._sub = session.liveliness().declare_subscriber("stb/alive/**", self._on,
+                                                            history=True)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        with self._lock:
+            self.events.append((time.monotonic(), str(sample.key_expr), str(sample.kind)))
+
+    def alive(self, key: str) -> bool:
+        with self._lock:
+            kinds = [k for _, key_, k in self.events if key_ == key]
+        return bool(kinds) and kinds[-1] == str(zenoh.SampleKind.PUT)
+
+    def first_put_after(self, key: str, t: float) -> float | None:
+        with self._lock:
+            return next((at for at, key_, kind in self.events
+                         if key_ == key and at > t and kind == str(zenoh.SampleKind.PUT)), None)
+
+
+@pytest.fixture
+def observer(router_endpoint: str) -> Iterator[tuple[Bus, AliveWatcher]]:
+    settings = client_settings(router_endpoint)
+    session = open_session(settings.zenoh)
+    bus = Bus(session, settings)
+    try:
+        yield bus, AliveWatcher(session)
+    finally:
+        bus.close()
+        session.close()
+
+
+def _stop(proc: subprocess.Popen, sig: int = signal.SIGTERM, timeout: float = 5.0) -> int:
+    if proc.poll() is None:
+        proc.send_signal(sig)
+    try:
+        return proc.wait(timeout)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def _linked_router(router_endpoint: str, instance: str) -> subprocess.Popen:
+    """A second router process that links to the test's router (a two-router lab)."""
+    return stb_process("router", "--instance", instance, "--listen",
+                       f"tcp/127.0.0.1:{free_port()}", "--set",
+                       f'connect=["{router_endpoint}"]')
+
+
+def test_liveliness_token_appears_and_goes_when_the_process_is_killed(
+        router_endpoint: str, observer: tuple[Bus, AliveWatcher]) -> None:
+    _, alive = observer
+    proc = _linked_router(router_endpoint, "r2")
+    try:
+        wait_for(lambda: alive.alive("stb/alive/router/r2"), timeout=10)
+        proc.kill()
+        proc.wait()
+        wait_for(lambda: not alive.alive("stb/alive/router/r2"), timeout=5)
+    finally:
+        _stop(proc)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_signal_stops_a_service_cleanly_and_quickly(
+        router_endpoint: str, observer: tuple[Bus, AliveWatcher], sig: int) -> None:
+    _, alive = observer
+    proc = _linked_router(router_endpoint, "r3")
+    wait_for(lambda: alive.alive("stb/alive/router/r3"), timeout=10)
+    start = time.monotonic()
+    assert _stop(proc, sig) == 0
+    assert time.monotonic() - start < 3.0
+    assert "router/r3 stopped" in proc.stderr.read()
+    wait_for(lambda: not alive.alive("stb/alive/router/r3"))
+
+
+def test_service_health_is_published(router_endpoint: str,
+                                     observer: tuple[Bus, AliveWatcher]) -> None:
+    bus, _ = observer
+    got: list[m.ServiceHealth] = []
+    bus.subscribe(keys.HEALTH, got.append, latest=False, instance="r4")
+    proc = _linked_router(router_endpoint, "r4")
+    try:
+        wait_for(lambda: got, timeout=10)
+        assert got[0].service == "router" and got[0].pid == proc.pid and got[0].status == "ok"
+    finally:
+        _stop(proc)
+
+
+def test_bad_config_stops_start_up_naming_the_field(tmp_path: Path) -> None:
+    lab = tmp_path / "lab.toml"
+    lab.write_text('[bus.zenoh]\nmode = "clinet"\n')
+    proc = stb_process("router", "--lab", str(lab))
+    assert proc.wait(10) == 2
+    assert "router.bus.zenoh.mode" in proc.stderr.read()
+
+
+def test_unreachable_router_is_a_clear_error() -> None:
+    proc = stb_process("monitor", "--connect", f"tcp/127.0.0.1:{free_port()}",
+                       "--set", "bus.zenoh.connect_timeout_ms=0")
+    assert proc.wait(10) == 3
+    assert "cannot open a Zenoh client session on tcp/127.0.0.1:" in proc.stderr.read()
+
+
+def test_monitor_raw_prints_what_is_published(router_endpoint: str,
+                                              observer: tuple[Bus, AliveWatcher]) -> None:
+    bus, _ = observer
+    proc = stb_process("monitor", "--connect", router_endpoint, "--raw", "stb/tracker/**",
+                       "--duration", "20")
+    try:
+        robot = EXAMPLES[m.RobotPosition]
+        line = ""
+
+        def published_and_printed() -> bool:
+            nonlocal line
+            bus.publish(keys.TRACKER_ROBOT, robot.model_copy(update={"measured_s": time.time()}))
+            os.set_blocking(proc.stdout.fileno(), False)
+            line = proc.stdout.readline()
+            return bool(line)
+
+        wait_for(published_and_printed, timeout=10, period=0.2)
+        data = json.loads(line)
+        assert data["key"] == "stb/tracker/robot" and data["type"] == "RobotPosition"
+        assert data["x_mm"] == robot.x_mm and data["sent_s"] > 0
+    finally:
+        _stop(proc, signal.SIGINT)
+
+
+def test_monitor_table_shows_alive_services_and_keys(router_endpoint: str,
+                                                     observer: tuple[Bus, AliveWatcher]) -> None:
+    _, alive = observer
+    router = _linked_router(router_endpoint, "r5")
+    try:
+        wait_for(lambda: alive.alive("stb/alive/router/r5"), timeout=10)
+        proc = stb_process("monitor", "--connect", router_endpoint, "--duration", "2.5")
+        stdout, _ = proc.communicate(timeout=20)
+        assert proc.returncode == 0
+        last = stdout.strip().split("---")[-2]
+        assert "router/r5" in last
+        assert "stb/health/router/r5" in last
+    finally:
+        _stop(router)
+
+
+def _lab_for_up(tmp_path: Path) -> tuple[Path, str]:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    lab = tmp_path / "lab.toml"
+    lab.write_text(f"""
+[bus.zenoh]
+connect = ["{endpoint}"]
+[router]
+listen = ["{endpoint}"]
+[up]
+log_dir = "{tmp_path / 'logs'}"
+""")
+    return lab, endpoint
+
+
+def _open_when_up(endpoint: str) -> zenoh.Session:
+    def attempt() -> zenoh.Session | None:
+        try:
+            return open_session(client_settings(endpoint).zenoh)
+        except BusUnreachable:
+            return None
+
+    return wait_for(attempt, timeout=15, period=0.2)  # type: ignore[return-value]
+
+
+def test_up_restarts_a_killed_service_within_two_seconds(tmp_path: Path) -> None:
+    lab, endpoint = _lab_for_up(tmp_path)
+    up = stb_process("up", "--lab", str(lab), "--no-view")
+    session = None
+    try:
+        session = _open_when_up(endpoint)
+        bus = Bus(session, client_settings(endpoint))
+        alive = AliveWatcher(session)
+        healths: list[m.ServiceHealth] = []
+        bus.subscribe(keys.HEALTH, healths.append, latest=False)
+        for service in ("router",):
+            key = f"stb/alive/{service}/main"
+            wait_for(lambda key=key: alive.alive(key), timeout=15)
+            pid = wait_for(lambda s=service: next(
+                (h.pid for h in reversed(healths) if h.service == s), None), timeout=5)
+            killed_at = time.monotonic()
+            os.kill(pid, signal.SIGKILL)
+            back_at = wait_for(lambda key=key: alive.first_put_after(key, killed_at), timeout=10)
+            print(f"{service} alive again {back_at - killed_at:.2f} s after kill -9")
+            assert back_at - killed_at < 2.0, f"{service} back after {back_at - killed_at:.2f} s"
+            wait_for(lambda s=service, p=pid: any(h.service == s and h.pid != p
+                                                  for h in healths), timeout=5)
+        bus.close()
+    finally:
+        if session is not None:
+            session.close()
+        assert _stop(up, signal.SIGINT, timeout=15) == 0
+    log = up.stderr.read()
+    assert "exited with -9; restarting" in log
+    assert "stopping all services" in log
+
+
+def test_up_stops_every_child_on_ctrl_c(tmp_path: Path) -> None:
+    lab, endpoint = _lab_for_up(tmp_path)
+    up = stb_process("up", "--lab", str(lab), "--no-view")
+    session = _open_when_up(endpoint)
+    try:
+        alive = AliveWatcher(session)
+        wait_for(lambda: alive.alive("stb/alive/router/main"), timeout=15)
+    finally:
+        session.close()
+    assert _stop(up, signal.SIGINT, timeout=15) == 0
+    log_text = (tmp_path / "logs" / "router-main.log").read_text()
+    assert "router/main stopped" in log_text
