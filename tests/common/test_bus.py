@@ -72,8 +72,8 @@ def test_stale_and_future_samples_never_reach_the_handler(make_bus: Callable[...
     now = time.time()
     for x_mm, sent_s in ((1.0, now - 1.0), (2.0, now + 1.0)):
         producer.session.put("stb/tracker/robot", codec.encode(_robot(x_mm), sent_s=sent_s))
-        wait_for(lambda: sum(consumer.key_stats()["stb/tracker/robot"].dropped.values())
-                 == x_mm if "stb/tracker/robot" in consumer.key_stats() else False)
+        wait_for(lambda n=x_mm: "stb/tracker/robot" in consumer.key_stats() and sum(
+            consumer.key_stats()["stb/tracker/robot"].dropped.values()) == n)
     producer.publish(keys.TRACKER_ROBOT, _robot(3.0))
     assert got.get(timeout=2).x_mm == 3.0
     assert consumer.key_stats()["stb/tracker/robot"].dropped == {"stale": 1, "from_future": 1}
