@@ -1,0 +1,12 @@
+# One image for every service; the command chooses which: `stb router`, `stb monitor`, ...
+FROM python:3.11-slim
+WORKDIR /app
+COPY pyproject.toml README.md ./
+COPY common ./common
+COPY services ./services
+RUN pip install --no-cache-dir . \
+ && useradd --system --uid 10001 --home-dir /app stb
+USER stb
+# A lab file, if any, is named by STB_LAB (see docker-compose.yml).
+ENV PYTHONUNBUFFERED=1
+ENTRYPOINT ["stb"]
