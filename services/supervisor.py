@@ -21,7 +21,8 @@ import zenoh
 from pydantic import Field, field_validator
 
 from common import keys
-from common.bus import BusUnreachable, open_session
+from common.bus import Bus, BusUnreachable, open_session
+from common.messages import ServiceHealth
 from common.settings import ServiceSettings
 from services.registry import DEFAULT_UP, SERVICES
 
@@ -67,6 +68,7 @@ class Child:
     restarts: int = 0
     last_exit: int | None = None
     alive: bool = False
+    health: str = ""
     log_file: object = field(default=None, repr=False)
 
     @property
@@ -144,8 +146,18 @@ class Supervisor:
         return tuple((c.name, c.process is not None and c.process.pid, c.alive, c.restarts)
                      for c in self.children)
 
+    def set_health(self, health: ServiceHealth) -> None:
+        dropped = sum(sum(k.dropped.values()) for k in health.keys.values())
+        text = health.status + (f" ({health.detail})" if health.detail else "")
+        text += f", {dropped} dropped" if dropped else ""
+        with self._lock:
+            for child in self.children:
+                if (child.service, child.instance) == (health.service, health.instance):
+                    child.health = text
+
     def render(self, now: float) -> str:
-        lines = [f"{'service':<24} {'pid':>7}  {'state':<22} {'restarts':>8}  last exit"]
+        lines = [f"{'service':<24} {'pid':>7}  {'state':<22} {'restarts':>8}  {'last exit':>9}"
+                 "  health"]
         for c in self.children:
             if c.process is None:
                 wait = max(0.0, (c.restart_at or now) - now)
@@ -154,7 +166,8 @@ class Supervisor:
                 state = "alive" if c.alive else "starting"
             pid = str(c.process.pid) if c.process else "-"
             exit_code = "-" if c.last_exit is None else str(c.last_exit)
-            lines.append(f"{c.name:<24} {pid:>7}  {state:<22} {c.restarts:>8}  {exit_code}")
+            lines.append(f"{c.name:<24} {pid:>7}  {state:<22} {c.restarts:>8}  {exit_code:>9}"
+                         f"  {c.health if c.process else ''}")
         return "\n".join(lines)
 
 
@@ -164,7 +177,7 @@ def _split(spec: str) -> tuple[str, str]:
 
 
 def watch_alive(supervisor: Supervisor, settings: UpSettings, stop: threading.Event) -> None:
-    """Follow the liveliness tokens (retrying until the router is up) until ``stop``."""
+    """Follow liveliness tokens and health (retrying until the router is up) until ``stop``."""
     session = None
     while session is None and not stop.is_set():
         try:
@@ -180,10 +193,13 @@ def watch_alive(supervisor: Supervisor, settings: UpSettings, stop: threading.Ev
         if parsed:
             supervisor.set_alive(*parsed, alive=sample.kind == zenoh.SampleKind.PUT)
 
+    bus = Bus(session, settings.bus)
     try:
         session.liveliness().declare_subscriber(keys.alive_pattern(prefix), on_token, history=True)
+        bus.subscribe(keys.HEALTH, supervisor.set_health, latest=True, max_age_s=5.0)
         stop.wait()
     finally:
+        bus.close()
         session.close()
 
 

@@ -206,3 +206,14 @@ def test_drop_counts_show_in_the_published_health(make_bus: Callable[..., Bus]) 
     assert health.service == "gantry" and health.status == "ok"
     assert health.keys["stb/gantry/camera/frame"].dropped == {"not_msgpack": 1,
                                                               "missing_field": 1}
+
+
+def test_bad_payloads_are_logged_at_a_bounded_rate(make_bus: Callable[..., Bus],
+                                                   caplog: pytest.LogCaptureFixture) -> None:
+    bus = make_bus()
+    with caplog.at_level("WARNING", logger="common.bus"):
+        for _ in range(200):
+            assert bus.accept(keys.TRACKER_ROBOT, "stb/tracker/robot", b"\xc1") is None
+    assert bus.key_stats()["stb/tracker/robot"].dropped == {"not_msgpack": 200}
+    assert len(caplog.records) == 1
+    assert "stb/tracker/robot" in caplog.records[0].getMessage()

@@ -150,7 +150,7 @@ def test_monitor_raw_prints_what_is_published(router_endpoint: str,
         assert data["key"] == "stb/tracker/robot" and data["type"] == "RobotPosition"
         assert data["x_mm"] == robot.x_mm and data["sent_s"] > 0
     finally:
-        _stop(proc, signal.SIGINT)
+        assert _stop(proc, signal.SIGINT) == 0
 
 
 def test_monitor_table_shows_alive_services_and_keys(router_endpoint: str,
