@@ -8,6 +8,7 @@ Keys are relative to a configurable prefix (default ``stb``)::
 
 from __future__ import annotations
 
+import functools
 import re
 import string
 from dataclasses import dataclass
@@ -66,11 +67,17 @@ class Topic(Generic[M]):
 
     def match(self, prefix: str, key: str) -> dict[str, str] | None:
         """The parameters of a concrete ``key`` if it belongs to this topic, else None."""
-        regex = re.escape(f"{prefix}/{self.path}")
-        for name in self.params:
-            regex = regex.replace(re.escape("{" + name + "}"), f"(?P<{name}>[^/]+)")
-        found = re.fullmatch(regex, key)
+        found = _key_regex(prefix, self.path).fullmatch(key)
         return found.groupdict() if found else None
+
+
+@functools.lru_cache(maxsize=256)
+def _key_regex(prefix: str, path: str) -> re.Pattern[str]:
+    regex = re.escape(f"{prefix}/{path}")
+    for _, name, _, _ in string.Formatter().parse(path):
+        if name:
+            regex = regex.replace(re.escape("{" + name + "}"), f"(?P<{name}>[^/]+)")
+    return re.compile(regex)
 
 
 TRACKER_MARKERS = Topic("tracker/markers", m.MarkerFrame, "every mocap frame's 3-D markers",

@@ -16,7 +16,7 @@ import zenoh
 
 from common import keys
 from common.bus import Bus, BusUnreachable, open_session
-from common.node import configure_logging, stop_on_signals
+from common.node import EXIT_UNREACHABLE, configure_logging, stop_on_signals
 from common.settings import ConfigError, load_settings
 from services.entry import EXIT_CONFIG, base_parser, overrides_from
 from services.monitor.settings import MonitorSettings
@@ -38,7 +38,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         session = open_session(settings.zenoh_settings())
     except BusUnreachable as err:
         print(f"stb monitor: {err}", file=sys.stderr)
-        return 3
+        return EXIT_UNREACHABLE
     stop = threading.Event()
     restore = stop_on_signals(stop)
     bus = Bus(session, settings.bus)
