@@ -217,3 +217,42 @@ def test_bad_payloads_are_logged_at_a_bounded_rate(make_bus: Callable[..., Bus],
     assert bus.key_stats()["stb/tracker/robot"].dropped == {"not_msgpack": 200}
     assert len(caplog.records) == 1
     assert "stb/tracker/robot" in caplog.records[0].getMessage()
+
+
+def test_backlog_after_a_network_stall_never_reaches_the_handler(
+        router_endpoint: str, make_bus: Callable[..., Bus]) -> None:
+    from common.bus import open_session
+    from tests.conftest import client_settings
+    from tests.faultproxy import FaultProxy
+
+    proxy = FaultProxy(int(router_endpoint.rsplit(":", 1)[1]))
+    settings = client_settings(proxy.endpoint)
+    session = open_session(settings.zenoh)
+    producer = Bus(session, settings)
+    consumer = make_bus(max_age_s=0.3)
+    ages: list[float] = []
+    consumer.subscribe(keys.TRACKER_ROBOT, lambda msg: ages.append(time.time() - msg.sent_s))
+    try:
+        time.sleep(SETTLE_S)
+        stop = threading.Event()
+
+        def produce() -> None:
+            while not stop.wait(0.02):
+                producer.publish(keys.TRACKER_ROBOT, _robot())
+
+        threading.Thread(target=produce, daemon=True).start()
+        wait_for(lambda: len(ages) > 10)
+        proxy.stall()
+        time.sleep(1.5)
+        before = len(ages)
+        proxy.release()
+        wait_for(lambda: len(ages) > before + 10, timeout=5)
+        stop.set()
+        dropped = consumer.key_stats()["stb/tracker/robot"].dropped
+        print("after stall:", dropped, f"max age {max(ages):.3f} s")
+        assert dropped.get("stale", 0) > 0, "the backlog must have arrived and been dropped"
+        assert max(ages) < 0.3, f"a sample {max(ages):.2f} s old reached the handler"
+    finally:
+        producer.close()
+        session.close()
+        proxy.close()
