@@ -25,6 +25,11 @@ log = logging.getLogger(__name__)
 
 EXIT_OK = 0
 EXIT_UNREACHABLE = 3
+EXIT_STARTUP = 4
+
+
+class StartupError(RuntimeError):
+    """A service cannot start (a port in use, a device that does not answer, a bad file)."""
 
 
 class Node:
@@ -79,6 +84,9 @@ def run_node(service: str, settings: ServiceSettings, body: Callable[[Node], Non
         health.start()
         log.info("%s/%s running (prefix %s)", service, settings.instance, bus.prefix)
         body(node)
+    except StartupError as err:
+        log.error("%s/%s cannot start: %s", service, settings.instance, err)
+        return EXIT_STARTUP
     finally:
         node.stop.set()
         health.join(timeout=2)

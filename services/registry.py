@@ -22,6 +22,8 @@ class ServiceInfo:
 SERVICES: dict[str, ServiceInfo] = {
     "router": ServiceInfo("embedded Zenoh router (lab: eclipse/zenoh or this)",
                           "services.router.settings:RouterSettings"),
+    "sim": ServiceInfo("the simulated lab: QTM RT mocap, VAPIX cameras, Modbus crane, frames",
+                       "services.sim.settings:SimSettings"),
 }
 
 TOOLS: dict[str, ServiceInfo] = {
@@ -32,7 +34,7 @@ TOOLS: dict[str, ServiceInfo] = {
     "config": ServiceInfo("check a lab config file: stb config check --lab FILE", ""),
 }
 
-DEFAULT_UP: tuple[str, ...] = ("router",)
+DEFAULT_UP: tuple[str, ...] = ("router", "sim")
 """What ``stb up`` starts when the lab file does not say: everything that exists so far."""
 
 

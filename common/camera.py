@@ -1,0 +1,154 @@
+"""The paper's camera model (eq. 1–3) and the AXIS 215 PTZ intrinsics (Table 1).
+
+Frames. The camera frame has its x axis along the optical axis, y to the image's right and z
+to the image's bottom (so u grows with y and v with z, eq. 3). The pose ``T_world_camera``
+maps camera coordinates into the world frame (eq. 1): ``X_world = R @ x_cam + t`` with
+``R = Rx(rx) @ Ry(ry) @ Rz(rz)``. Millimetres and degrees at the interface, radians inside.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+AXIS_215_FOCAL_MM = (3.8, 46.0)
+AXIS_215_ZOOM_STEPS = (1, 9999)
+
+
+def rot_x(angle_rad: float) -> np.ndarray:
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def rot_y(angle_rad: float) -> np.ndarray:
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def rot_z(angle_rad: float) -> np.ndarray:
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def rotation_xyz(rx_deg: float, ry_deg: float, rz_deg: float) -> np.ndarray:
+    """R = Rx·Ry·Rz (paper eq. 1), angles in degrees."""
+    rx, ry, rz = np.radians([rx_deg, ry_deg, rz_deg])
+    return rot_x(rx) @ rot_y(ry) @ rot_z(rz)
+
+
+def euler_xyz_deg(rotation: np.ndarray) -> tuple[float, float, float]:
+    """Angles (rx, ry, rz) in degrees with R = Rx·Ry·Rz; ry in [-90°, 90°]."""
+    r = np.asarray(rotation, dtype=float)
+    ry = np.arcsin(np.clip(r[0, 2], -1.0, 1.0))
+    if abs(r[0, 2]) < 1 - 1e-12:
+        rx = np.arctan2(-r[1, 2], r[2, 2])
+        rz = np.arctan2(-r[0, 1], r[0, 0])
+    else:  # gimbal lock: only rx + rz (or rx - rz) is defined; put it all in rx
+        rx = np.arctan2(r[2, 1], r[1, 1])
+        rz = 0.0
+    return tuple(float(a) for a in np.degrees([rx, ry, rz]))  # type: ignore[return-value]
+
+
+@dataclass(frozen=True)
+class Pose:
+    """T_world_camera: where a camera is (mm) and how it is turned (deg, R = Rx·Ry·Rz)."""
+
+    x_mm: float
+    y_mm: float
+    z_mm: float
+    rx_deg: float
+    ry_deg: float
+    rz_deg: float
+
+    @property
+    def rotation(self) -> np.ndarray:
+        return rotation_xyz(self.rx_deg, self.ry_deg, self.rz_deg)
+
+    @property
+    def position(self) -> np.ndarray:
+        return np.array([self.x_mm, self.y_mm, self.z_mm])
+
+    @classmethod
+    def from_matrix(cls, rotation: np.ndarray, position: np.ndarray) -> Pose:
+        rx, ry, rz = euler_xyz_deg(rotation)
+        x, y, z = (float(v) for v in position)
+        return cls(x, y, z, rx, ry, rz)
+
+    def to_camera(self, points_world: np.ndarray) -> np.ndarray:
+        """World points (N, 3) → camera frame (N, 3), eq. 2: x_cam = Rᵀ (X − t)."""
+        return (np.asarray(points_world, dtype=float) - self.position) @ self.rotation
+
+    def to_world(self, points_camera: np.ndarray) -> np.ndarray:
+        return np.asarray(points_camera, dtype=float) @ self.rotation.T + self.position
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """A pinhole camera from its data sheet: focal length, chip size, resolution (Table 1)."""
+
+    focal_mm: float
+    chip_width_mm: float = 3.6
+    chip_height_mm: float = 2.7
+    width_px: int = 704
+    height_px: int = 576
+
+    @property
+    def fy_px(self) -> float:
+        return self.focal_mm / (self.chip_width_mm / self.width_px)
+
+    @property
+    def fz_px(self) -> float:
+        return self.focal_mm / (self.chip_height_mm / self.height_px)
+
+    @property
+    def cy_px(self) -> float:
+        return self.width_px / 2
+
+    @property
+    def cz_px(self) -> float:
+        return self.height_px / 2
+
+    def with_focal(self, focal_mm: float) -> Intrinsics:
+        return Intrinsics(focal_mm, self.chip_width_mm, self.chip_height_mm, self.width_px,
+                          self.height_px)
+
+
+def project_camera(points_camera: np.ndarray, intr: Intrinsics) -> np.ndarray:
+    """Camera-frame points (N, 3) → pixels (N, 2) by eq. 3; rows with x ≤ 0 become NaN."""
+    p = np.atleast_2d(np.asarray(points_camera, dtype=float))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = intr.fy_px * p[:, 1] / p[:, 0] + intr.cy_px
+        v = intr.fz_px * p[:, 2] / p[:, 0] + intr.cz_px
+    uv = np.column_stack([u, v])
+    uv[p[:, 0] <= 0] = np.nan
+    return uv
+
+
+def project(points_world: np.ndarray, pose: Pose, intr: Intrinsics) -> np.ndarray:
+    """World points (N, 3) → pixels (N, 2) (eq. 2 then eq. 3); behind the camera → NaN."""
+    return project_camera(pose.to_camera(points_world), intr)
+
+
+def focal_mm_for_zoom(zoom: float, *, focal_range_mm: tuple[float, float] = AXIS_215_FOCAL_MM,
+                      zoom_steps: tuple[int, int] = AXIS_215_ZOOM_STEPS) -> float:
+    """VAPIX zoom step → focal length, linear over the lens's range (documented assumption)."""
+    lo, hi = zoom_steps
+    fraction = (min(max(zoom, lo), hi) - lo) / (hi - lo)
+    return focal_range_mm[0] + fraction * (focal_range_mm[1] - focal_range_mm[0])
+
+
+def zoom_for_focal_mm(focal_mm: float, *,
+                      focal_range_mm: tuple[float, float] = AXIS_215_FOCAL_MM,
+                      zoom_steps: tuple[int, int] = AXIS_215_ZOOM_STEPS) -> int:
+    """Inverse of focal_mm_for_zoom, rounded to a whole step and clamped."""
+    lo, hi = zoom_steps
+    fraction = (focal_mm - focal_range_mm[0]) / (focal_range_mm[1] - focal_range_mm[0])
+    return int(round(min(max(lo + fraction * (hi - lo), lo), hi)))
+
+
+def thin_lens_image_distance_mm(focal_mm: float, object_distance_mm: float) -> float:
+    """Image distance b of a lens focused on an object at distance z: 1/b = 1/f − 1/z (eq. 5)."""
+    if object_distance_mm <= focal_mm:
+        raise ValueError(f"object at {object_distance_mm} mm is inside the focal length")
+    return 1.0 / (1.0 / focal_mm - 1.0 / object_distance_mm)

@@ -1,0 +1,1 @@
+"""The simulated Space Testbed: the lab's devices on their real protocols."""

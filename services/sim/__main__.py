@@ -1,0 +1,30 @@
+"""``stb sim [--scenario locomotive|walker|calibration] [--seed N]``: the simulated lab."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+from services.entry import service_main
+from services.sim.service import run
+from services.sim.settings import SimSettings
+
+
+def _flags(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--scenario", choices=["locomotive", "walker", "calibration"])
+    parser.add_argument("--seed", type=int)
+
+
+def _overrides(args: argparse.Namespace) -> dict[str, Any]:
+    return {k: v for k, v in (("scenario", args.scenario), ("seed", args.seed)) if v is not None}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return service_main("sim", SimSettings, run, argv, __doc__ or "", flags=_flags,
+                        flag_overrides=_overrides)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,216 @@
+"""A simulated AXIS 215 PTZ camera on HTTP: VAPIX, Digest (or Basic) authentication, JPEGs."""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import hmac
+import logging
+import secrets
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from typing import Literal
+from urllib.parse import parse_qsl, urlsplit
+
+import cv2
+import numpy as np
+
+from common.camera import Intrinsics
+from services.sim import vapix
+from services.sim.ptz import PtzHead
+from services.sim.render import Glint, draw, glint_blobs, marker_blobs
+
+log = logging.getLogger(__name__)
+
+REALM = "AXIS_ACCC8E5A0215"
+NONCE_LIFETIME_S = 300.0
+
+
+@dataclass
+class SimCamera:
+    """What the server needs to play one camera: its head, its scene and its credentials."""
+
+    name: str
+    head: PtzHead
+    scene: Callable[[], np.ndarray]  # marker world points (N, 3) now
+    glints: list[Glint]
+    clock: Callable[[], float]
+    rng: np.random.Generator
+    user: str = "root"
+    password: str = "pass"
+    auth: Literal["digest", "basic", "none"] = "digest"
+    jpeg_quality: int = 90
+
+    def snapshot(self, width: int, height: int) -> np.ndarray:
+        now = self.clock()
+        pose = self.head.pose(now)
+        intr = Intrinsics(self.head.focal_mm(now), width_px=width, height_px=height)
+        ir_visible = self.head.ir_cut_filter == "off"
+        peak, background = (255.0, 16.0) if ir_visible else (70.0, 55.0)
+        blobs = marker_blobs(self.scene(), pose, intr, peak=peak)
+        if ir_visible:
+            blobs += glint_blobs(self.glints, pose, intr)
+        return draw(blobs, width, height, self.rng, background=background)
+
+
+def digest_challenge(secret: bytes, now: float) -> str:
+    stamp = f"{now:.3f}"
+    mac = hmac.new(secret, stamp.encode(), hashlib.sha256).hexdigest()[:16]
+    nonce = base64.b64encode(f"{stamp}:{mac}".encode()).decode()
+    return f'Digest realm="{REALM}", nonce="{nonce}", algorithm=MD5, qop="auth"'
+
+
+def digest_ok(header: str, method: str, user: str, password: str, secret: bytes,
+              now: float) -> bool:
+    """Check an ``Authorization: Digest ...`` header (RFC 2617, MD5, qop=auth)."""
+    fields = _parse_auth_fields(header[len("Digest "):])
+    try:
+        stamp, mac = base64.b64decode(fields["nonce"]).decode().split(":")
+        fresh = now - float(stamp) < NONCE_LIFETIME_S
+        genuine = hmac.compare_digest(
+            mac, hmac.new(secret, stamp.encode(), hashlib.sha256).hexdigest()[:16])
+        ha1 = _md5(f"{user}:{REALM}:{password}")
+        ha2 = _md5(f"{method}:{fields['uri']}")
+        expected = _md5(f"{ha1}:{fields['nonce']}:{fields['nc']}:{fields['cnonce']}:"
+                        f"{fields['qop']}:{ha2}")
+    except (KeyError, ValueError):
+        return False
+    return (fresh and genuine and fields.get("username") == user
+            and hmac.compare_digest(expected, fields.get("response", "")))
+
+
+def basic_ok(header: str, user: str, password: str) -> bool:
+    try:
+        given = base64.b64decode(header[len("Basic "):]).decode()
+    except ValueError:
+        return False
+    return hmac.compare_digest(given, f"{user}:{password}")
+
+
+def _md5(text: str) -> str:
+    return hashlib.md5(text.encode()).hexdigest()  # noqa: S324 - RFC 2617 mandates MD5
+
+
+def _parse_auth_fields(text: str) -> dict[str, str]:
+    fields: dict[str, str] = {}
+    for part in _split_commas(text):
+        key, _, value = part.strip().partition("=")
+        fields[key.strip()] = value.strip().strip('"')
+    return fields
+
+
+def _split_commas(text: str) -> list[str]:
+    parts, current, quoted = [], "", False
+    for char in text:
+        if char == '"':
+            quoted = not quoted
+        if char == "," and not quoted:
+            parts.append(current)
+            current = ""
+        else:
+            current += char
+    return [*parts, current]
+
+
+class CameraServer:
+    """Serves one SimCamera on ``host:port`` from a background thread."""
+
+    def __init__(self, camera: SimCamera, host: str, port: int) -> None:
+        self.camera = camera
+        self._secret = secrets.token_bytes(16)
+        self._httpd = ThreadingHTTPServer((host, port), self._handler_class())
+        self._httpd.daemon_threads = True
+        self.port = self._httpd.server_address[1]
+        self._thread = threading.Thread(target=self._httpd.serve_forever,
+                                        name=f"vapix:{camera.name}", daemon=True)
+
+    def start(self) -> CameraServer:
+        self._thread.start()
+        return self
+
+    def close(self) -> None:
+        self._httpd.shutdown()
+        self._httpd.server_close()
+
+    def _handler_class(self) -> type[BaseHTTPRequestHandler]:
+        server = self
+
+        class Handler(BaseHTTPRequestHandler):
+            server_version = "Boa/0.94.14rc21"  # what AXIS 2xx cameras announce
+            protocol_version = "HTTP/1.1"
+
+            def do_GET(self) -> None:  # noqa: N802 - http.server's naming
+                server._serve(self, "GET")
+
+            def do_POST(self) -> None:  # noqa: N802
+                server._serve(self, "POST")
+
+            def log_message(self, fmt: str, *args: object) -> None:
+                log.debug("%s %s", server.camera.name, fmt % args)
+
+        return Handler
+
+    def _serve(self, request: BaseHTTPRequestHandler, method: str) -> None:
+        url = urlsplit(request.path)
+        args = dict(parse_qsl(url.query, keep_blank_values=True))
+        if method == "POST":
+            length = int(request.headers.get("Content-Length") or 0)
+            body = request.rfile.read(length).decode(errors="replace")
+            args.update(parse_qsl(body, keep_blank_values=True))
+        if not self._authorized(request, method):
+            return
+        now = self.camera.clock()
+        if url.path == vapix.PTZ_PATH:
+            reply = vapix.handle_ptz(args, self.camera.head, now)
+        elif url.path == vapix.IMAGE_PATH:
+            reply = self._image(args)
+        else:
+            reply = vapix.Reply(404, "text/plain", b"Not Found\r\n")
+        self._send(request, reply)
+
+    def _authorized(self, request: BaseHTTPRequestHandler, method: str) -> bool:
+        cam = self.camera
+        header = request.headers.get("Authorization", "")
+        if cam.auth == "none":
+            return True
+        if cam.auth == "digest" and header.startswith("Digest ") and digest_ok(
+                header, method, cam.user, cam.password, self._secret, time.time()):
+            return True
+        if cam.auth == "basic" and header.startswith("Basic ") and basic_ok(
+                header, cam.user, cam.password):
+            return True
+        challenge = (digest_challenge(self._secret, time.time()) if cam.auth == "digest"
+                     else f'Basic realm="{REALM}"')
+        request.send_response(401)
+        request.send_header("WWW-Authenticate", challenge)
+        body = b"401 Unauthorized\r\n"
+        request.send_header("Content-Type", "text/plain")
+        request.send_header("Content-Length", str(len(body)))
+        request.end_headers()
+        request.wfile.write(body)
+        return False
+
+    def _image(self, args: dict[str, str]) -> vapix.Reply:
+        size = vapix.snapshot_size(args)
+        if isinstance(size, vapix.Reply):
+            return size
+        image = self.camera.snapshot(*size)
+        quality = self.camera.jpeg_quality
+        if "compression" in args and args["compression"].isdigit():
+            quality = max(5, 100 - int(args["compression"]))
+        ok, jpeg = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, quality])
+        if not ok:
+            return vapix.error("image: encoding failed")
+        return vapix.Reply(200, "image/jpeg", jpeg.tobytes())
+
+    @staticmethod
+    def _send(request: BaseHTTPRequestHandler, reply: vapix.Reply) -> None:
+        request.send_response(reply.status)
+        request.send_header("Content-Type", reply.content_type)
+        request.send_header("Content-Length", str(len(reply.body)))
+        request.end_headers()
+        if reply.body:
+            request.wfile.write(reply.body)

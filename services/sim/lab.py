@@ -1,0 +1,181 @@
+"""The simulated lab's state: crater, robot, markers, PTZ heads, crane, tracking camera.
+
+Everything is a function of the scenario time ``t`` (seconds since the sim started) and the
+seed, so the live servers (real time) and fast experiments (simulated time) see the same lab.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+
+from common.camera import Pose
+from services.sim.crane import CraneModel, CraneParams
+from services.sim.mocap_server import MocapFrame
+from services.sim.ptz import PtzHead
+from services.sim.render import MARKER_RADIUS_MM, Blob, Glint, TrackingCamera, draw
+from services.sim.robots import Trajectory, make_trajectory, railway_keep_clear
+from services.sim.settings import SimSettings
+from services.sim.world import CraterMap, CraterShape, generate_crater
+
+log = logging.getLogger(__name__)
+
+LOOP_PAUSE_S = 5.0
+OCCLUSION_WINDOW_S = 2.0
+
+
+def load_or_make_crater(settings: SimSettings) -> CraterMap:
+    """The crater file if it exists (as a real lab's laser scan would), else a new one saved
+    there, generated from the seed."""
+    path = settings.crater_file
+    if path.exists():
+        return CraterMap.load(path)
+    crater = generate_crater(CraterShape(keep_clear=railway_keep_clear()),
+                             np.random.default_rng(settings.seed))
+    crater.save(path)
+    log.info("generated crater height map %s (seed %d)", path, settings.seed)
+    return crater
+
+
+@dataclass
+class Lab:
+    settings: SimSettings
+    crater: CraterMap
+    trajectory: Trajectory
+    static_markers: np.ndarray  # (S, 3)
+    ghost_markers: np.ndarray  # (G, 3)
+    ptz_glints: list[Glint]
+    ground_glints: list[Glint]
+    heads: dict[str, PtzHead]
+    crane: CraneModel
+    crane_lock: threading.Lock
+    tracking: TrackingCamera
+
+    @classmethod
+    def build(cls, settings: SimSettings, crater: CraterMap | None = None) -> Lab:
+        crater = crater if crater is not None else load_or_make_crater(settings)
+        rng = np.random.default_rng(settings.seed)
+        trajectory = make_trajectory(settings.scenario, crater, rng)
+        c = settings.crane
+        params = CraneParams(c.x_min_mm, c.x_max_mm, c.y_min_mm, c.y_max_mm, c.max_speed_mm_s,
+                             c.max_accel_mm_s2, c.reaction_s, c.cycle_s, c.watchdog_s)
+        crane = CraneModel(params)
+        start = trajectory.position(0.0)[:2]
+        crane.position = np.clip(start, [c.x_min_mm, c.y_min_mm], [c.x_max_mm, c.y_max_mm])
+        t = settings.tracking_camera
+        area_m2 = (c.x_max_mm - c.x_min_mm) * (c.y_max_mm - c.y_min_mm) / 1e6
+        return cls(
+            settings=settings, crater=crater, trajectory=trajectory,
+            static_markers=_on_ground(crater, rng, settings.mocap.static_markers, 2600, 3400),
+            ghost_markers=_on_ground(crater, rng, settings.mocap.ghost_markers, 500, 2500),
+            ptz_glints=_glints(crater, rng, 8, 2500.0),
+            ground_glints=_glints(crater, rng, int(round(t.reflections_per_m2 * area_m2)),
+                                  max(c.x_max_mm, c.y_max_mm, -c.x_min_mm, -c.y_min_mm)),
+            heads={cam.name: PtzHead(Pose(cam.x_mm, cam.y_mm, cam.z_mm, cam.rx_deg, cam.ry_deg,
+                                          cam.rz_deg), latency_s=cam.latency_s,
+                                     pan_speed_deg_s=cam.pan_speed_deg_s,
+                                     tilt_speed_deg_s=cam.tilt_speed_deg_s)
+                   for cam in settings.cameras},
+            crane=crane, crane_lock=threading.Lock(),
+            tracking=TrackingCamera(t.focal_mm, t.pixel_mm, t.width_px, t.height_px,
+                                    t.height_mm))
+
+    # --- the robot ---------------------------------------------------------------------------
+
+    def scenario_time(self, t: float) -> float:
+        if not self.settings.loop:
+            return t
+        return t % (self.trajectory.duration_s + LOOP_PAUSE_S)
+
+    def robot(self, t: float) -> np.ndarray:
+        """The robot marker's true world position (mm) at sim time ``t``."""
+        return self.trajectory.position(self.scenario_time(t))
+
+    def robot_velocity(self, t: float) -> np.ndarray:
+        return self.trajectory.velocity(self.scenario_time(t))
+
+    def bright_points(self, t: float) -> np.ndarray:
+        """Every IR marker a PTZ camera can see at ``t``: the robot's and the static ones."""
+        return np.vstack([self.robot(t)[None, :], self.static_markers])
+
+    # --- motion capture -----------------------------------------------------------------------
+
+    @property
+    def labels(self) -> list[str]:
+        robot = [self.settings.mocap.robot_label] if self.settings.mocap.robot_label else []
+        return robot + [f"static_{i + 1}" for i in range(len(self.static_markers))]
+
+    def mocap_frame(self, number: int) -> MocapFrame:
+        """Frame ``number`` as QTM would measure it: noise, dropouts, occlusions."""
+        m = self.settings.mocap
+        t = number / m.rate_hz
+        rng = np.random.default_rng((self.settings.seed, number))
+        robot = self.robot(t)
+        if self._occluded(t):
+            robot = np.full(3, np.nan)
+        noisy = np.vstack([robot[None, :], self.static_markers])
+        noisy = noisy + rng.normal(0.0, m.noise_mm, size=noisy.shape)
+        noisy[rng.random(len(noisy)) < m.dropout] = np.nan
+        unlabelled = [(100 + i, xyz) for i, xyz in enumerate(self.ghost_markers)
+                      if rng.random() < 0.5]
+        if m.robot_label:
+            labelled = noisy
+        else:
+            labelled = noisy[1:]
+            if np.all(np.isfinite(noisy[0])):
+                unlabelled.insert(0, (1, noisy[0]))
+        return MocapFrame(number, int(round(t * 1e6)), labelled, unlabelled)
+
+    def _occluded(self, t: float) -> bool:
+        window = int(t // OCCLUSION_WINDOW_S)
+        rng = np.random.default_rng((self.settings.seed, 7, window))
+        if rng.random() >= 0.05:
+            return False
+        start = rng.uniform(0, OCCLUSION_WINDOW_S - 0.3)
+        return start <= t - window * OCCLUSION_WINDOW_S < start + 0.3
+
+    # --- crane and its tracking camera ---------------------------------------------------------
+
+    def crane_state(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(position, velocity) of the crane at ``t`` (mm, mm/s)."""
+        with self.crane_lock:
+            self.crane.advance_to(t)
+            return self.crane.position.copy(), self.crane.velocity.copy()
+
+    def tracking_frame(self, t: float, rng: np.random.Generator) -> np.ndarray:
+        """The downward tracking camera's image at ``t`` (uint8, height × width)."""
+        crane, _ = self.crane_state(t)
+        cam = self.tracking
+        blobs = []
+        u, v, r = cam.pixel_of(self.robot(t), *crane)
+        blobs.append(Blob(u, v, r, r))
+        for g in self.ground_glints:
+            gu, gv, scale = cam.pixel_of(np.array([g.x_mm, g.y_mm, g.z_mm]), *crane)
+            if -50 < gu < cam.width_px + 50 and -50 < gv < cam.height_px + 50:
+                k = scale / MARKER_RADIUS_MM
+                blobs.append(Blob(gu, gv, max(g.long_mm * k, 1.5), max(g.short_mm * k, 0.6),
+                                  g.angle_rad, 230.0))
+        return draw(blobs, cam.width_px, cam.height_px, rng,
+                    noise_sigma=self.settings.tracking_camera.noise)
+
+
+def _on_ground(crater: CraterMap, rng: np.random.Generator, count: int, r_min: float,
+               r_max: float) -> np.ndarray:
+    r = rng.uniform(r_min, r_max, count)
+    a = rng.uniform(0, 2 * np.pi, count)
+    x, y = r * np.cos(a), r * np.sin(a)
+    return np.column_stack([x, y, crater.height_at(x, y) + 20.0]) if count else np.zeros((0, 3))
+
+
+def _glints(crater: CraterMap, rng: np.random.Generator, count: int, half: float
+            ) -> list[Glint]:
+    out = []
+    for _ in range(count):
+        x, y = rng.uniform(-half, half, 2)
+        out.append(Glint(float(x), float(y), float(crater.height_at(x, y)) + 5.0,
+                         float(rng.uniform(25, 45)), float(rng.uniform(5, 10)),
+                         float(rng.uniform(0, np.pi))))
+    return out

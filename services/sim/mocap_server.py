@@ -1,0 +1,240 @@
+"""A Qualisys QTM real-time server (RT protocol 1.25, little-endian port) playing the scenario.
+
+The unmodified ``qtm-rt`` client connects, reads the 3D labels, and streams ``3d`` (labelled)
+and ``3dnolabels`` (unidentified) frames at the configured rate, with noise, dropouts (NaN
+markers) and the protocol's events; while not capturing it answers with NoMoreData.
+Packet building is pure (top of the module); the asyncio server is at the bottom.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import struct
+from collections.abc import Callable
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+GREETING = "QTM RT Interface connected"  # the exact string the client ignores
+NAN32 = struct.unpack("<f", b"\xff\xff\xff\xff")[0]  # QTM's "missing marker": all bits set
+
+
+class PacketType(IntEnum):
+    ERROR = 0
+    COMMAND = 1
+    XML = 2
+    DATA = 3
+    NO_MORE_DATA = 4
+    EVENT = 6
+
+
+class Event(IntEnum):
+    CONNECTED = 1
+    CONNECTION_CLOSED = 2
+    CAPTURE_STARTED = 3
+    CAPTURE_STOPPED = 4
+
+
+COMPONENT_3D = 1
+COMPONENT_3D_NO_LABELS = 2
+
+
+def packet(kind: PacketType, body: bytes = b"") -> bytes:
+    return struct.pack("<II", 8 + len(body), kind) + body
+
+
+def text_packet(kind: PacketType, text: str) -> bytes:
+    return packet(kind, text.encode() + b"\0")
+
+
+def event_packet(event: Event) -> bytes:
+    return packet(PacketType.EVENT, bytes([event]))
+
+
+@dataclass(frozen=True)
+class MocapFrame:
+    """One frame: labelled markers in label order (NaN rows = missing) and unidentified ones."""
+
+    number: int
+    timestamp_us: int
+    labelled: np.ndarray  # (L, 3)
+    unlabelled: list[tuple[int, np.ndarray]]
+
+
+def data_packet(frame: MocapFrame, components: set[int]) -> bytes:
+    parts = []
+    if COMPONENT_3D in components:
+        body = struct.pack("<Ihh", len(frame.labelled), 0, 0) + b"".join(
+            struct.pack("<3f", *(NAN32 if np.isnan(v) else float(v) for v in xyz))
+            for xyz in frame.labelled)
+        parts.append(struct.pack("<II", 8 + len(body), COMPONENT_3D) + body)
+    if COMPONENT_3D_NO_LABELS in components:
+        body = struct.pack("<Ihh", len(frame.unlabelled), 0, 0) + b"".join(
+            struct.pack("<3fi", *map(float, xyz), marker_id) for marker_id, xyz in
+            frame.unlabelled)
+        parts.append(struct.pack("<II", 8 + len(body), COMPONENT_3D_NO_LABELS) + body)
+    header = struct.pack("<qII", frame.timestamp_us, frame.number, len(parts))
+    return packet(PacketType.DATA, header + b"".join(parts))
+
+
+def parameters_xml(labels: list[str], frequency_hz: float) -> str:
+    label_xml = "".join(f"<Label><Name>{name}</Name><RGBColor>ff0000</RGBColor></Label>"
+                        for name in labels)
+    return ("<QTM_Parameters_Ver_1.25>"
+            f"<General><Frequency>{frequency_hz:g}</Frequency><Capture_Time>0</Capture_Time>"
+            "</General>"
+            f"<The_3D><AxisUpwards>+Z</AxisUpwards><Labels>{len(labels)}</Labels>{label_xml}"
+            "</The_3D></QTM_Parameters_Ver_1.25>")
+
+
+_COMPONENTS = {"3d": COMPONENT_3D, "3dnolabels": COMPONENT_3D_NO_LABELS}
+
+
+def parse_stream_command(words: list[str], rate_hz: float) -> tuple[int, set[int]] | str:
+    """``streamframes <frames> <components...>`` → (frame divisor, components) or an error."""
+    if len(words) < 2:
+        return "Missing frames argument"
+    frames, names = words[0].lower(), [w.lower() for w in words[1:]]
+    if frames == "allframes":
+        divisor = 1
+    elif frames.startswith("frequencydivisor:") and frames[17:].isdigit():
+        divisor = max(1, int(frames[17:]))
+    elif frames.startswith("frequency:") and frames[10:].replace(".", "", 1).isdigit():
+        divisor = max(1, round(rate_hz / max(float(frames[10:]), 1e-9)))
+    else:
+        return f"Invalid frames argument: {words[0]}"
+    unknown = [n for n in names if n not in _COMPONENTS]
+    if unknown:
+        return f"Component not supported by this simulator: {unknown[0]}"
+    return divisor, {_COMPONENTS[n] for n in names}
+
+
+# --- the server ----------------------------------------------------------------------------------
+
+
+@dataclass
+class MocapSource:
+    """What the server streams: labels, the frame at a frame number, and the capture state."""
+
+    labels: list[str]
+    rate_hz: float
+    frame_at: Callable[[int], MocapFrame]
+    frame_now: Callable[[], int]  # the frame number the capture is at
+    capturing: Callable[[], bool]
+
+
+class MocapServer:
+    def __init__(self, source: MocapSource, host: str = "127.0.0.1", port: int = 22223) -> None:
+        self.source, self.host, self.port = source, host, port
+        self._server: asyncio.base_events.Server | None = None
+        self._clients: set[asyncio.StreamWriter] = set()
+
+    async def start(self) -> None:
+        self._server = await asyncio.start_server(self._serve, self.host, self.port)
+        self.port = self._server.sockets[0].getsockname()[1]
+        log.info("QTM RT server on %s:%d (%g Hz)", self.host, self.port, self.source.rate_hz)
+
+    async def close(self) -> None:
+        if self._server is not None:
+            self._server.close()
+            for writer in list(self._clients):
+                writer.close()
+            await self._server.wait_closed()
+
+    def broadcast(self, event: Event) -> None:
+        for writer in list(self._clients):
+            writer.write(event_packet(event))
+
+    async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        self._clients.add(writer)
+        writer.transport.get_extra_info("socket").setsockopt(6, 1, 1)  # TCP_NODELAY
+        writer.write(text_packet(PacketType.COMMAND, GREETING))
+        streamer: asyncio.Task | None = None
+        try:
+            while True:
+                header = await reader.readexactly(8)
+                size, kind = struct.unpack("<II", header)
+                if not 8 <= size <= 65536:
+                    log.warning("QTM client sent a bad packet size %d; closing", size)
+                    return
+                body = (await reader.readexactly(size - 8)).rstrip(b"\0").decode(errors="replace")
+                if kind != PacketType.COMMAND:
+                    writer.write(text_packet(PacketType.ERROR, "Expected a command packet"))
+                    continue
+                words = body.split()
+                if words[:2] == ["streamframes", "stop"]:
+                    streamer = _cancel(streamer)
+                elif words[:1] == ["streamframes"]:
+                    parsed = parse_stream_command(words[1:], self.source.rate_hz)
+                    if isinstance(parsed, str):
+                        writer.write(text_packet(PacketType.ERROR, parsed))
+                    else:
+                        streamer = _cancel(streamer)
+                        streamer = asyncio.create_task(self._stream(writer, *parsed))
+                else:
+                    writer.write(self._reply(words))
+                await writer.drain()
+        except (asyncio.IncompleteReadError, ConnectionError):
+            pass
+        finally:
+            _cancel(streamer)
+            self._clients.discard(writer)
+            writer.close()
+
+    def _reply(self, words: list[str]) -> bytes:
+        command = words[0].lower() if words else ""
+        src = self.source
+        if command == "version":
+            version = words[1] if len(words) > 1 else "1.25"
+            return text_packet(PacketType.COMMAND, f"Version set to {version}")
+        if command == "qtmversion":
+            return text_packet(PacketType.COMMAND, "QTM Version is 2024.1 (build 9000) [STB sim]")
+        if command == "byteorder":
+            return text_packet(PacketType.COMMAND, "Byte order is little endian")
+        if command == "getstate":
+            return event_packet(Event.CAPTURE_STARTED if src.capturing() else Event.CONNECTED)
+        if command == "getparameters":
+            return text_packet(PacketType.XML, parameters_xml(src.labels, src.rate_hz))
+        if command == "getcurrentframe":
+            if not src.capturing():
+                return packet(PacketType.NO_MORE_DATA)
+            parsed = parse_stream_command(["allframes", *words[1:]], src.rate_hz)
+            if isinstance(parsed, str):
+                return text_packet(PacketType.ERROR, parsed)
+            return data_packet(src.frame_at(src.frame_now()), parsed[1])
+        return text_packet(PacketType.ERROR, f"Command not supported by this simulator: {command}")
+
+    async def _stream(self, writer: asyncio.StreamWriter, divisor: int,
+                      components: set[int]) -> None:
+        """Send every ``divisor``-th frame as the capture reaches it (catching up after a
+        late wake-up, at most a tenth of a second's worth at once)."""
+        src = self.source
+        period = divisor / src.rate_hz
+        burst = max(1, int(0.1 * src.rate_hz / divisor))
+        last: int | None = None
+        while not writer.is_closing():
+            if not src.capturing():
+                last = None
+                writer.write(packet(PacketType.NO_MORE_DATA))
+                await asyncio.sleep(1.0)
+                continue
+            newest = src.frame_now() // divisor * divisor
+            first = newest if last is None else max(last + divisor, newest - burst * divisor)
+            for number in range(first, newest + 1, divisor):
+                writer.write(data_packet(src.frame_at(number), components))
+            last = newest
+            if writer.transport.get_write_buffer_size() > 4 * 1024 * 1024:
+                log.warning("QTM client is not reading; closing its connection")
+                writer.close()
+                return
+            await asyncio.sleep(period)
+
+
+def _cancel(task: asyncio.Task | None) -> None:
+    if task is not None:
+        task.cancel()
+    return None

@@ -1,0 +1,141 @@
+"""A PTZ head as an AXIS 215 PTZ moves (pure, on an injected time; no clock, no sleeping).
+
+Commands take effect ``latency_s`` after they arrive; pan and tilt then move at finite speed
+(scaled by the VAPIX ``speed`` 1…100) towards their target, or at a rate in continuous mode,
+and stop at the limits. Zoom moves in steps per second.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from common.camera import Pose, focal_mm_for_zoom, rot_y, rot_z
+
+
+@dataclass(frozen=True)
+class PtzLimits:
+    min_pan: float = -170.0
+    max_pan: float = 170.0
+    min_tilt: float = -90.0
+    max_tilt: float = 90.0
+    min_zoom: int = 1
+    max_zoom: int = 9999
+
+    def clamp(self, pan: float, tilt: float, zoom: float) -> tuple[float, float, float]:
+        return (min(max(pan, self.min_pan), self.max_pan),
+                min(max(tilt, self.min_tilt), self.max_tilt),
+                min(max(zoom, self.min_zoom), self.max_zoom))
+
+
+@dataclass
+class _Axis:
+    position: float
+    target: float
+    rate: float = 0.0  # continuous mode: signed units/s; 0 = move to target
+    speed: float = 1.0  # fraction of the maximum speed for target moves
+
+    def advance(self, dt: float, max_speed: float, lo: float, hi: float) -> None:
+        if self.rate:
+            self.position = min(max(self.position + self.rate * dt, lo), hi)
+            self.target = self.position
+            return
+        step = max_speed * self.speed * dt
+        error = self.target - self.position
+        self.position = self.target if abs(error) <= step else self.position + np.sign(error) * step
+
+
+@dataclass
+class PtzHead:
+    """The moving part of a simulated PTZ camera; ``mount`` is its pose at pan = tilt = 0."""
+
+    mount: Pose
+    limits: PtzLimits = PtzLimits()
+    pan_speed_deg_s: float = 100.0
+    tilt_speed_deg_s: float = 90.0
+    zoom_steps_s: float = 4000.0
+    latency_s: float = 0.12
+    ir_cut_filter: str = "auto"
+    _time: float = 0.0
+    _pan: _Axis = field(default_factory=lambda: _Axis(0.0, 0.0))
+    _tilt: _Axis = field(default_factory=lambda: _Axis(0.0, 0.0))
+    _zoom: _Axis = field(default_factory=lambda: _Axis(1.0, 1.0))
+    _pending: list[tuple[float, str, tuple]] = field(default_factory=list)
+
+    # --- commands (take effect after the latency) -----------------------------------------
+
+    def absolute(self, now: float, pan: float | None = None, tilt: float | None = None,
+                 zoom: float | None = None, speed: float | None = None) -> None:
+        self._queue(now, "absolute", (pan, tilt, zoom, speed))
+
+    def relative(self, now: float, rpan: float = 0.0, rtilt: float = 0.0, rzoom: float = 0.0,
+                 speed: float | None = None) -> None:
+        self._queue(now, "relative", (rpan, rtilt, rzoom, speed))
+
+    def continuous(self, now: float, pan_pct: float | None = None, tilt_pct: float | None = None,
+                   zoom_pct: float | None = None) -> None:
+        self._queue(now, "continuous", (pan_pct, tilt_pct, zoom_pct))
+
+    def stop(self, now: float) -> None:
+        self._queue(now, "stop", ())
+
+    def _queue(self, now: float, kind: str, args: tuple) -> None:
+        self.advance_to(now)
+        self._pending.append((now + self.latency_s, kind, args))
+
+    # --- state ------------------------------------------------------------------------------
+
+    def state(self, now: float) -> tuple[float, float, int, bool]:
+        """(pan_deg, tilt_deg, zoom, moving) at ``now``."""
+        self.advance_to(now)
+        moving = any(a.rate or a.position != a.target for a in (self._pan, self._tilt, self._zoom))
+        return self._pan.position, self._tilt.position, int(round(self._zoom.position)), moving
+
+    def pose(self, now: float) -> Pose:
+        """Where the camera looks at ``now``: mount · Rz(pan) · Ry(tilt) (x optical axis,
+        z down in the image: positive pan turns right, positive tilt turns up)."""
+        pan, tilt, _, _ = self.state(now)
+        rotation = self.mount.rotation @ rot_z(np.radians(pan)) @ rot_y(np.radians(tilt))
+        return Pose.from_matrix(rotation, self.mount.position)
+
+    def focal_mm(self, now: float) -> float:
+        return focal_mm_for_zoom(self.state(now)[2])
+
+    def advance_to(self, now: float) -> None:
+        if now < self._time:
+            return
+        while self._pending and self._pending[0][0] <= now:
+            at, kind, args = self._pending.pop(0)
+            self._move(at)
+            self._apply(kind, args)
+        self._move(now)
+
+    def _move(self, now: float) -> None:
+        dt = max(0.0, now - self._time)
+        lim = self.limits
+        self._pan.advance(dt, self.pan_speed_deg_s, lim.min_pan, lim.max_pan)
+        self._tilt.advance(dt, self.tilt_speed_deg_s, lim.min_tilt, lim.max_tilt)
+        self._zoom.advance(dt, self.zoom_steps_s, lim.min_zoom, lim.max_zoom)
+        self._time = max(self._time, now)
+
+    def _apply(self, kind: str, args: tuple) -> None:
+        axes = (self._pan, self._tilt, self._zoom)
+        if kind == "stop":
+            for axis in axes:
+                axis.rate, axis.target = 0.0, axis.position
+            return
+        if kind == "continuous":
+            maxima = (self.pan_speed_deg_s, self.tilt_speed_deg_s, self.zoom_steps_s)
+            for axis, pct, top in zip(axes, args, maxima, strict=True):
+                if pct is not None:
+                    axis.rate = top * pct / 100.0
+            return
+        *values, speed = args
+        if kind == "relative":
+            values = [a.position + v for a, v in zip(axes, values, strict=True)]
+        current = [a.position if v is None else v for a, v in zip(axes, values, strict=True)]
+        pan, tilt, zoom = self.limits.clamp(*current)
+        for axis, target in zip(axes, (pan, tilt, zoom), strict=True):
+            axis.rate, axis.target = 0.0, target
+            axis.speed = 1.0 if speed is None else min(max(speed, 1.0), 100.0) / 100.0

@@ -1,0 +1,133 @@
+"""Camera images of the lab as an IR camera sees it: dark ground, bright round markers (pure).
+
+Pixel convention (shared with the detector): pixel ``[row, col]`` has its centre at
+``(u, v) = (col, row)``, so a marker projected to (u, v) by the camera model is drawn centred
+there and its intensity centroid is (u, v).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from common.camera import Intrinsics, Pose, project, thin_lens_image_distance_mm
+
+MARKER_RADIUS_MM = 9.5
+
+
+@dataclass(frozen=True)
+class Blob:
+    """Something bright in the image: centre (px), semi-axes (px), angle (rad), peak gray."""
+
+    u: float
+    v: float
+    a_px: float
+    b_px: float
+    angle_rad: float = 0.0
+    peak: float = 255.0
+
+
+@dataclass(frozen=True)
+class Glint:
+    """A stray reflection on the ground: a world point and its elongated size (mm)."""
+
+    x_mm: float
+    y_mm: float
+    z_mm: float
+    long_mm: float
+    short_mm: float
+    angle_rad: float
+
+
+def draw(blobs: list[Blob], width: int, height: int, rng: np.random.Generator, *,
+         background: float = 16.0, noise_sigma: float = 2.5) -> np.ndarray:
+    """An 8-bit gray image of ``blobs`` on a noisy background, edges anti-aliased."""
+    image = np.full((height, width), background, dtype=np.float32)
+    for blob in blobs:
+        _draw_blob(image, blob)
+    if noise_sigma > 0:
+        image += rng.normal(0.0, noise_sigma, size=image.shape).astype(np.float32)
+    return np.clip(np.rint(image), 0, 255).astype(np.uint8)
+
+
+def _draw_blob(image: np.ndarray, blob: Blob) -> None:
+    reach = max(blob.a_px, blob.b_px) + 2
+    c0, c1 = int(np.floor(blob.u - reach)), int(np.ceil(blob.u + reach)) + 1
+    r0, r1 = int(np.floor(blob.v - reach)), int(np.ceil(blob.v + reach)) + 1
+    height, width = image.shape
+    c0, c1, r0, r1 = max(c0, 0), min(c1, width), max(r0, 0), min(r1, height)
+    if c0 >= c1 or r0 >= r1:
+        return
+    cols, rows = np.meshgrid(np.arange(c0, c1) - blob.u, np.arange(r0, r1) - blob.v)
+    cos, sin = np.cos(blob.angle_rad), np.sin(blob.angle_rad)
+    along, across = cols * cos + rows * sin, -cols * sin + rows * cos
+    # Distance to the ellipse's edge in pixels (exact for a circle); 1 px wide soft edge.
+    scale = min(blob.a_px, blob.b_px)
+    rho = np.sqrt((along / blob.a_px) ** 2 + (across / blob.b_px) ** 2)
+    coverage = np.clip((1.0 - rho) * scale + 0.5, 0.0, 1.0)
+    patch = image[r0:r1, c0:c1]
+    np.maximum(patch, patch + coverage * (blob.peak - patch), out=patch)
+
+
+def marker_blobs(points_world: np.ndarray, pose: Pose, intr: Intrinsics, *,
+                 radius_mm: float = MARKER_RADIUS_MM, peak: float = 255.0) -> list[Blob]:
+    """The discs of spherical markers as a PTZ camera sees them (pinhole, eq. 1–3)."""
+    points = np.atleast_2d(points_world)
+    uv = project(points, pose, intr)
+    depth = pose.to_camera(points)[:, 0]
+    blobs = []
+    for (u, v), x in zip(uv, depth, strict=True):
+        if np.isfinite(u) and x > 0:
+            r = max(intr.fy_px * radius_mm / x, 0.6)
+            blobs.append(Blob(float(u), float(v), r, r, 0.0, peak))
+    return blobs
+
+
+def glint_blobs(glints: list[Glint], pose: Pose, intr: Intrinsics) -> list[Blob]:
+    if not glints:
+        return []
+    points = np.array([[g.x_mm, g.y_mm, g.z_mm] for g in glints])
+    uv = project(points, pose, intr)
+    depth = pose.to_camera(points)[:, 0]
+    out = []
+    for g, (u, v), x in zip(glints, uv, depth, strict=True):
+        if np.isfinite(u) and x > 0:
+            scale = intr.fy_px / x
+            out.append(Blob(float(u), float(v), max(g.long_mm * scale, 1.5),
+                            max(g.short_mm * scale, 0.5), g.angle_rad, 235.0))
+    return out
+
+
+@dataclass(frozen=True)
+class TrackingCamera:
+    """The crane's downward IR camera (paper §3.1), with the paper's thin-lens model.
+
+    Mounted ``height_mm`` above the world's z = 0 at the crane's (x, y); image columns grow
+    with world +x, rows with world −y; the reference pixel (directly below the lens) is the
+    image centre. A point at distance z below the lens appears at an offset of
+    ``(b / z) · offset_mm / pixel_mm`` pixels, with b from eq. 5.
+    """
+
+    focal_mm: float = 8.0
+    pixel_mm: float = 0.0075
+    width_px: int = 640
+    height_px: int = 480
+    height_mm: float = 3500.0
+
+    @property
+    def ref_u(self) -> float:
+        return self.width_px / 2
+
+    @property
+    def ref_v(self) -> float:
+        return self.height_px / 2
+
+    def pixel_of(self, point_world: np.ndarray, crane_x_mm: float, crane_y_mm: float
+                 ) -> tuple[float, float, float]:
+        """(u, v, radius_px) of a marker at ``point_world`` seen from the crane."""
+        z = self.height_mm - float(point_world[2])
+        magnification = thin_lens_image_distance_mm(self.focal_mm, z) / z / self.pixel_mm
+        u = self.ref_u + (float(point_world[0]) - crane_x_mm) * magnification
+        v = self.ref_v - (float(point_world[1]) - crane_y_mm) * magnification
+        return u, v, MARKER_RADIUS_MM * magnification

@@ -1,0 +1,194 @@
+"""The robots of the scenarios, as marker trajectories over time (pure, seeded, no clock).
+
+Each scenario is a ``Trajectory``: the robot marker's world position (mm) at any time ``t``
+(seconds since the scenario started), sampled at 100 Hz and interpolated. The marker (19 mm,
+paper §3.1) follows the surface height of the crater plus the height it is mounted at.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from services.sim.world import CraterMap
+
+Scenario = Literal["locomotive", "walker", "calibration"]
+SAMPLE_HZ = 100.0
+MARKER_DIAMETER_MM = 19.0
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    name: str
+    t_s: np.ndarray  # (N,) increasing
+    xyz_mm: np.ndarray  # (N, 3)
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.t_s[-1])
+
+    def position(self, t_s: float) -> np.ndarray:
+        """Marker position at ``t_s``; before the start the first, after the end the last."""
+        return np.array([np.interp(t_s, self.t_s, self.xyz_mm[:, i]) for i in range(3)])
+
+    def velocity(self, t_s: float, dt_s: float = 0.02) -> np.ndarray:
+        return (self.position(t_s + dt_s / 2) - self.position(t_s - dt_s / 2)) / dt_s
+
+
+# --- locomotive: the paper's model railway ----------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Oval:
+    """A model-railway oval: two straights along x joined by two half circles (mm)."""
+
+    straight_mm: float = 1500.0
+    radius_mm: float = 500.0
+    centre_x_mm: float = 0.0
+    centre_y_mm: float = 0.0
+
+    @property
+    def length_mm(self) -> float:
+        return 2 * self.straight_mm + 2 * np.pi * self.radius_mm
+
+    def point(self, s_mm: np.ndarray) -> np.ndarray:
+        """Points (N, 2) at arc lengths ``s_mm`` from the start (middle of the lower straight)."""
+        s = np.mod(s_mm, self.length_mm)
+        half, r, straight = self.straight_mm / 2, self.radius_mm, self.straight_mm
+        arc = np.pi * r
+        out = np.empty((len(s), 2))
+        # lower straight from the start, going +x
+        seg = [half, half + arc, half + arc + straight, half + 2 * arc + straight]
+        a = s < seg[0]
+        out[a] = np.column_stack([s[a], np.full(a.sum(), -r)])
+        b = (s >= seg[0]) & (s < seg[1])
+        phi = (s[b] - seg[0]) / r - np.pi / 2
+        out[b] = np.column_stack([half + r * np.cos(phi), r * np.sin(phi)])
+        c = (s >= seg[1]) & (s < seg[2])
+        out[c] = np.column_stack([half - (s[c] - seg[1]), np.full(c.sum(), r)])
+        d = (s >= seg[2]) & (s < seg[3])
+        phi = (s[d] - seg[2]) / r + np.pi / 2
+        out[d] = np.column_stack([-half + r * np.cos(phi), r * np.sin(phi)])
+        e = s >= seg[3]
+        out[e] = np.column_stack([-half + (s[e] - seg[3]), np.full(e.sum(), -r)])
+        return out + [self.centre_x_mm, self.centre_y_mm]
+
+
+def locomotive(world: CraterMap, *, oval: Oval = Oval(), speed_mm_s: float = 290.0,
+               rounds: int = 5, accel_mm_s2: float = 300.0, marker_height_mm: float = 80.0,
+               start_delay_s: float = 2.0) -> Trajectory:
+    """Five rounds at ~29 cm/s, then a stop exactly at the start (paper §3.3)."""
+    distance = rounds * oval.length_mm
+    ramp_s = speed_mm_s / accel_mm_s2
+    ramp_mm = 0.5 * accel_mm_s2 * ramp_s**2
+    cruise_s = (distance - 2 * ramp_mm) / speed_mm_s
+    total = start_delay_s + 2 * ramp_s + cruise_s + 2.0
+    t = np.arange(0, total, 1 / SAMPLE_HZ)
+    tm = np.clip(t - start_delay_s, 0, None)
+    s = np.where(tm < ramp_s, 0.5 * accel_mm_s2 * tm**2,
+                 np.where(tm < ramp_s + cruise_s, ramp_mm + speed_mm_s * (tm - ramp_s),
+                          distance - 0.5 * accel_mm_s2
+                          * np.clip(2 * ramp_s + cruise_s - tm, 0, None) ** 2))
+    xy = oval.point(s)
+    z = world.height_at(xy[:, 0], xy[:, 1]) + marker_height_mm
+    return Trajectory("locomotive", t, np.column_stack([xy, z]))
+
+
+# --- walker: a slow legged robot on the slopes ------------------------------------------------
+
+
+def walker(world: CraterMap, rng: np.random.Generator, *, duration_s: float = 240.0,
+           speed_mm_s: float = 60.0, step_hz: float = 0.8, sway_mm: float = 20.0,
+           bob_mm: float = 8.0, slide_per_s: float = 0.04, slide_mm: tuple[float, float] =
+           (120.0, 300.0), steep_deg: float = 28.0, marker_height_mm: float = 350.0
+           ) -> Trajectory:
+    """Walks up and down the crater wall; its marker sways with every step, and on steep
+    ground it now and then slides downhill (faster than it walks), as in paper §3.3."""
+    waypoints = np.array([[0.0, -600.0], [300.0, 1200.0], [-200.0, 2100.0], [200.0, 1400.0],
+                          [-400.0, 300.0], [500.0, -900.0], [0.0, -600.0]])
+    t = np.arange(0, duration_s, 1 / SAMPLE_HZ)
+    xy = np.empty((len(t), 2))
+    pos, target, heading = waypoints[0].copy(), 1, np.zeros(2)
+    slide_left, slide_dir, slide_speed = 0.0, np.zeros(2), 0.0
+    dt = 1 / SAMPLE_HZ
+    for i in range(len(t)):
+        if slide_left > 0:
+            step = min(slide_speed * dt, slide_left)
+            pos += slide_dir * step
+            slide_left -= step
+        else:
+            to_target = waypoints[target] - pos
+            dist = np.linalg.norm(to_target)
+            if dist < 20:
+                target = (target + 1) % len(waypoints)
+            else:
+                heading = to_target / dist
+                pos += heading * speed_mm_s * dt
+            slope = _slope_at(world, pos)
+            if slope > steep_deg and rng.random() < slide_per_s * dt:
+                slide_dir = world.downhill(*pos)
+                slide_left = rng.uniform(*slide_mm)
+                slide_speed = rng.uniform(250.0, 400.0)
+        xy[i] = pos
+    phase = 2 * np.pi * step_hz * t
+    lateral = np.column_stack([-np.gradient(xy[:, 1]), np.gradient(xy[:, 0])])
+    norms = np.linalg.norm(lateral, axis=1, keepdims=True)
+    lateral = np.divide(lateral, norms, out=np.zeros_like(lateral), where=norms > 1e-9)
+    swayed = xy + lateral * (sway_mm * np.sin(phase))[:, None]
+    z = (world.height_at(swayed[:, 0], swayed[:, 1]) + marker_height_mm
+         + bob_mm * np.abs(np.sin(phase)))
+    return Trajectory("walker", t, np.column_stack([swayed, z]))
+
+
+def _slope_at(world: CraterMap, pos: np.ndarray) -> float:
+    step = world.resolution_mm
+    gx = (world.height_at(pos[0] + step, pos[1]) - world.height_at(pos[0] - step, pos[1]))
+    gy = (world.height_at(pos[0], pos[1] + step) - world.height_at(pos[0], pos[1] - step))
+    return float(np.degrees(np.arctan(np.hypot(gx, gy) / (2 * step))))
+
+
+# --- calibration: a marker carried through the cameras' view -----------------------------------
+
+
+def calibration(world: CraterMap, rng: np.random.Generator, *, points: int = 150,
+                region_mm: float = 1600.0, height_mm: tuple[float, float] = (200.0, 1400.0),
+                speed_mm_s: float = 400.0, dwell_s: float = 1.5) -> Trajectory:
+    """A marker on a pole, carried from point to point over the crater floor and held still
+    at each for ``dwell_s`` (so that snapshots see it sharp): passpoint collection (§2.2)."""
+    samples_t, samples = [0.0], []
+    xy = rng.uniform(-region_mm, region_mm, size=(points, 2))
+    z = world.height_at(xy[:, 0], xy[:, 1]) + rng.uniform(*height_mm, size=points)
+    targets = np.column_stack([xy, z])
+    samples.append(targets[0])
+    t = 0.0
+    for a, b in zip(targets[:-1], targets[1:], strict=True):
+        t += dwell_s
+        samples_t.append(t)
+        samples.append(a)
+        t += float(np.linalg.norm(b - a)) / speed_mm_s
+        samples_t.append(t)
+        samples.append(b)
+    samples_t.append(t + dwell_s)
+    samples.append(targets[-1])
+    keys_t, keys_xyz = np.array(samples_t), np.array(samples)
+    tt = np.arange(0, keys_t[-1], 1 / SAMPLE_HZ)
+    xyz = np.column_stack([np.interp(tt, keys_t, keys_xyz[:, i]) for i in range(3)])
+    return Trajectory("calibration", tt, xyz)
+
+
+def make_trajectory(scenario: Scenario, world: CraterMap, rng: np.random.Generator
+                    ) -> Trajectory:
+    if scenario == "locomotive":
+        return locomotive(world)
+    if scenario == "walker":
+        return walker(world, rng)
+    return calibration(world, rng)
+
+
+def railway_keep_clear(oval: Oval = Oval(), margin_mm: float = 350.0
+                       ) -> tuple[tuple[float, float, float], ...]:
+    """Discs along the railway where the crater generator puts no rocks."""
+    pts = oval.point(np.linspace(0, oval.length_mm, 60, endpoint=False))
+    return tuple((float(x), float(y), margin_mm) for x, y in pts)

@@ -1,0 +1,196 @@
+"""Sim service: the Space Testbed's devices, served on their real protocols.
+
+Serves:     QTM RT on mocap.port (22223), VAPIX HTTP per camera (8081, 8082),
+            Modbus/TCP crane controller on crane.port (5020)
+Publishes:  stb/gantry/camera/frame (CameraFrame, 25 Hz) as the tracking camera's host would;
+            stb/sim/truth/robot/{robot}, stb/sim/truth/crane, stb/sim/truth/ptz/{camera}
+            (ground truth, 20 Hz; for tests and evaluation only)
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import threading
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from common import keys
+from common import messages as m
+from common.node import Node, StartupError
+from services.sim.camera_server import CameraServer, SimCamera
+from services.sim.crane_server import CraneServer
+from services.sim.lab import Lab
+from services.sim.mocap_server import MocapServer, MocapSource
+from services.sim.settings import SimSettings
+
+log = logging.getLogger(__name__)
+
+
+class Clock:
+    """Sim time: seconds since start (monotonic), and the wall time of a sim instant."""
+
+    def __init__(self) -> None:
+        self._t0 = time.monotonic()
+        self._wall0 = time.time()
+
+    def __call__(self) -> float:
+        return time.monotonic() - self._t0
+
+    def wall(self, t: float) -> float:
+        return self._wall0 + t
+
+
+def run(node: Node) -> None:
+    settings: SimSettings = node.settings  # type: ignore[assignment]
+    lab = Lab.build(settings)
+    clock = Clock()
+    cameras = _start_cameras(lab, settings, clock)
+    devices = _DeviceLoop(lab, settings, clock)
+    try:
+        devices.start()
+        log.info("sim running scenario %s (seed %d)", settings.scenario, settings.seed)
+        threads = [
+            _every(1 / settings.tracking_camera.rate_hz, node.stop,
+                   _frame_publisher(node, lab, settings, clock)),
+            _every(1 / settings.truth_rate_hz, node.stop, _truth_publisher(node, lab, clock)),
+        ]
+        node.stop.wait()
+        for thread in threads:
+            thread.join(timeout=2)
+    finally:
+        devices.stop()
+        for server in cameras:
+            server.close()
+
+
+def _start_cameras(lab: Lab, settings: SimSettings, clock: Clock) -> list[CameraServer]:
+    servers = []
+    for i, cam in enumerate(settings.cameras):
+        sim_camera = SimCamera(cam.name, lab.heads[cam.name], lambda: lab.bright_points(clock()),
+                               lab.ptz_glints, clock, np.random.default_rng((settings.seed, 3, i)),
+                               cam.user, cam.password, cam.auth)
+        try:
+            servers.append(CameraServer(sim_camera, cam.host, cam.port).start())
+        except OSError as err:
+            for server in servers:
+                server.close()
+            raise StartupError(f"camera {cam.name}: cannot listen on {cam.host}:{cam.port}: "
+                               f"{err.strerror}") from err
+        log.info("camera %s (VAPIX) on http://%s:%d", cam.name, cam.host, servers[-1].port)
+    return servers
+
+
+class _DeviceLoop:
+    """The asyncio devices (QTM RT server, Modbus crane) on a thread of their own."""
+
+    def __init__(self, lab: Lab, settings: SimSettings, clock: Clock) -> None:
+        m_ = settings.mocap
+        source = MocapSource(lab.labels, m_.rate_hz, lab.mocap_frame,
+                             lambda: int(clock() * m_.rate_hz), lambda: True)
+        self.mocap = MocapServer(source, m_.host, m_.port)
+        self.crane = CraneServer(lab.crane, clock, lab.crane_lock, settings.crane.host,
+                                 settings.crane.port)
+        self._loop = asyncio.new_event_loop()
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="devices", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+        self._ready.wait(10)
+        if self._error is not None:
+            raise StartupError(str(self._error)) from self._error
+
+    def _run(self) -> None:
+        asyncio.set_event_loop(self._loop)
+        try:
+            self._loop.run_until_complete(self._start_servers())
+        except OSError as err:
+            self._error = err
+            self._ready.set()
+            return
+        self._ready.set()
+        self._loop.run_forever()
+
+    async def _start_servers(self) -> None:
+        try:
+            await self.mocap.start()
+        except OSError as err:
+            raise OSError(f"QTM RT: cannot listen on {self.mocap.host}:{self.mocap.port}: "
+                          f"{err.strerror}") from err
+        self._crane_task = asyncio.create_task(self.crane.serve())
+        await asyncio.sleep(0.05)
+        if self._crane_task.done() and self._crane_task.exception() is not None:
+            raise OSError(f"crane: cannot listen on {self.crane.host}:{self.crane.port}: "
+                          f"{self._crane_task.exception()}")
+
+    def stop(self) -> None:
+        if not self._thread.is_alive():
+            return
+
+        async def shutdown() -> None:
+            await self.mocap.close()
+            with contextlib.suppress(Exception):
+                await self.crane.close()
+            self._loop.stop()
+
+        asyncio.run_coroutine_threadsafe(shutdown(), self._loop)
+        self._thread.join(timeout=5)
+
+
+def _every(period_s: float, stop: threading.Event, action: Callable[[], None]
+           ) -> threading.Thread:
+    def loop() -> None:
+        next_at = time.monotonic()
+        while not stop.is_set():
+            try:
+                action()
+            except Exception:  # noqa: BLE001 - one bad tick must not end the stream
+                log.exception("periodic publisher failed")
+            next_at += period_s
+            stop.wait(max(0.0, next_at - time.monotonic()))
+
+    thread = threading.Thread(target=loop, daemon=True)
+    thread.start()
+    return thread
+
+
+def _frame_publisher(node: Node, lab: Lab, settings: SimSettings, clock: Clock
+                     ) -> Callable[[], None]:
+    rng = np.random.default_rng((settings.seed, 5))
+    cam = settings.tracking_camera
+    seq = iter(range(1 << 62))
+
+    def publish() -> None:
+        t = clock()
+        image = lab.tracking_frame(t, rng)
+        node.bus.publish(keys.GANTRY_FRAME, m.CameraFrame(
+            measured_s=clock.wall(t), camera=cam.name, seq=next(seq), width_px=cam.width_px,
+            height_px=cam.height_px, encoding="mono8", data=image.tobytes()))
+
+    return publish
+
+
+def _truth_publisher(node: Node, lab: Lab, clock: Clock) -> Callable[[], None]:
+    def publish() -> None:
+        t = clock()
+        wall = clock.wall(t)
+        robot, velocity = lab.robot(t), lab.robot_velocity(t)
+        node.bus.publish(keys.TRUTH_ROBOT, m.RobotTruth(
+            measured_s=wall, robot=lab.trajectory.name, x_mm=robot[0], y_mm=robot[1],
+            z_mm=robot[2], vx_mm_s=velocity[0], vy_mm_s=velocity[1]), robot=lab.trajectory.name)
+        crane, crane_v = lab.crane_state(t)
+        node.bus.publish(keys.TRUTH_CRANE, m.CraneTruth(
+            measured_s=wall, x_mm=crane[0], y_mm=crane[1], vx_mm_s=crane_v[0],
+            vy_mm_s=crane_v[1]))
+        for name, head in lab.heads.items():
+            pan, tilt, zoom, _ = head.state(t)
+            node.bus.publish(keys.TRUTH_PTZ, m.PtzTruth(
+                measured_s=wall, camera=name, pan_deg=pan, tilt_deg=tilt, zoom=zoom),
+                camera=name)
+
+    return publish

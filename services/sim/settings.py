@@ -1,0 +1,99 @@
+"""Sim settings: the scenario, the crater, and each simulated device's address and behaviour.
+
+The cameras' mount poses live here and nowhere else: no service reads them (the calibration
+service has to find them), only the sim and its tests.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from common.settings import ServiceSettings
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class MocapSettings(_Section):
+    host: str = "127.0.0.1"
+    port: int = Field(22223, ge=0, le=65535, description="QTM RT little-endian port")
+    rate_hz: float = Field(100.0, ge=100, le=1000)
+    noise_mm: float = Field(0.5, ge=0)
+    dropout: float = Field(0.005, ge=0, le=1, description="chance a marker is lost in a frame")
+    robot_label: str = Field("robot", description='label of the robot marker; "" = unlabelled')
+    static_markers: int = Field(3, ge=0, le=20)
+    ghost_markers: int = Field(1, ge=0, le=10, description="unidentified markers in 3dnolabels")
+
+
+class PtzCameraSettings(_Section):
+    name: str = Field(pattern=r"^[A-Za-z0-9_.-]{1,64}$")
+    host: str = "127.0.0.1"
+    port: int = Field(ge=0, le=65535)
+    mount: Literal["standing", "hanging"] = "standing"
+    x_mm: float
+    y_mm: float
+    z_mm: float
+    rx_deg: float
+    ry_deg: float
+    rz_deg: float
+    user: str = "root"
+    password: str = "pass"
+    auth: Literal["digest", "basic", "none"] = "digest"
+    latency_s: float = Field(0.12, ge=0)
+    pan_speed_deg_s: float = Field(100.0, gt=0)
+    tilt_speed_deg_s: float = Field(90.0, gt=0)
+
+
+def _default_cameras() -> list[PtzCameraSettings]:
+    # Near the paper's estimate for its camera (Table 2), and a second one across the crater.
+    return [
+        PtzCameraSettings(name="ptz1", port=8081, mount="standing", x_mm=3550, y_mm=1090,
+                          z_mm=2190, rx_deg=180, ry_deg=30, rz_deg=165),
+        PtzCameraSettings(name="ptz2", port=8082, mount="hanging", x_mm=-3300, y_mm=-1800,
+                          z_mm=2600, rx_deg=164, ry_deg=-27, rz_deg=-33),
+    ]
+
+
+class CraneSettings(_Section):
+    host: str = "127.0.0.1"
+    port: int = Field(5020, ge=0, le=65535)
+    x_min_mm: float = -3000.0
+    x_max_mm: float = 3000.0
+    y_min_mm: float = -3000.0
+    y_max_mm: float = 3000.0
+    max_speed_mm_s: float = Field(500.0, gt=0)
+    max_accel_mm_s2: float = Field(600.0, gt=0)
+    reaction_s: float = Field(0.5, ge=0)
+    cycle_s: float = Field(0.25, gt=0, description="controller cycle: setpoints taken at 4 Hz")
+    watchdog_s: float = Field(0.5, gt=0)
+
+
+class TrackingCameraSettings(_Section):
+    name: str = "tracking"
+    rate_hz: float = Field(25.0, gt=0, le=120)
+    focal_mm: float = Field(8.0, gt=0)
+    pixel_mm: float = Field(0.0075, gt=0)
+    width_px: int = Field(640, ge=64, le=4096)
+    height_px: int = Field(480, ge=64, le=4096)
+    height_mm: float = Field(3500.0, gt=0, description="lens height above world z = 0")
+    noise: float = Field(2.5, ge=0, description="gray-level noise sigma")
+    reflections_per_m2: float = Field(0.5, ge=0, le=20, description="stray reflections")
+
+
+class SimSettings(ServiceSettings):
+    section = "sim"
+
+    scenario: Literal["locomotive", "walker", "calibration"] = "locomotive"
+    loop: bool = Field(True, description="start the scenario again when it ends")
+    seed: int = 1
+    crater_file: Path = Field(Path("run/sim/crater.npz"),
+                              description="height map; generated from the seed if missing")
+    truth_rate_hz: float = Field(20.0, gt=0, le=200)
+    mocap: MocapSettings = MocapSettings()
+    cameras: list[PtzCameraSettings] = Field(default_factory=_default_cameras)
+    crane: CraneSettings = CraneSettings()
+    tracking_camera: TrackingCameraSettings = TrackingCameraSettings()

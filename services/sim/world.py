@@ -1,0 +1,140 @@
+"""The crater: a height map on a millimetre grid, made from a seed, stored like a laser scan.
+
+World frame: x, y horizontal, z up, millimetres, origin at the centre of the crater floor (the
+mocap's frame). The map is a grid ``heights_mm[row, col]`` with row ↔ y and col ↔ x:
+``x = origin_x_mm + col * resolution_mm``, ``y = origin_y_mm + row * resolution_mm``.
+
+File format (``.npz``, numpy's zip of arrays), what a laser scan of the crater is turned into:
+``heights_mm`` (float32, rows × cols), ``origin_mm`` ([x, y] of element [0, 0]) and
+``resolution_mm`` (grid spacing). ``CraterMap.load`` reads it; the gantry service uses it as its
+height look-up table (paper §3.1).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class CraterMap:
+    heights_mm: np.ndarray
+    origin_x_mm: float
+    origin_y_mm: float
+    resolution_mm: float
+
+    @property
+    def extent_mm(self) -> tuple[float, float, float, float]:
+        """(x_min, x_max, y_min, y_max) covered by the grid."""
+        rows, cols = self.heights_mm.shape
+        return (self.origin_x_mm, self.origin_x_mm + (cols - 1) * self.resolution_mm,
+                self.origin_y_mm, self.origin_y_mm + (rows - 1) * self.resolution_mm)
+
+    def height_at(self, x_mm: np.ndarray | float, y_mm: np.ndarray | float) -> np.ndarray:
+        """Surface height (mm) by bilinear interpolation; outside the grid: the nearest edge."""
+        rows, cols = self.heights_mm.shape
+        fx = np.clip((np.asarray(x_mm, float) - self.origin_x_mm) / self.resolution_mm,
+                     0, cols - 1.000001)
+        fy = np.clip((np.asarray(y_mm, float) - self.origin_y_mm) / self.resolution_mm,
+                     0, rows - 1.000001)
+        c0, r0 = fx.astype(int), fy.astype(int)
+        dx, dy = fx - c0, fy - r0
+        h = self.heights_mm
+        return ((h[r0, c0] * (1 - dx) + h[r0, c0 + 1] * dx) * (1 - dy)
+                + (h[r0 + 1, c0] * (1 - dx) + h[r0 + 1, c0 + 1] * dx) * dy)
+
+    def slope_deg(self) -> np.ndarray:
+        """Steepest slope at every grid point, degrees."""
+        gy, gx = np.gradient(self.heights_mm.astype(float), self.resolution_mm)
+        return np.degrees(np.arctan(np.hypot(gx, gy)))
+
+    def downhill(self, x_mm: float, y_mm: float) -> np.ndarray:
+        """Unit vector (x, y) pointing downhill at a point (zero on flat ground)."""
+        step = self.resolution_mm
+        gx = (self.height_at(x_mm + step, y_mm) - self.height_at(x_mm - step, y_mm)) / (2 * step)
+        gy = (self.height_at(x_mm, y_mm + step) - self.height_at(x_mm, y_mm - step)) / (2 * step)
+        g = np.array([-float(gx), -float(gy)])
+        n = np.linalg.norm(g)
+        return g / n if n > 1e-9 else np.zeros(2)
+
+    def save(self, path: Path) -> None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path, "wb") as f:
+            np.savez_compressed(f, heights_mm=self.heights_mm.astype(np.float32),
+                                origin_mm=np.array([self.origin_x_mm, self.origin_y_mm]),
+                                resolution_mm=np.array(self.resolution_mm))
+
+    @classmethod
+    def load(cls, path: Path) -> CraterMap:
+        """Read a height map file; ValueError naming what is wrong with it."""
+        try:
+            with np.load(path) as data:
+                heights = np.asarray(data["heights_mm"], dtype=np.float32)
+                origin = np.asarray(data["origin_mm"], dtype=float)
+                resolution = float(data["resolution_mm"])
+        except (OSError, KeyError, ValueError) as err:
+            raise ValueError(f"{path} is not a crater height map: {err}") from err
+        if heights.ndim != 2 or min(heights.shape) < 2 or not np.all(np.isfinite(heights)):
+            raise ValueError(f"{path}: heights_mm must be a finite 2-D grid of at least 2 × 2")
+        if origin.shape != (2,) or not resolution > 0:
+            raise ValueError(f"{path}: origin_mm must be [x, y] and resolution_mm > 0")
+        return cls(heights, float(origin[0]), float(origin[1]), resolution)
+
+
+@dataclass(frozen=True)
+class CraterShape:
+    """Parameters of the generated crater (mm, degrees)."""
+
+    half_size_mm: float = 4000.0
+    resolution_mm: float = 20.0
+    floor_radius_mm: float = 1500.0
+    rim_radius_mm: float = 3000.0
+    slope_min_deg: float = 30.0
+    slope_max_deg: float = 45.0
+    rocks: int = 25
+    mini_craters: int = 6
+    keep_clear: tuple[tuple[float, float, float], ...] = ()
+    """Discs (x, y, radius) where no rock or mini crater is placed (the railway)."""
+
+
+def generate_crater(shape: CraterShape, rng: np.random.Generator) -> CraterMap:
+    """A bowl with a flat floor, walls of 30°–45° slope, rocks and mini craters."""
+    n = int(round(2 * shape.half_size_mm / shape.resolution_mm)) + 1
+    axis = np.linspace(-shape.half_size_mm, shape.half_size_mm, n)
+    x, y = np.meshgrid(axis, axis)
+    heights = _bowl(x, y, shape, rng)
+    for _ in range(shape.rocks):
+        cx, cy = _free_spot(shape, rng)
+        radius, height = rng.uniform(80, 250), rng.uniform(40, 150)
+        heights += height * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / (2 * (radius / 2) ** 2))
+    for _ in range(shape.mini_craters):
+        cx, cy = _free_spot(shape, rng)
+        radius, depth = rng.uniform(150, 350), rng.uniform(40, 100)
+        d = np.hypot(x - cx, y - cy) / radius
+        bowl = np.where(d < 1, -depth * (1 - d**2), 0.0)
+        rim = 0.3 * depth * np.exp(-(((d - 1) / 0.15) ** 2))
+        heights += bowl + rim
+    return CraterMap(heights.astype(np.float32), -shape.half_size_mm, -shape.half_size_mm,
+                     shape.resolution_mm)
+
+
+def _bowl(x: np.ndarray, y: np.ndarray, shape: CraterShape,
+          rng: np.random.Generator) -> np.ndarray:
+    r = np.hypot(x, y)
+    azimuth = np.arctan2(y, x)
+    mid = (shape.slope_min_deg + shape.slope_max_deg) / 2
+    half = (shape.slope_max_deg - shape.slope_min_deg) / 2
+    phase = rng.uniform(0, 2 * np.pi)
+    slope = np.radians(mid + half * np.sin(2 * azimuth + phase))
+    wall = np.clip(r, shape.floor_radius_mm, shape.rim_radius_mm) - shape.floor_radius_mm
+    return wall * np.tan(slope)
+
+
+def _free_spot(shape: CraterShape, rng: np.random.Generator) -> tuple[float, float]:
+    for _ in range(1000):
+        cx, cy = rng.uniform(-shape.rim_radius_mm, shape.rim_radius_mm, size=2)
+        if all(np.hypot(cx - kx, cy - ky) > kr for kx, ky, kr in shape.keep_clear):
+            return float(cx), float(cy)
+    raise ValueError("no room for crater features outside the keep-clear discs")
