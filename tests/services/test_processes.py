@@ -18,6 +18,7 @@ from common import keys
 from common import messages as m
 from common.bus import Bus, BusUnreachable, open_session
 from common.wiredoc import EXAMPLES
+from services.registry import DEFAULT_UP
 from tests.conftest import client_settings, free_port, stb_process, wait_for
 
 
@@ -170,11 +171,13 @@ def test_monitor_table_shows_alive_services_and_keys(router_endpoint: str,
 
 
 def _lab_for_up(tmp_path: Path) -> tuple[Path, str]:
+    """A lab file for ``stb up`` with every service (the sim too) on free ports."""
+    from tests.sim.test_sim_service import write_lab
+
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    lab = tmp_path / "lab.toml"
-    lab.write_text(f"""
-[bus.zenoh]
-connect = ["{endpoint}"]
+    lab, _ = write_lab(tmp_path, endpoint, tmp_path / "crater.npz")
+    with open(lab, "a") as f:
+        f.write(f"""
 [router]
 listen = ["{endpoint}"]
 [up]
@@ -203,7 +206,7 @@ def test_up_restarts_a_killed_service_within_two_seconds(tmp_path: Path) -> None
         alive = AliveWatcher(session)
         healths: list[m.ServiceHealth] = []
         bus.subscribe(keys.HEALTH, healths.append, latest=False)
-        for service in ("router",):
+        for service in DEFAULT_UP:
             key = f"stb/alive/{service}/main"
             wait_for(lambda key=key: alive.alive(key), timeout=15)
             pid = wait_for(lambda s=service: next(

@@ -1,0 +1,193 @@
+"""The simulated AXIS cameras over real HTTP: VAPIX answers, auth, motion, snapshots."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+
+import cv2
+import httpx
+import numpy as np
+import pytest
+
+from common.camera import Intrinsics, project
+from services.sim.camera_server import CameraServer, SimCamera
+from services.sim.lab import Lab
+
+PTZ = "/axis-cgi/com/ptz.cgi"
+IMAGE = "/axis-cgi/jpg/image.cgi"
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.t0 = time.monotonic()
+
+    def __call__(self) -> float:
+        return time.monotonic() - self.t0
+
+
+@pytest.fixture
+def servers(lab: Lab) -> Iterator[dict[str, tuple[CameraServer, httpx.Client]]]:
+    clock = Clock()
+    out = {}
+    for i, cam in enumerate(lab.settings.cameras):
+        # A still scene (the robot at its start), so a snapshot and a prediction agree.
+        sim = SimCamera(cam.name, lab.heads[cam.name], lambda: lab.bright_points(0.0),
+                        lab.ptz_glints, clock, np.random.default_rng(i), cam.user, cam.password)
+        server = CameraServer(sim, "127.0.0.1", cam.port).start()
+        client = httpx.Client(base_url=f"http://127.0.0.1:{server.port}", timeout=3,
+                              auth=httpx.DigestAuth(cam.user, cam.password))
+        out[cam.name] = (server, client)
+    yield out
+    for server, client in out.values():
+        client.close()
+        server.close()
+
+
+def _position(client: httpx.Client) -> dict[str, float]:
+    reply = client.get(PTZ, params={"query": "position"})
+    assert reply.status_code == 200
+    pairs = dict(line.split("=", 1) for line in reply.text.split())
+    return {k: float(pairs[k]) for k in ("pan", "tilt", "zoom")}
+
+
+def test_requests_without_or_with_wrong_credentials_get_401(servers: dict) -> None:
+    server, client = servers["ptz1"]
+    base = f"http://127.0.0.1:{server.port}"
+    bare = httpx.get(base + PTZ, params={"query": "position"})
+    assert bare.status_code == 401
+    assert bare.headers["WWW-Authenticate"].startswith('Digest realm="AXIS_')
+    wrong = httpx.get(base + PTZ, params={"query": "position"},
+                      auth=httpx.DigestAuth("root", "wrong"))
+    assert wrong.status_code == 401
+    assert client.get(PTZ, params={"query": "position"}).status_code == 200
+
+
+def test_basic_auth_when_the_camera_is_set_to_it(lab: Lab) -> None:
+    sim = SimCamera("cam", lab.heads["ptz1"], lambda: lab.bright_points(0.0), [], lambda: 0.0,
+                    np.random.default_rng(0), "operator", "secret", auth="basic")
+    server = CameraServer(sim, "127.0.0.1", 0).start()
+    try:
+        base = f"http://127.0.0.1:{server.port}{PTZ}?query=limits"
+        assert httpx.get(base).headers["WWW-Authenticate"].startswith("Basic")
+        assert httpx.get(base, auth=("operator", "secret")).status_code == 200
+        assert httpx.get(base, auth=("operator", "nope")).status_code == 401
+    finally:
+        server.close()
+
+
+def test_a_move_takes_time_after_the_command_latency(servers: dict) -> None:
+    _, client = servers["ptz1"]
+    sent = time.monotonic()
+    assert client.get(PTZ, params={"pan": "40", "tilt": "-10"}).status_code == 204
+    assert _position(client)["pan"] == 0.0, "nothing happens before the command latency"
+    time.sleep(0.25)
+    partway = _position(client)["pan"]
+    assert 0 < partway < 40, "pan moves at finite speed (100°/s)"
+    while _position(client)["pan"] != 40.0:
+        assert time.monotonic() - sent < 2.0
+        time.sleep(0.02)
+    assert _position(client)["tilt"] == -10.0
+
+
+def test_limits_hold_and_are_reported(servers: dict) -> None:
+    _, client = servers["ptz2"]
+    reply = client.get(PTZ, params={"query": "limits"})
+    limits = dict(line.split("=") for line in reply.text.split())
+    assert limits["MinPan"] == "-170" and limits["MaxPan"] == "170"
+    assert limits["MinTilt"] == "-90" and limits["MaxZoom"] == "9999"
+    client.get(PTZ, params={"pan": "400", "tilt": "-120", "zoom": "20000", "speed": "100"})
+    deadline = time.monotonic() + 5
+    while _position(client) != {"pan": 170.0, "tilt": -90.0, "zoom": 9999.0}:
+        assert time.monotonic() < deadline, _position(client)
+        time.sleep(0.1)
+
+
+@pytest.mark.parametrize(("params", "message"), [
+    ({"pan": "abc"}, 'Error: pan: invalid value "abc"'),
+    ({"pann": "1"}, 'Error: unknown argument "pann"'),
+    ({"query": "everything"}, 'Error: query: unknown value "everything"'),
+    ({"continuouspantiltmove": "200,0"}, "Error: continuouspantiltmove: invalid value"),
+    ({"camera": "3", "pan": "1"}, 'Error: camera: invalid value "3"'),
+    ({"move": "sideways"}, 'Error: move: invalid value "sideways"'),
+])
+def test_errors_come_as_http_200_with_an_error_body(servers: dict, params: dict,
+                                                    message: str) -> None:
+    _, client = servers["ptz1"]
+    reply = client.get(PTZ, params=params)
+    assert reply.status_code == 200 and reply.text.startswith(message)
+
+
+def test_continuous_move_and_stop(servers: dict) -> None:
+    _, client = servers["ptz1"]
+    assert client.post(PTZ, data={"continuouspantiltmove": "50,0"}).status_code == 204
+    time.sleep(0.5)
+    assert client.get(PTZ, params={"continuouspantiltmove": "0,0"}).status_code == 204
+    time.sleep(0.3)
+    stopped = _position(client)["pan"]
+    time.sleep(0.3)
+    assert stopped == _position(client)["pan"] and 5 < stopped < 40
+
+
+def test_info_lists_the_ir_cut_filter(servers: dict) -> None:
+    _, client = servers["ptz1"]
+    assert "ircutfilter={on|off|auto}" in client.get(PTZ, params={"info": "1"}).text
+
+
+def _snapshot(client: httpx.Client, **params: str) -> np.ndarray:
+    reply = client.get(IMAGE, params=params)
+    assert reply.status_code == 200 and reply.headers["Content-Type"] == "image/jpeg"
+    return cv2.imdecode(np.frombuffer(reply.content, np.uint8), cv2.IMREAD_GRAYSCALE)
+
+
+def _bright_spots(image: np.ndarray, threshold: int = 128) -> list[tuple[float, float, float]]:
+    """(u, v, area) of bright regions, intensity-weighted centroids."""
+    count, labels = cv2.connectedComponents((image > threshold).astype(np.uint8))
+    out = []
+    for label in range(1, count):
+        rows, cols = np.nonzero(labels == label)
+        w = image[rows, cols].astype(float)
+        out.append((float((cols * w).sum() / w.sum()), float((rows * w).sum() / w.sum()),
+                    float(len(rows))))
+    return out
+
+
+def test_ir_lit_marker_is_visible_only_with_the_ir_cut_filter_off(servers: dict) -> None:
+    _, client = servers["ptz1"]
+    client.get(PTZ, params={"ircutfilter": "on"})
+    assert _snapshot(client).max() < 128
+    client.get(PTZ, params={"ircutfilter": "off"})
+    assert _snapshot(client).max() > 200
+
+
+@pytest.mark.parametrize("camera", ["ptz1", "ptz2"])
+def test_marker_renders_where_the_camera_model_predicts(servers: dict, lab: Lab,
+                                                        camera: str) -> None:
+    server, client = servers[camera]
+    head = lab.heads[camera]
+    # Point near the robot (eq. 4 on the mount frame), a little off so it is not centred.
+    x, y, z = head.mount.to_camera(lab.bright_points(0.0)[:1])[0]
+    pan = np.degrees(np.arctan2(y, x)) + 1.5
+    tilt = -np.degrees(np.arctan2(z, np.hypot(x, y))) - 1.0
+    client.get(PTZ, params={"ircutfilter": "off", "pan": f"{pan:.3f}", "tilt": f"{tilt:.3f}",
+                            "zoom": "1500"})
+    time.sleep(1.2)
+    assert not head.state(server.camera.clock())[3], "camera has stopped moving"
+    image = _snapshot(client, compression="0")
+    assert image.shape == (576, 704)
+    now = server.camera.clock()
+    predicted = project(lab.bright_points(0.0), head.pose(now),
+                        Intrinsics(head.focal_mm(now)))
+    visible = [(u, v) for u, v in predicted if 5 < u < 699 and 5 < v < 571]
+    assert visible, "the scene must put at least one marker in view"
+    spots = _bright_spots(image)
+    for u, v in visible:
+        nearest = min(spots, key=lambda s: np.hypot(s[0] - u, s[1] - v))
+        assert np.hypot(nearest[0] - u, nearest[1] - v) < 1.0
+
+
+def test_snapshot_resolutions(servers: dict) -> None:
+    _, client = servers["ptz1"]
+    assert _snapshot(client, resolution="352x288").shape == (288, 352)
+    reply = client.get(IMAGE, params={"resolution": "1920x1080"})
+    assert reply.text.startswith('Error: resolution: invalid value "1920x1080"')

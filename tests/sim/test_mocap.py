@@ -1,0 +1,124 @@
+"""The QTM RT server, driven by the unmodified qtm-rt client over TCP."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import Awaitable, Callable
+
+import numpy as np
+import pytest
+import qtm_rt
+
+from services.sim.lab import Lab
+from services.sim.mocap_server import MocapServer, MocapSource
+from tests.sim.conftest import sim_settings
+
+
+def _run(lab: Lab, client: Callable[[int], Awaitable[object]], *, capturing: bool = True,
+         rate_hz: float | None = None) -> object:
+    rate = rate_hz or lab.settings.mocap.rate_hz
+    t0 = time.monotonic()
+    source = MocapSource(lab.labels, rate, lab.mocap_frame,
+                         lambda: int((time.monotonic() - t0) * rate), lambda: capturing)
+
+    async def main() -> object:
+        server = MocapServer(source, "127.0.0.1", 0)
+        await server.start()
+        try:
+            return await client(server.port)
+        finally:
+            await server.close()
+
+    return asyncio.run(main())
+
+
+async def _stream(port: int, seconds: float, components: list[str],
+                  frames: str = "allframes") -> list:
+    conn = await qtm_rt.connect("127.0.0.1", port=port, version="1.25")
+    assert conn is not None, "the real client must accept our server"
+    packets: list = []
+    await conn.stream_frames(frames=frames, components=components, on_packet=packets.append)
+    await asyncio.sleep(seconds)
+    await conn.stream_frames_stop()
+    conn.disconnect()
+    return packets
+
+
+def test_handshake_labels_and_state(lab: Lab) -> None:
+    async def client(port: int) -> tuple:
+        conn = await qtm_rt.connect("127.0.0.1", port=port, version="1.25")
+        try:
+            return (await conn.qtm_version(), await conn.byte_order(),
+                    await conn.get_parameters(["3d"]), await conn.get_state())
+        finally:
+            conn.disconnect()
+
+    version, order, xml, state = _run(lab, client)
+    assert version.startswith(b"QTM Version is") and order == b"Byte order is little endian"
+    assert b"<Name>robot</Name>" in xml and b"<Name>static_1</Name>" in xml
+    assert b"<AxisUpwards>+Z</AxisUpwards>" in xml
+    assert state == qtm_rt.QRTEvent.EventCaptureStarted
+
+
+def test_streamed_markers_equal_the_truth_within_the_noise(lab: Lab) -> None:
+    packets = _run(lab, lambda port: _stream(port, 1.5, ["3d", "3dnolabels"]))
+    assert len(packets) > 100
+    numbers = [p.framenumber for p in packets]
+    assert numbers == sorted(numbers) and len(set(numbers)) == len(numbers)
+    errors, missing = [], 0
+    for p in packets:
+        _, markers = p.get_3d_markers()
+        assert len(markers) == len(lab.labels)
+        truth = np.vstack([lab.robot(p.framenumber / 100.0)[None, :], lab.static_markers])
+        for measured, true in zip(markers, truth, strict=True):
+            xyz = np.array([measured.x, measured.y, measured.z])
+            if np.isnan(xyz).any():
+                missing += 1
+            else:
+                errors.append(np.linalg.norm(xyz - true))
+        assert abs(p.timestamp - p.framenumber * 10_000) <= 1
+    errors = np.array(errors)
+    assert np.sqrt(np.mean(errors**2)) < 1.5, "about 0.5 mm per axis"
+    assert errors.max() < 5.0
+    assert missing < 0.05 * len(packets) * len(lab.labels)
+
+
+def test_dropouts_are_nan_markers(lab: Lab) -> None:
+    frames = [lab.mocap_frame(n) for n in range(3000)]
+    lost = sum(int(np.isnan(f.labelled).any()) for f in frames)
+    assert 0 < lost < 600
+    occluded = [n for n, f in enumerate(frames) if np.isnan(f.labelled[0]).all()]
+    assert occluded, "the robot marker is sometimes lost for a while"
+
+
+def test_rate_and_frequency_divisor(crater_file, crater) -> None:
+    lab = Lab.build(sim_settings(crater_file, mocap={"rate_hz": 500, "port": 0}), crater)
+    packets = _run(lab, lambda port: _stream(port, 1.0, ["3d"], "frequencydivisor:5"))
+    gaps = np.diff([p.framenumber for p in packets])
+    assert set(gaps) == {5} and 80 <= len(packets) <= 110
+
+
+def test_unlabelled_robot_marker_comes_in_3dnolabels(crater_file, crater) -> None:
+    lab = Lab.build(sim_settings(crater_file, mocap={"robot_label": "", "port": 0}), crater)
+    packets = _run(lab, lambda port: _stream(port, 0.5, ["3dnolabels"]))
+    ids = {m.id for p in packets for m in p.get_3d_markers_no_label()[1]}
+    assert 1 in ids, "the robot as an unidentified marker with a stable id"
+
+
+def test_no_more_data_while_not_capturing(lab: Lab) -> None:
+    packets = _run(lab, lambda port: _stream(port, 0.5, ["3d"]), capturing=False)
+    assert packets == []
+
+
+def test_unknown_command_is_an_error_reply(lab: Lab) -> None:
+    async def client(port: int) -> None:
+        conn = await qtm_rt.connect("127.0.0.1", port=port, version="1.25")
+        try:
+            with pytest.raises(qtm_rt.QRTCommandException):
+                await conn.get_current_frame(components=["skeleton"])
+            assert (await conn.qtm_version()).startswith(b"QTM"), "connection still usable"
+        finally:
+            conn.disconnect()
+
+    _run(lab, client)
