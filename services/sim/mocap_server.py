@@ -118,20 +118,33 @@ def parse_stream_command(words: list[str], rate_hz: float) -> tuple[int, set[int
 
 @dataclass
 class MocapSource:
-    """What the server streams: labels, the frame at a frame number, and the capture state."""
+    """What the server streams: labels, and the frame at a frame number."""
 
     labels: list[str]
     rate_hz: float
     frame_at: Callable[[int], MocapFrame]
     frame_now: Callable[[], int]  # the frame number the capture is at
-    capturing: Callable[[], bool]
+
+
+_CONTROL_REPLIES = {
+    "takecontrol": "You are now master",
+    "releasecontrol": "You are now a regular client",
+    "new": "Creating new connection",
+    "close": "Closing connection",
+}
 
 
 class MocapServer:
-    def __init__(self, source: MocapSource, host: str = "127.0.0.1", port: int = 22223) -> None:
+    """Serves ``source``; capturing from the start unless ``capturing=False``. A client that
+    took control can ``stop`` and ``start`` the capture (events go to every client)."""
+
+    def __init__(self, source: MocapSource, host: str = "127.0.0.1", port: int = 22223,
+                 *, capturing: bool = True) -> None:
         self.source, self.host, self.port = source, host, port
+        self.capturing = capturing
         self._server: asyncio.base_events.Server | None = None
         self._clients: set[asyncio.StreamWriter] = set()
+        self._master: asyncio.StreamWriter | None = None
 
     async def start(self) -> None:
         self._server = await asyncio.start_server(self._serve, self.host, self.port)
@@ -176,18 +189,22 @@ class MocapServer:
                         streamer = _cancel(streamer)
                         streamer = asyncio.create_task(self._stream(writer, *parsed))
                 else:
-                    writer.write(self._reply(words))
+                    writer.write(self._reply(words, writer))
                 await writer.drain()
         except (asyncio.IncompleteReadError, ConnectionError):
             pass
         finally:
             _cancel(streamer)
             self._clients.discard(writer)
+            if self._master is writer:
+                self._master = None
             writer.close()
 
-    def _reply(self, words: list[str]) -> bytes:
+    def _reply(self, words: list[str], writer: asyncio.StreamWriter) -> bytes:
         command = words[0].lower() if words else ""
         src = self.source
+        if command in _CONTROL_REPLIES or command in ("start", "stop"):
+            return self._control(command, writer)
         if command == "version":
             version = words[1] if len(words) > 1 else "1.25"
             return text_packet(PacketType.COMMAND, f"Version set to {version}")
@@ -196,17 +213,34 @@ class MocapServer:
         if command == "byteorder":
             return text_packet(PacketType.COMMAND, "Byte order is little endian")
         if command == "getstate":
-            return event_packet(Event.CAPTURE_STARTED if src.capturing() else Event.CONNECTED)
+            return event_packet(Event.CAPTURE_STARTED if self.capturing
+                                else Event.CAPTURE_STOPPED)
         if command == "getparameters":
             return text_packet(PacketType.XML, parameters_xml(src.labels, src.rate_hz))
         if command == "getcurrentframe":
-            if not src.capturing():
+            if not self.capturing:
                 return packet(PacketType.NO_MORE_DATA)
             parsed = parse_stream_command(["allframes", *words[1:]], src.rate_hz)
             if isinstance(parsed, str):
                 return text_packet(PacketType.ERROR, parsed)
             return data_packet(src.frame_at(src.frame_now()), parsed[1])
         return text_packet(PacketType.ERROR, f"Command not supported by this simulator: {command}")
+
+    def _control(self, command: str, writer: asyncio.StreamWriter) -> bytes:
+        if command == "takecontrol":
+            if self._master not in (None, writer):
+                return text_packet(PacketType.ERROR, "Another client is master")
+            self._master = writer
+        elif command == "releasecontrol" and self._master is writer:
+            self._master = None
+        elif command in ("start", "stop", "new", "close") and self._master is not writer:
+            return text_packet(PacketType.ERROR, "You must be master to issue this command")
+        if command in ("start", "stop"):
+            self.capturing = command == "start"
+            self.broadcast(Event.CAPTURE_STARTED if self.capturing else Event.CAPTURE_STOPPED)
+            reply = "Starting measurement" if self.capturing else "Stopping measurement"
+            return text_packet(PacketType.COMMAND, reply)
+        return text_packet(PacketType.COMMAND, _CONTROL_REPLIES[command])
 
     async def _stream(self, writer: asyncio.StreamWriter, divisor: int,
                       components: set[int]) -> None:
@@ -216,12 +250,18 @@ class MocapServer:
         period = divisor / src.rate_hz
         burst = max(1, int(0.1 * src.rate_hz / divisor))
         last: int | None = None
+        idle_since: float | None = None
+        loop = asyncio.get_running_loop()
         while not writer.is_closing():
-            if not src.capturing():
+            if not self.capturing:
+                # NoMoreData at once, then once a second, until the capture starts again.
+                if idle_since is None or loop.time() - idle_since >= 1.0:
+                    writer.write(packet(PacketType.NO_MORE_DATA))
+                    idle_since = loop.time()
                 last = None
-                writer.write(packet(PacketType.NO_MORE_DATA))
-                await asyncio.sleep(1.0)
+                await asyncio.sleep(0.05)
                 continue
+            idle_since = None
             newest = src.frame_now() // divisor * divisor
             first = newest if last is None else max(last + divisor, newest - burst * divisor)
             for number in range(first, newest + 1, divisor):

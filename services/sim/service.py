@@ -90,7 +90,7 @@ class _DeviceLoop:
     def __init__(self, lab: Lab, settings: SimSettings, clock: Clock) -> None:
         m_ = settings.mocap
         source = MocapSource(lab.labels, m_.rate_hz, lab.mocap_frame,
-                             lambda: int(clock() * m_.rate_hz), lambda: True)
+                             lambda: int(clock() * m_.rate_hz))
         self.mocap = MocapServer(source, m_.host, m_.port)
         self.crane = CraneServer(lab.crane, clock, lab.crane_lock, settings.crane.host,
                                  settings.crane.port)

@@ -191,3 +191,14 @@ def test_snapshot_resolutions(servers: dict) -> None:
     assert _snapshot(client, resolution="352x288").shape == (288, 352)
     reply = client.get(IMAGE, params={"resolution": "1920x1080"})
     assert reply.text.startswith('Error: resolution: invalid value "1920x1080"')
+
+
+def test_relative_moves_add_up_and_home_returns(servers: dict) -> None:
+    _, client = servers["ptz2"]
+    for _ in range(2):
+        assert client.get(PTZ, params={"rpan": "10", "rtilt": "-5"}).status_code == 204
+        time.sleep(0.4)
+    assert _position(client)["pan"] == 20.0 and _position(client)["tilt"] == -10.0
+    client.get(PTZ, params={"move": "home"})
+    time.sleep(0.5)
+    assert _position(client)["pan"] == 0.0 and _position(client)["tilt"] == 0.0

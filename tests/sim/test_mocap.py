@@ -20,10 +20,10 @@ def _run(lab: Lab, client: Callable[[int], Awaitable[object]], *, capturing: boo
     rate = rate_hz or lab.settings.mocap.rate_hz
     t0 = time.monotonic()
     source = MocapSource(lab.labels, rate, lab.mocap_frame,
-                         lambda: int((time.monotonic() - t0) * rate), lambda: capturing)
+                         lambda: int((time.monotonic() - t0) * rate))
 
     async def main() -> object:
-        server = MocapServer(source, "127.0.0.1", 0)
+        server = MocapServer(source, "127.0.0.1", 0, capturing=capturing)
         await server.start()
         try:
             return await client(server.port)
@@ -111,6 +111,38 @@ def test_no_more_data_while_not_capturing(lab: Lab) -> None:
     assert packets == []
 
 
+def test_master_stops_and_starts_the_capture_with_events(lab: Lab) -> None:
+    async def client(port: int) -> dict:
+        events: list = []
+        conn = await qtm_rt.connect("127.0.0.1", port=port, version="1.25",
+                                    on_event=events.append)
+        watcher = await qtm_rt.connect("127.0.0.1", port=port, version="1.25")
+        try:
+            with pytest.raises(qtm_rt.QRTCommandException, match="master"):
+                await conn.stop()
+            await conn.take_control("")
+            await conn.stop()
+            stopped = await conn.get_state()
+            packets: list = []
+            # While stopped the stream request is answered with NoMoreData: no frames.
+            await watcher.stream_frames(components=["3d"], on_packet=packets.append)
+            await asyncio.sleep(0.3)
+            idle = len(packets)
+            await conn.start()
+            await asyncio.sleep(0.3)
+            await watcher.stream_frames_stop()
+            return {"events": events, "stopped": stopped, "idle": idle, "running": len(packets)}
+        finally:
+            conn.disconnect()
+            watcher.disconnect()
+
+    out = _run(lab, client)
+    assert out["stopped"] == qtm_rt.QRTEvent.EventCaptureStopped
+    assert qtm_rt.QRTEvent.EventCaptureStopped in out["events"]
+    assert qtm_rt.QRTEvent.EventCaptureStarted in out["events"]
+    assert out["idle"] == 0 and out["running"] > 10
+
+
 def test_unknown_command_is_an_error_reply(lab: Lab) -> None:
     async def client(port: int) -> None:
         conn = await qtm_rt.connect("127.0.0.1", port=port, version="1.25")
@@ -122,3 +154,13 @@ def test_unknown_command_is_an_error_reply(lab: Lab) -> None:
             conn.disconnect()
 
     _run(lab, client)
+
+
+def test_frames_are_deterministic_under_the_seed(crater_file, crater) -> None:
+    a = Lab.build(sim_settings(crater_file, seed=3), crater)
+    b = Lab.build(sim_settings(crater_file, seed=3), crater)
+    c = Lab.build(sim_settings(crater_file, seed=4), crater)
+    for n in (0, 777, 4321):
+        fa, fb, fc = a.mocap_frame(n), b.mocap_frame(n), c.mocap_frame(n)
+        np.testing.assert_array_equal(fa.labelled, fb.labelled)
+        assert not np.array_equal(np.nan_to_num(fa.labelled), np.nan_to_num(fc.labelled))
