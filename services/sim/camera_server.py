@@ -157,8 +157,11 @@ class CameraServer:
         url = urlsplit(request.path)
         args = dict(parse_qsl(url.query, keep_blank_values=True))
         if method == "POST":
-            length = int(request.headers.get("Content-Length") or 0)
-            body = request.rfile.read(length).decode(errors="replace")
+            length = request.headers.get("Content-Length") or "0"
+            if not length.isdigit() or int(length) > 65536:
+                self._send(request, vapix.Reply(400, "text/plain", b"Bad Request\r\n"))
+                return
+            body = request.rfile.read(int(length)).decode(errors="replace")
             args.update(parse_qsl(body, keep_blank_values=True))
         if not self._authorized(request, method):
             return

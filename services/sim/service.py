@@ -74,7 +74,7 @@ def _start_cameras(lab: Lab, settings: SimSettings, clock: Clock) -> list[Camera
                                lab.ptz_glints, clock, np.random.default_rng((settings.seed, 3, i)),
                                cam.user, cam.password, cam.auth)
         try:
-            servers.append(CameraServer(sim_camera, cam.host, cam.port).start())
+            servers.append(CameraServer(sim_camera, settings.host_of(cam.host), cam.port).start())
         except OSError as err:
             for server in servers:
                 server.close()
@@ -91,9 +91,9 @@ class _DeviceLoop:
         m_ = settings.mocap
         source = MocapSource(lab.labels, m_.rate_hz, lab.mocap_frame,
                              lambda: int(clock() * m_.rate_hz))
-        self.mocap = MocapServer(source, m_.host, m_.port)
-        self.crane = CraneServer(lab.crane, clock, lab.crane_lock, settings.crane.host,
-                                 settings.crane.port)
+        self.mocap = MocapServer(source, settings.host_of(m_.host), m_.port)
+        self.crane = CraneServer(lab.crane, clock, lab.crane_lock,
+                                 settings.host_of(settings.crane.host), settings.crane.port)
         self._loop = asyncio.new_event_loop()
         self._ready = threading.Event()
         self._error: BaseException | None = None

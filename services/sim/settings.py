@@ -93,7 +93,12 @@ class SimSettings(ServiceSettings):
     crater_file: Path = Field(Path("run/sim/crater.npz"),
                               description="height map; generated from the seed if missing")
     truth_rate_hz: float = Field(20.0, gt=0, le=200)
+    bind: str | None = Field(None, description="if set, every device listens on this address "
+                             "instead of its own host (e.g. 0.0.0.0 in a container)")
     mocap: MocapSettings = MocapSettings()
     cameras: list[PtzCameraSettings] = Field(default_factory=_default_cameras)
     crane: CraneSettings = CraneSettings()
     tracking_camera: TrackingCameraSettings = TrackingCameraSettings()
+
+    def host_of(self, device_host: str) -> str:
+        return self.bind or device_host

@@ -18,11 +18,18 @@ def _config(path: Path, *args: str) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=60)
 
 
+def _config_with_sim(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([str(COMPOSE), "-f", str(ROOT / "docker-compose.yml"), "--profile",
+                           "sim", "config", *args], cwd=ROOT, capture_output=True, text=True,
+                          timeout=60)
+
+
 def test_compose_file_is_valid_and_every_service_restarts() -> None:
-    result = _config(ROOT / "docker-compose.yml", "--format", "json")
+    result = _config_with_sim("--format", "json")
     assert result.returncode == 0, result.stderr
     services = json.loads(result.stdout)["services"]
-    assert "router" in services
+    assert {"router", "sim"} <= set(services)
+    assert services["sim"]["profiles"] == ["sim"], "the sim only with --profile sim"
     for name, service in services.items():
         assert service["restart"] == "unless-stopped", name
 
