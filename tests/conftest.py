@@ -10,6 +10,7 @@ import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 import zenoh
 
@@ -38,6 +39,12 @@ def wait_for(predicate: Callable[[], object], timeout: float = 5.0, period: floa
             return value
         time.sleep(period)
     pytest.fail(f"condition not met within {timeout} s: {predicate}")
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    """A seeded generator: every test's randomness is reproducible."""
+    return np.random.default_rng(1234)
 
 
 @pytest.fixture(scope="module")

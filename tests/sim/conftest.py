@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from services.sim.lab import Lab, load_or_make_crater
@@ -37,8 +36,3 @@ def crater(crater_file: Path) -> CraterMap:
 @pytest.fixture
 def lab(crater_file: Path, crater: CraterMap) -> Lab:
     return Lab.build(sim_settings(crater_file), crater)
-
-
-@pytest.fixture
-def rng() -> np.random.Generator:
-    return np.random.default_rng(1234)

@@ -1,0 +1,210 @@
+"""The paper's marker detector (§2.1): run lengths, union-find, inertia ellipses, roundness.
+
+``detect(frame)`` finds the round bright regions of an 8-bit gray image:
+
+1. run-length encoding: per row, runs of pixels at or above the threshold that are at least
+   ``l_min`` long (shorter ones are stray bright pixels);
+2. a union-find with path compression merges runs that overlap on consecutive rows into
+   regions;
+3. per region: area, centroid and the inertia ellipse from the second moments (long and short
+   radius, angle of the long axis); roundness r = long / short;
+4. a region is a marker if r < ``r_lim`` and its area is within bounds. With no marker the
+   threshold is lowered step by step down to ``t_lim``; more than ``max_markers`` markers is
+   "too_many" (the paper makes no passpoint of such an image).
+
+Pixel ``[row, col]`` has its centre at ``(u, v) = (col, row)``. Angles are in degrees in
+(−90, 90], measured from the +u axis towards +v (clockwise on screen).
+
+Speed: one vectorised numpy pass finds the 16-row bands that hold bright pixels; only those
+rows are scanned, by the compiled loop in ``markers_kernel.py`` (run lengths, union-find and
+moments in one go). The first call compiles it (about 2 s, then cached on disk).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from common.markers_kernel import regions_kernel
+
+Status = Literal["ok", "none", "too_many"]
+_BAND = 16
+_SMALL_AREA = 30  # below this (radius ≲ 3 px) the binary shape is too coarse to judge
+
+
+@dataclass(frozen=True)
+class Marker:
+    """One region: centroid (px), inertia ellipse (px, deg), roundness, area (px)."""
+
+    u: float
+    v: float
+    radius_long: float
+    radius_short: float
+    angle_deg: float
+    roundness: float
+    area: int
+
+
+@dataclass(frozen=True)
+class Detection:
+    """What ``detect`` found. ``regions`` are all regions at the final threshold (markers and
+    rejected ones alike, for annotated images); ``markers`` are the valid ones."""
+
+    status: Status
+    threshold: int
+    markers: tuple[Marker, ...]
+    regions: tuple[Marker, ...] = ()
+
+
+def detect(frame: np.ndarray, *, threshold: int = 230, t_lim: int = 203, step: int = 5,
+           r_lim: float = 1.21, l_min: int = 2, min_area: int = 3, max_area: int = 20000,
+           max_markers: int = 1) -> Detection:
+    """Find round bright markers in an 8-bit gray image (paper §2.1).
+
+    Parameters
+    ----------
+    frame : (rows, cols) uint8 array
+    threshold : first gray threshold (pixels ≥ threshold are bright)
+    t_lim : lowest threshold tried when nothing is found (paper: 203)
+    step : how much the threshold is lowered each time
+    r_lim : a marker's roundness (long / short radius) must be below this (paper: 1.21)
+    l_min : shortest run of bright pixels kept, in pixels
+    min_area, max_area : a marker's area bounds, pixels
+    max_markers : more valid markers than this → status "too_many"
+
+    Raises ValueError for anything but a 2-D uint8 array, or inconsistent parameters.
+    """
+    image = _checked(frame, threshold, t_lim, step, r_lim, l_min, min_area, max_area,
+                     max_markers)
+    if image.size == 0:
+        return Detection("none", t_lim, ())
+    band_max = _band_maxima(image)
+    brightest = int(band_max.max())
+    regions: tuple[Marker, ...] = ()
+    for t in _thresholds(threshold, t_lim, step):
+        if t > brightest:
+            continue
+        regions = _regions(image, band_max, t, l_min)
+        regions = tuple(_refine_small(image, r, t) if r.area < _SMALL_AREA else r
+                        for r in regions)
+        markers = tuple(r for r in regions
+                        if r.roundness < r_lim and min_area <= r.area <= max_area)
+        if len(markers) > max_markers:
+            return Detection("too_many", t, markers, regions)
+        if markers:
+            return Detection("ok", t, markers, regions)
+    return Detection("none", t_lim, (), regions)
+
+
+def closest(markers: tuple[Marker, ...] | list[Marker], u: float, v: float,
+            max_distance_px: float = float("inf")) -> Marker | None:
+    """The marker nearest to a last known position (the gantry's choice, §3.1), or None."""
+    best = min(markers, key=lambda m: (m.u - u) ** 2 + (m.v - v) ** 2, default=None)
+    if best is None or np.hypot(best.u - u, best.v - v) > max_distance_px:
+        return None
+    return best
+
+
+# --- the pipeline's steps --------------------------------------------------------------------
+
+
+def _checked(frame: np.ndarray, threshold: int, t_lim: int, step: int, r_lim: float,
+             l_min: int, min_area: int, max_area: int, max_markers: int) -> np.ndarray:
+    if not isinstance(frame, np.ndarray):
+        raise ValueError(f"expected a numpy array, got {type(frame).__name__}")
+    if frame.ndim != 2:
+        raise ValueError(f"expected a 2-D gray image (rows × cols), got shape {frame.shape}; "
+                         "convert colour images to gray first")
+    if frame.dtype != np.uint8:
+        raise ValueError(f"expected 8-bit pixels (uint8), got {frame.dtype}")
+    if not 0 <= t_lim <= threshold <= 255:
+        raise ValueError(f"need 0 ≤ t_lim ≤ threshold ≤ 255, got t_lim={t_lim}, "
+                         f"threshold={threshold}")
+    if step < 1 or l_min < 1 or r_lim < 1 or max_markers < 1 or not 0 <= min_area <= max_area:
+        raise ValueError("need step ≥ 1, l_min ≥ 1, r_lim ≥ 1, max_markers ≥ 1 and "
+                         "0 ≤ min_area ≤ max_area")
+    return frame if frame.flags.c_contiguous else np.ascontiguousarray(frame)
+
+
+def _thresholds(threshold: int, t_lim: int, step: int) -> list[int]:
+    out = list(range(threshold, t_lim, -step))
+    return [*out, t_lim]
+
+
+def _band_maxima(image: np.ndarray) -> np.ndarray:
+    """The brightest pixel of every band of ``_BAND`` rows (the last band may be shorter)."""
+    rows, cols = image.shape
+    full = rows // _BAND
+    maxima = image[: full * _BAND].reshape(full, _BAND * cols).max(axis=1) if full else (
+        np.zeros(0, np.uint8))
+    if rows % _BAND:
+        maxima = np.append(maxima, image[full * _BAND:].max())
+    return maxima
+
+
+def _regions(image: np.ndarray, band_max: np.ndarray, threshold: int,
+             l_min: int) -> tuple[Marker, ...]:
+    table = regions_kernel(image, band_max, _BAND, threshold, l_min)
+    return tuple(Marker(u, v, long_r, short_r, angle, roundness, int(area))
+                 for u, v, long_r, short_r, angle, roundness, area in table.tolist())
+
+
+def _refine_small(image: np.ndarray, region: Marker, threshold: int) -> Marker:
+    """Centroid and ellipse of a small region from brightness-weighted moments in a window.
+
+    A marker a few pixels across leaves only a handful of pixels above the threshold, whose
+    binary shape says little about roundness (three pixels make an "L"). The blurred spot
+    around it does: weights are the brightness above the midpoint between the window's
+    background (its border's median) and the threshold.
+    """
+    reach = int(np.ceil(region.radius_long)) + 3
+    r0, c0 = max(int(region.v) - reach, 0), max(int(region.u) - reach, 0)
+    window = image[r0 : int(region.v) + reach + 1, c0 : int(region.u) + reach + 1]
+    border = np.concatenate([window[0], window[-1], window[:, 0], window[:, -1]])
+    floor = (float(np.median(border)) + threshold) / 2
+    weights = np.clip(window.astype(np.float64) - floor, 0, None)
+    total = weights.sum()
+    if total <= 0:
+        return region
+    rows, cols = np.indices(window.shape)
+    u, v = (weights * cols).sum() / total, (weights * rows).sum() / total
+    mu20 = (weights * (cols - u) ** 2).sum() / total + 1 / 12
+    mu02 = (weights * (rows - v) ** 2).sum() / total + 1 / 12
+    mu11 = (weights * (cols - u) * (rows - v)).sum() / total
+    spread = np.hypot((mu20 - mu02) / 2, mu11)
+    mean = (mu20 + mu02) / 2
+    long_r, short_r = 2 * np.sqrt(mean + spread), 2 * np.sqrt(max(mean - spread, 1e-12))
+    angle = float(np.degrees(0.5 * np.arctan2(2 * mu11, mu20 - mu02)))
+    return Marker(float(u + c0), float(v + r0), float(long_r), float(short_r),
+                  angle + 180 if angle <= -90 else angle, float(long_r / short_r), region.area)
+
+
+# --- annotated images ----------------------------------------------------------------------------
+
+
+def annotate(frame: np.ndarray, result: Detection) -> np.ndarray:
+    """A colour copy of ``frame`` with every region drawn: its ellipse (green for markers,
+    red for rejected regions), centroid, both radii along their axes, and the status."""
+    import cv2
+
+    image = cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
+    chosen = set(result.markers)
+    for region in result.regions:
+        colour = (0, 200, 0) if region in chosen else (0, 0, 255)
+        centre = (region.u, region.v)
+        axes = (max(region.radius_long, 0.5), max(region.radius_short, 0.5))
+        cv2.ellipse(image, (centre, (2 * axes[0], 2 * axes[1]), region.angle_deg), colour, 1,
+                    cv2.LINE_AA)
+        a = np.radians(region.angle_deg)
+        for radius, direction in ((region.radius_long, (np.cos(a), np.sin(a))),
+                                  (region.radius_short, (-np.sin(a), np.cos(a)))):
+            tip = (int(round(region.u + radius * direction[0])),
+                   int(round(region.v + radius * direction[1])))
+            cv2.line(image, (int(round(region.u)), int(round(region.v))), tip, colour, 1)
+        cv2.drawMarker(image, (int(round(region.u)), int(round(region.v))), (255, 200, 0),
+                       cv2.MARKER_CROSS, 6, 1)
+    text = f"{result.status} t={result.threshold} markers={len(result.markers)}"
+    cv2.putText(image, text, (5, 15), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 0), 1)
+    return image

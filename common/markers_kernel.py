@@ -1,0 +1,143 @@
+"""The marker detector's hot loop, compiled with numba: runs → union-find → region moments.
+
+Pure and allocation-light; ``common.markers`` is its only caller and documents the algorithm
+(paper §2.1). Set ``NUMBA_DISABLE_JIT=1`` to run it as plain Python (slow, for debugging).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+COLUMNS = ("u", "v", "radius_long", "radius_short", "angle_deg", "roundness", "area")
+
+
+@njit(cache=True, nogil=True)
+def _find(parent: np.ndarray, i: int) -> int:
+    root = i
+    while parent[root] != root:
+        root = parent[root]
+    while parent[i] != root:  # path compression
+        following = parent[i]
+        parent[i] = root
+        i = following
+    return root
+
+
+@njit(cache=True, nogil=True)
+def _scan_runs(image: np.ndarray, band_max: np.ndarray, band: int, threshold: int,
+               l_min: int) -> tuple:
+    """Runs (row, start, end exclusive, Σw, Σw·x) with w = gray − threshold + 1, in the rows
+    of the bands whose maximum reaches the threshold; sorted by row, then start."""
+    rows, cols = image.shape
+    bright_bands = 0
+    for b in range(band_max.shape[0]):
+        if band_max[b] >= threshold:
+            bright_bands += 1
+    capacity = bright_bands * band * (cols // (l_min + 1) + 1) + 1
+    run_row = np.empty(capacity, np.int64)
+    run_start = np.empty(capacity, np.int64)
+    run_end = np.empty(capacity, np.int64)
+    run_w = np.empty(capacity, np.float64)
+    run_wx = np.empty(capacity, np.float64)
+    n = 0
+    for b in range(band_max.shape[0]):
+        if band_max[b] < threshold:
+            continue
+        for y in range(b * band, min((b + 1) * band, rows)):
+            x = 0
+            while x < cols:
+                if image[y, x] < threshold:
+                    x += 1
+                    continue
+                start, w, wx = x, 0.0, 0.0
+                while x < cols and image[y, x] >= threshold:
+                    weight = image[y, x] - threshold + 1.0
+                    w += weight
+                    wx += weight * x
+                    x += 1
+                if x - start >= l_min:
+                    run_row[n], run_start[n], run_end[n] = y, start, x
+                    run_w[n], run_wx[n] = w, wx
+                    n += 1
+    return run_row[:n], run_start[:n], run_end[:n], run_w[:n], run_wx[:n]
+
+
+@njit(cache=True, nogil=True)
+def _label_runs(run_row: np.ndarray, run_start: np.ndarray, run_end: np.ndarray) -> tuple:
+    """Union-find over runs overlapping on consecutive rows; (label per run, region count)."""
+    n = run_row.shape[0]
+    parent = np.arange(n)
+    prev_lo, prev_hi, i = 0, 0, 0
+    while i < n:
+        row = run_row[i]
+        j = i + 1
+        while j < n and run_row[j] == row:
+            j += 1
+        if i > 0 and run_row[i - 1] == row - 1:
+            a = prev_lo
+            for b in range(i, j):
+                while a < prev_hi and run_end[a] <= run_start[b]:
+                    a += 1
+                k = a
+                while k < prev_hi and run_start[k] < run_end[b]:
+                    ra, rb = _find(parent, k), _find(parent, b)
+                    if ra != rb:
+                        parent[max(ra, rb)] = min(ra, rb)
+                    k += 1
+        prev_lo, prev_hi = i, j
+        i = j
+    label = np.full(n, -1, np.int64)
+    count = 0
+    for i in range(n):
+        root = _find(parent, i)
+        if label[root] < 0:
+            label[root] = count
+            count += 1
+        label[i] = label[root]
+    return label, count
+
+
+@njit(cache=True, nogil=True)
+def regions_kernel(image: np.ndarray, band_max: np.ndarray, band: int, threshold: int,
+                   l_min: int) -> np.ndarray:
+    """One row per region, columns ``COLUMNS``: the brightness-weighted centroid, and the
+    binary region's inertia ellipse (radius = 2·√eigenvalue, + 1/12 px² for a pixel's own
+    extent, so a disc of radius R gives R), its angle, roundness and area."""
+    run_row, run_start, run_end, run_w, run_wx = _scan_runs(image, band_max, band, threshold,
+                                                            l_min)
+    label, count = _label_runs(run_row, run_start, run_end)
+    sums = np.zeros((count, 9))
+    for i in range(run_row.shape[0]):
+        k = label[i]
+        s, e, y = float(run_start[i]), float(run_end[i]), float(run_row[i])
+        m = e - s
+        sx = m * (s + e - 1) / 2
+        sums[k, 0] += m
+        sums[k, 1] += sx
+        sums[k, 2] += ((e - 1) * e * (2 * e - 1) - (s - 1) * s * (2 * s - 1)) / 6
+        sums[k, 3] += m * y
+        sums[k, 4] += m * y * y
+        sums[k, 5] += y * sx
+        sums[k, 6] += run_w[i]
+        sums[k, 7] += run_wx[i]
+        sums[k, 8] += y * run_w[i]
+    out = np.empty((count, 7))
+    for k in range(count):
+        area = sums[k, 0]
+        mean_x, mean_y = sums[k, 1] / area, sums[k, 3] / area
+        mu20 = sums[k, 2] / area - mean_x * mean_x + 1.0 / 12
+        mu02 = sums[k, 4] / area - mean_y * mean_y + 1.0 / 12
+        mu11 = sums[k, 5] / area - mean_x * mean_y
+        spread = np.sqrt(((mu20 - mu02) / 2) ** 2 + mu11 * mu11)
+        mean = (mu20 + mu02) / 2
+        long_r = 2 * np.sqrt(mean + spread)
+        short_r = 2 * np.sqrt(max(mean - spread, 1e-12))
+        angle = np.degrees(0.5 * np.arctan2(2 * mu11, mu20 - mu02))
+        if angle <= -90:
+            angle += 180
+        out[k, 0] = sums[k, 7] / sums[k, 6]
+        out[k, 1] = sums[k, 8] / sums[k, 6]
+        out[k, 2], out[k, 3], out[k, 4] = long_r, short_r, angle
+        out[k, 5], out[k, 6] = long_r / short_r, area
+    return out
