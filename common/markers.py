@@ -15,27 +15,25 @@
 Pixel ``[row, col]`` has its centre at ``(u, v) = (col, row)``. Angles are in degrees in
 (−90, 90], measured from the +u axis towards +v (clockwise on screen).
 
-Speed: one vectorised numpy pass finds the 16-row bands that hold bright pixels; only those
-rows are scanned, by the compiled loop in ``markers_kernel.py`` (run lengths, union-find and
-moments in one go). The first call compiles it (about 2 s, then cached on disk).
+Speed: one vectorised pass finds each row's brightest pixel; only rows that reach the
+threshold are scanned, by the compiled loop in ``markers_kernel.py`` (run lengths, union-find
+and moments in one go). The first call compiles it (a few seconds, then cached on disk).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 
-from common.markers_kernel import regions_kernel
+from common.markers_kernel import regions_kernel, row_maxima, weighted_ellipse
 
 Status = Literal["ok", "none", "too_many"]
-_BAND = 16
 _SMALL_AREA = 30  # below this (radius ≲ 3 px) the binary shape is too coarse to judge
 
 
-@dataclass(frozen=True)
-class Marker:
+class Marker(NamedTuple):
     """One region: centroid (px), inertia ellipse (px, deg), roundness, area (px)."""
 
     u: float
@@ -80,13 +78,13 @@ def detect(frame: np.ndarray, *, threshold: int = 230, t_lim: int = 203, step: i
                      max_markers)
     if image.size == 0:
         return Detection("none", t_lim, ())
-    band_max = _band_maxima(image)
-    brightest = int(band_max.max())
+    row_max = row_maxima(image)
+    brightest = int(row_max.max())
     regions: tuple[Marker, ...] = ()
     for t in _thresholds(threshold, t_lim, step):
         if t > brightest:
             continue
-        regions = _regions(image, band_max, t, l_min)
+        regions = _regions(image, row_max, t, l_min)
         regions = tuple(_refine_small(image, r, t) if r.area < _SMALL_AREA else r
                         for r in regions)
         markers = tuple(r for r in regions
@@ -133,20 +131,9 @@ def _thresholds(threshold: int, t_lim: int, step: int) -> list[int]:
     return [*out, t_lim]
 
 
-def _band_maxima(image: np.ndarray) -> np.ndarray:
-    """The brightest pixel of every band of ``_BAND`` rows (the last band may be shorter)."""
-    rows, cols = image.shape
-    full = rows // _BAND
-    maxima = image[: full * _BAND].reshape(full, _BAND * cols).max(axis=1) if full else (
-        np.zeros(0, np.uint8))
-    if rows % _BAND:
-        maxima = np.append(maxima, image[full * _BAND:].max())
-    return maxima
-
-
-def _regions(image: np.ndarray, band_max: np.ndarray, threshold: int,
+def _regions(image: np.ndarray, row_max: np.ndarray, threshold: int,
              l_min: int) -> tuple[Marker, ...]:
-    table = regions_kernel(image, band_max, _BAND, threshold, l_min)
+    table = regions_kernel(image, row_max, threshold, l_min)
     return tuple(Marker(u, v, long_r, short_r, angle, roundness, int(area))
                  for u, v, long_r, short_r, angle, roundness, area in table.tolist())
 
@@ -156,29 +143,13 @@ def _refine_small(image: np.ndarray, region: Marker, threshold: int) -> Marker:
 
     A marker a few pixels across leaves only a handful of pixels above the threshold, whose
     binary shape says little about roundness (three pixels make an "L"). The blurred spot
-    around it does: weights are the brightness above the midpoint between the window's
-    background (its border's median) and the threshold.
-    """
+    around it does (see ``weighted_ellipse``)."""
     reach = int(np.ceil(region.radius_long)) + 3
-    r0, c0 = max(int(region.v) - reach, 0), max(int(region.u) - reach, 0)
-    window = image[r0 : int(region.v) + reach + 1, c0 : int(region.u) + reach + 1]
-    border = np.concatenate([window[0], window[-1], window[:, 0], window[:, -1]])
-    floor = (float(np.median(border)) + threshold) / 2
-    weights = np.clip(window.astype(np.float64) - floor, 0, None)
-    total = weights.sum()
-    if total <= 0:
+    u, v, long_r, short_r, angle = weighted_ellipse(image, region.u, region.v, reach,
+                                                    threshold).tolist()
+    if u != u:  # NaN: nothing above the background in the window
         return region
-    rows, cols = np.indices(window.shape)
-    u, v = (weights * cols).sum() / total, (weights * rows).sum() / total
-    mu20 = (weights * (cols - u) ** 2).sum() / total + 1 / 12
-    mu02 = (weights * (rows - v) ** 2).sum() / total + 1 / 12
-    mu11 = (weights * (cols - u) * (rows - v)).sum() / total
-    spread = np.hypot((mu20 - mu02) / 2, mu11)
-    mean = (mu20 + mu02) / 2
-    long_r, short_r = 2 * np.sqrt(mean + spread), 2 * np.sqrt(max(mean - spread, 1e-12))
-    angle = float(np.degrees(0.5 * np.arctan2(2 * mu11, mu20 - mu02)))
-    return Marker(float(u + c0), float(v + r0), float(long_r), float(short_r),
-                  angle + 180 if angle <= -90 else angle, float(long_r / short_r), region.area)
+    return Marker(u, v, long_r, short_r, angle, long_r / short_r, region.area)
 
 
 # --- annotated images ----------------------------------------------------------------------------

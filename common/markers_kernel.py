@@ -25,41 +25,56 @@ def _find(parent: np.ndarray, i: int) -> int:
 
 
 @njit(cache=True, nogil=True)
-def _scan_runs(image: np.ndarray, band_max: np.ndarray, band: int, threshold: int,
-               l_min: int) -> tuple:
+def _row_max(row: np.ndarray) -> int:
+    top = 0
+    for value in row:
+        top = max(top, value)
+    return top
+
+
+@njit(cache=True, nogil=True)
+def row_maxima(image: np.ndarray) -> np.ndarray:
+    """The brightest pixel of every row: the one full pass over the frame."""
+    out = np.empty(image.shape[0], np.uint8)
+    for y in range(image.shape[0]):
+        out[y] = _row_max(image[y])
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _scan_runs(image: np.ndarray, row_max: np.ndarray, threshold: int, l_min: int) -> tuple:
     """Runs (row, start, end exclusive, Σw, Σw·x) with w = gray − threshold + 1, in the rows
-    of the bands whose maximum reaches the threshold; sorted by row, then start."""
+    whose maximum reaches the threshold; sorted by row, then start."""
     rows, cols = image.shape
-    bright_bands = 0
-    for b in range(band_max.shape[0]):
-        if band_max[b] >= threshold:
-            bright_bands += 1
-    capacity = bright_bands * band * (cols // (l_min + 1) + 1) + 1
+    bright_rows = 0
+    for y in range(rows):
+        if row_max[y] >= threshold:
+            bright_rows += 1
+    capacity = bright_rows * (cols // (l_min + 1) + 1) + 1
     run_row = np.empty(capacity, np.int64)
     run_start = np.empty(capacity, np.int64)
     run_end = np.empty(capacity, np.int64)
     run_w = np.empty(capacity, np.float64)
     run_wx = np.empty(capacity, np.float64)
     n = 0
-    for b in range(band_max.shape[0]):
-        if band_max[b] < threshold:
+    for y in range(rows):
+        if row_max[y] < threshold:
             continue
-        for y in range(b * band, min((b + 1) * band, rows)):
-            x = 0
-            while x < cols:
-                if image[y, x] < threshold:
-                    x += 1
-                    continue
-                start, w, wx = x, 0.0, 0.0
-                while x < cols and image[y, x] >= threshold:
-                    weight = image[y, x] - threshold + 1.0
-                    w += weight
-                    wx += weight * x
-                    x += 1
-                if x - start >= l_min:
-                    run_row[n], run_start[n], run_end[n] = y, start, x
-                    run_w[n], run_wx[n] = w, wx
-                    n += 1
+        x = 0
+        while x < cols:
+            if image[y, x] < threshold:
+                x += 1
+                continue
+            start, w, wx = x, 0.0, 0.0
+            while x < cols and image[y, x] >= threshold:
+                weight = image[y, x] - threshold + 1.0
+                w += weight
+                wx += weight * x
+                x += 1
+            if x - start >= l_min:
+                run_row[n], run_start[n], run_end[n] = y, start, x
+                run_w[n], run_wx[n] = w, wx
+                n += 1
     return run_row[:n], run_start[:n], run_end[:n], run_w[:n], run_wx[:n]
 
 
@@ -99,13 +114,12 @@ def _label_runs(run_row: np.ndarray, run_start: np.ndarray, run_end: np.ndarray)
 
 
 @njit(cache=True, nogil=True)
-def regions_kernel(image: np.ndarray, band_max: np.ndarray, band: int, threshold: int,
+def regions_kernel(image: np.ndarray, row_max: np.ndarray, threshold: int,
                    l_min: int) -> np.ndarray:
     """One row per region, columns ``COLUMNS``: the brightness-weighted centroid, and the
     binary region's inertia ellipse (radius = 2·√eigenvalue, + 1/12 px² for a pixel's own
     extent, so a disc of radius R gives R), its angle, roundness and area."""
-    run_row, run_start, run_end, run_w, run_wx = _scan_runs(image, band_max, band, threshold,
-                                                            l_min)
+    run_row, run_start, run_end, run_w, run_wx = _scan_runs(image, row_max, threshold, l_min)
     label, count = _label_runs(run_row, run_start, run_end)
     sums = np.zeros((count, 9))
     for i in range(run_row.shape[0]):
@@ -140,4 +154,45 @@ def regions_kernel(image: np.ndarray, band_max: np.ndarray, band: int, threshold
         out[k, 1] = sums[k, 8] / sums[k, 6]
         out[k, 2], out[k, 3], out[k, 4] = long_r, short_r, angle
         out[k, 5], out[k, 6] = long_r / short_r, area
+    return out
+
+
+@njit(cache=True, nogil=True)
+def weighted_ellipse(image: np.ndarray, u: float, v: float, reach: int,
+                     threshold: int) -> np.ndarray:
+    """(u, v, radius_long, radius_short, angle_deg) from brightness-weighted moments in the
+    window of ``reach`` pixels around (u, v); weights are the brightness above the midpoint
+    between the window border's median (the background) and the threshold. All NaN if the
+    window holds nothing above that midpoint."""
+    rows, cols = image.shape
+    r0, r1 = max(int(v) - reach, 0), min(int(v) + reach + 1, rows)
+    c0, c1 = max(int(u) - reach, 0), min(int(u) + reach + 1, cols)
+    border = np.concatenate((image[r0, c0:c1], image[r1 - 1, c0:c1], image[r0:r1, c0],
+                             image[r0:r1, c1 - 1]))
+    floor = (np.median(border.astype(np.float64)) + threshold) / 2
+    w = sx = sy = sxx = syy = sxy = 0.0
+    for y in range(r0, r1):
+        for x in range(c0, c1):
+            weight = image[y, x] - floor
+            if weight > 0:
+                w += weight
+                sx += weight * x
+                sy += weight * y
+                sxx += weight * x * x
+                syy += weight * y * y
+                sxy += weight * x * y
+    out = np.full(5, np.nan)
+    if w <= 0:
+        return out
+    mean_x, mean_y = sx / w, sy / w
+    mu20 = sxx / w - mean_x * mean_x + 1.0 / 12
+    mu02 = syy / w - mean_y * mean_y + 1.0 / 12
+    mu11 = sxy / w - mean_x * mean_y
+    spread = np.sqrt(((mu20 - mu02) / 2) ** 2 + mu11 * mu11)
+    mean = (mu20 + mu02) / 2
+    angle = np.degrees(0.5 * np.arctan2(2 * mu11, mu20 - mu02))
+    out[0], out[1] = mean_x, mean_y
+    out[2] = 2 * np.sqrt(mean + spread)
+    out[3] = 2 * np.sqrt(max(mean - spread, 1e-12))
+    out[4] = angle + 180 if angle <= -90 else angle
     return out

@@ -31,6 +31,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _up(rest)
     if command == "config":
         return _config(rest)
+    if command == "detect":
+        from services.detect_cli import main as detect_main
+
+        return detect_main(rest)
     print(f"stb: unknown command {command!r}\n\n{_usage()}", file=sys.stderr)
     return 2
 

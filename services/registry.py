@@ -32,6 +32,8 @@ TOOLS: dict[str, ServiceInfo] = {
     "monitor": ServiceInfo("live table of alive services and every key's latest value; --raw",
                            "services.monitor.settings:MonitorSettings"),
     "config": ServiceInfo("check a lab config file: stb config check --lab FILE", ""),
+    "detect": ServiceInfo("find markers in image files (paper §2.1): stb detect IMAGE --json",
+                          ""),
 }
 
 DEFAULT_UP: tuple[str, ...] = ("router", "sim")
