@@ -9,5 +9,5 @@ RUN pip install --no-cache-dir . \
  && mkdir -p /app/run && chown stb /app/run
 USER stb
 # A lab file, if any, is named by STB_LAB (see docker-compose.yml).
-ENV PYTHONUNBUFFERED=1
+ENV PYTHONUNBUFFERED=1 NUMBA_CACHE_DIR=/tmp/numba-cache
 ENTRYPOINT ["stb"]

@@ -27,7 +27,7 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 
-from common.markers_kernel import regions_kernel, row_maxima, weighted_ellipse
+from common.markers_kernel import regions_kernel, row_maxima
 
 Status = Literal["ok", "none", "too_many"]
 _SMALL_AREA = 30  # below this (radius ≲ 3 px) the binary shape is too coarse to judge
@@ -85,8 +85,6 @@ def detect(frame: np.ndarray, *, threshold: int = 230, t_lim: int = 203, step: i
         if t > brightest:
             continue
         regions = _regions(image, row_max, t, l_min)
-        regions = tuple(_refine_small(image, r, t) if r.area < _SMALL_AREA else r
-                        for r in regions)
         markers = tuple(r for r in regions
                         if r.roundness < r_lim and min_area <= r.area <= max_area)
         if len(markers) > max_markers:
@@ -133,23 +131,9 @@ def _thresholds(threshold: int, t_lim: int, step: int) -> list[int]:
 
 def _regions(image: np.ndarray, row_max: np.ndarray, threshold: int,
              l_min: int) -> tuple[Marker, ...]:
-    table = regions_kernel(image, row_max, threshold, l_min)
+    table = regions_kernel(image, row_max, threshold, l_min, _SMALL_AREA)
     return tuple(Marker(u, v, long_r, short_r, angle, roundness, int(area))
                  for u, v, long_r, short_r, angle, roundness, area in table.tolist())
-
-
-def _refine_small(image: np.ndarray, region: Marker, threshold: int) -> Marker:
-    """Centroid and ellipse of a small region from brightness-weighted moments in a window.
-
-    A marker a few pixels across leaves only a handful of pixels above the threshold, whose
-    binary shape says little about roundness (three pixels make an "L"). The blurred spot
-    around it does (see ``weighted_ellipse``)."""
-    reach = int(np.ceil(region.radius_long)) + 3
-    u, v, long_r, short_r, angle = weighted_ellipse(image, region.u, region.v, reach,
-                                                    threshold).tolist()
-    if u != u:  # NaN: nothing above the background in the window
-        return region
-    return Marker(u, v, long_r, short_r, angle, long_r / short_r, region.area)
 
 
 # --- annotated images ----------------------------------------------------------------------------

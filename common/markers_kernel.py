@@ -114,11 +114,15 @@ def _label_runs(run_row: np.ndarray, run_start: np.ndarray, run_end: np.ndarray)
 
 
 @njit(cache=True, nogil=True)
-def regions_kernel(image: np.ndarray, row_max: np.ndarray, threshold: int,
-                   l_min: int) -> np.ndarray:
+def regions_kernel(image: np.ndarray, row_max: np.ndarray, threshold: int, l_min: int,
+                   small_area: int) -> np.ndarray:
     """One row per region, columns ``COLUMNS``: the brightness-weighted centroid, and the
     binary region's inertia ellipse (radius = 2·√eigenvalue, + 1/12 px² for a pixel's own
-    extent, so a disc of radius R gives R), its angle, roundness and area."""
+    extent, so a disc of radius R gives R), its angle, roundness and area.
+
+    A region smaller than ``small_area`` leaves too few pixels for its binary shape to say
+    whether it is round (three pixels make an "L"); its centroid and ellipse come from the
+    brightness-weighted moments of the blurred spot around it (``weighted_ellipse``)."""
     run_row, run_start, run_end, run_w, run_wx = _scan_runs(image, row_max, threshold, l_min)
     label, count = _label_runs(run_row, run_start, run_end)
     sums = np.zeros((count, 9))
@@ -154,6 +158,12 @@ def regions_kernel(image: np.ndarray, row_max: np.ndarray, threshold: int,
         out[k, 1] = sums[k, 8] / sums[k, 6]
         out[k, 2], out[k, 3], out[k, 4] = long_r, short_r, angle
         out[k, 5], out[k, 6] = long_r / short_r, area
+        if area < small_area:
+            refined = weighted_ellipse(image, out[k, 0], out[k, 1], int(np.ceil(long_r)) + 3,
+                                       threshold)
+            if not np.isnan(refined[0]):
+                out[k, :5] = refined
+                out[k, 5] = refined[2] / refined[3]
     return out
 
 
