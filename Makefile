@@ -20,7 +20,7 @@ demo: $(STAMP)
 
 ## Lint, then the full test suite.
 test: $(STAMP)
-	$(BIN)/ruff check common services tests
+	$(BIN)/ruff check common services tests benchmarks
 	$(BIN)/python -m pytest -q
 
 wire-doc: $(STAMP)

@@ -1,0 +1,77 @@
+"""The camera model (paper eq. 1–3, Table 1) against hand-computed cases."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from common.camera import (
+    Intrinsics,
+    Pose,
+    euler_xyz_deg,
+    focal_mm_for_zoom,
+    project,
+    rotation_xyz,
+    thin_lens_image_distance_mm,
+    zoom_for_focal_mm,
+)
+
+
+def test_axis_215_intrinsics_of_table_1() -> None:
+    intr = Intrinsics(3.8)
+    assert intr.fy_px == pytest.approx(3.8 / (3.6 / 704))
+    assert intr.fz_px == pytest.approx(3.8 / (2.7 / 576))
+    assert (intr.cy_px, intr.cz_px) == (352, 288)
+
+
+def test_identity_pose_projects_by_equation_3() -> None:
+    intr = Intrinsics(3.8)
+    uv = project(np.array([[2000.0, 100.0, -50.0]]), Pose(0, 0, 0, 0, 0, 0), intr)
+    assert uv[0, 0] == pytest.approx(intr.fy_px * 100 / 2000 + 352)
+    assert uv[0, 1] == pytest.approx(intr.fz_px * -50 / 2000 + 288)
+
+
+def test_rotation_order_is_rx_ry_rz() -> None:
+    r = rotation_xyz(90, 0, 0) @ rotation_xyz(0, 90, 0)
+    np.testing.assert_allclose(rotation_xyz(90, 90, 0), r, atol=1e-12)
+    # Rz(90°) turns the optical axis x onto y.
+    np.testing.assert_allclose(rotation_xyz(0, 0, 90) @ [1, 0, 0], [0, 1, 0], atol=1e-12)
+
+
+def test_pose_maps_camera_to_world_and_back() -> None:
+    pose = Pose(3413, 1093, 2163, 197, 27, 159)  # the paper's optimum (Table 2)
+    points = np.array([[100.0, -20.0, 5.0], [4000.0, 300.0, -200.0]])
+    np.testing.assert_allclose(pose.to_camera(pose.to_world(points)), points, atol=1e-9)
+    np.testing.assert_allclose(pose.to_world([[0.0, 0.0, 0.0]])[0], pose.position)
+
+
+def test_paper_estimate_looks_at_the_crater_centre() -> None:
+    pose = Pose(3550, 1090, 2190, 180, 30, 165)  # Table 2, "estimated"
+    axis = pose.rotation @ [1, 0, 0]
+    hit = pose.position + axis * (-pose.z_mm / axis[2])  # where the optical axis meets z = 0
+    assert np.hypot(*hit[:2]) < 300
+
+
+def test_points_behind_the_camera_do_not_project() -> None:
+    uv = project(np.array([[-10.0, 0, 0], [10.0, 0, 0]]), Pose(0, 0, 0, 0, 0, 0),
+                 Intrinsics(3.8))
+    assert np.isnan(uv[0]).all() and np.isfinite(uv[1]).all()
+
+
+@pytest.mark.parametrize("angles", [(197, 27, 159), (10, -80, 33), (-45, 10, 170), (0, 0, 0)])
+def test_euler_angles_round_trip(angles: tuple[float, float, float]) -> None:
+    r = rotation_xyz(*angles)
+    np.testing.assert_allclose(rotation_xyz(*euler_xyz_deg(r)), r, atol=1e-12)
+
+
+def test_zoom_steps_map_onto_the_lens_range() -> None:
+    assert focal_mm_for_zoom(1) == 3.8 and focal_mm_for_zoom(9999) == 46.0
+    assert focal_mm_for_zoom(0) == 3.8 and focal_mm_for_zoom(20000) == 46.0
+    for zoom in (1, 2500, 5000, 9999):
+        assert zoom_for_focal_mm(focal_mm_for_zoom(zoom)) == zoom
+
+
+def test_thin_lens_equation_5() -> None:
+    assert thin_lens_image_distance_mm(8.0, 3000.0) == pytest.approx(1 / (1 / 8 - 1 / 3000))
+    with pytest.raises(ValueError):
+        thin_lens_image_distance_mm(8.0, 5.0)
