@@ -112,7 +112,7 @@ def test_modbus_client_drives_the_crane_over_tcp() -> None:
     def clock() -> float:
         return time.monotonic() - t0
 
-    crane = CraneModel(CraneParams(watchdog_s=0.5))
+    crane = CraneModel(CraneParams(watchdog_s=0.5, x_max_mm=3000.0))
     server = regs.CraneServer(crane, clock, threading.Lock(), "127.0.0.1", port)
 
     async def main() -> dict:
@@ -124,26 +124,35 @@ def test_modbus_client_drives_the_crane_over_tcp() -> None:
             await client.write_register(regs.HR_CONTROL, CONTROL_ENABLE)
             await client.write_registers(regs.HR_SETPOINT_X, regs.int32_to_registers(800)
                                          + regs.int32_to_registers(-300))
+            await asyncio.sleep(0.3)
+            early = (await client.read_input_registers(0, count=regs.IR_COUNT)).registers
             for beat in range(1, 16):
                 await asyncio.sleep(0.1)
                 await client.write_register(regs.HR_HEARTBEAT, beat)
             moving = (await client.read_input_registers(0, count=regs.IR_COUNT)).registers
+            await client.write_registers(regs.HR_SETPOINT_X, regs.int32_to_registers(9000)
+                                         + regs.int32_to_registers(0))
+            await asyncio.sleep(0.3)
+            clamped = (await client.read_input_registers(0, count=regs.IR_COUNT)).registers
             await asyncio.sleep(1.0)  # silence: the watchdog trips
             silent = (await client.read_input_registers(0, count=regs.IR_COUNT)).registers
             bad = await client.read_input_registers(100, count=2)
-            return {"moving": moving, "silent": silent, "bad": bad}
+            return {"early": early, "moving": moving, "clamped": clamped, "silent": silent,
+                    "bad": bad}
         finally:
             client.close()
             await server.close()
             serving.cancel()
 
     result = asyncio.run(main())
-    moving, silent = result["moving"], result["silent"]
+    early, moving, silent = result["early"], result["moving"], result["silent"]
+    assert early[regs.IR_ACTUAL_X: regs.IR_ACTUAL_X + 4] == [0, 0, 0, 0], "0.5 s reaction"
     x = regs.registers_to_int32(moving[regs.IR_ACTUAL_X], moving[regs.IR_ACTUAL_X + 1])
     y = regs.registers_to_int32(moving[regs.IR_ACTUAL_Y], moving[regs.IR_ACTUAL_Y + 1])
     assert 0 < x < 800 and -300 < y < 0
     assert moving[regs.IR_STATUS] & ENABLED and moving[regs.IR_HEARTBEAT] == 15
     assert regs.registers_to_int32(moving[regs.IR_TARGET_X], moving[regs.IR_TARGET_X + 1]) == 800
+    assert result["clamped"][regs.IR_FAULTS] & FAULT_CLAMPED, "outside the workspace: flagged"
     assert silent[regs.IR_FAULTS] & FAULT_WATCHDOG and not silent[regs.IR_STATUS] & ENABLED
     assert result["bad"].isError(), "an address outside the map is an exception response"
 
