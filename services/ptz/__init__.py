@@ -1,0 +1,1 @@
+"""PTZ service: points an AXIS camera at the tracked robot (paper §2.3)."""
