@@ -9,11 +9,11 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+from services.ptz.vapix import IMAGE_PATH, PTZ_PATH
 from services.sim.ptz import PtzHead
 
 TEXT = "text/plain"
-PTZ_PATH = "/axis-cgi/com/ptz.cgi"
-IMAGE_PATH = "/axis-cgi/jpg/image.cgi"
+__all__ = ["IMAGE_PATH", "PTZ_PATH", "handle_ptz", "snapshot_size"]
 RESOLUTIONS = {"704x576": (704, 576), "352x288": (352, 288), "176x144": (176, 144)}
 
 INFO = """\

@@ -1,0 +1,106 @@
+"""The PTZ camera driver: a small interface and the AXIS one (VAPIX over HTTP, httpx)."""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import cv2
+import httpx
+import numpy as np
+
+from services.ptz import vapix
+from services.ptz.aim import Limits
+
+
+class PtzError(Exception):
+    """Something went wrong talking to a PTZ camera."""
+
+
+class PtzUnreachable(PtzError):
+    """No answer: wrong address, camera off, network down, or a timeout."""
+
+
+class PtzUnauthorized(PtzError):
+    """The camera refused the credentials (HTTP 401/403)."""
+
+
+class PtzRejected(PtzError):
+    """The camera answered ``Error: ...`` (a request it does not accept)."""
+
+
+class PtzCamera(Protocol):
+    name: str
+
+    def move_to(self, pan_deg: float | None, tilt_deg: float | None,
+                zoom: int | None = None, speed: int | None = None) -> None: ...
+
+    def position(self) -> vapix.Position: ...
+
+    def limits(self) -> Limits: ...
+
+    def snapshot(self) -> np.ndarray: ...
+
+    def set_ir_cut_filter(self, mode: str) -> None: ...
+
+
+class AxisPtzCamera:
+    """An AXIS PTZ camera; ``client`` carries the base URL, authentication and timeouts."""
+
+    def __init__(self, client: httpx.Client, name: str = "ptz") -> None:
+        self.client = client
+        self.name = name
+
+    def move_to(self, pan_deg: float | None, tilt_deg: float | None,
+                zoom: int | None = None, speed: int | None = None) -> None:
+        self._request(vapix.PTZ_PATH, vapix.move_params(pan_deg, tilt_deg, zoom, speed))
+
+    def stop(self) -> None:
+        self._request(vapix.PTZ_PATH, {"move": "stop"})
+
+    def position(self) -> vapix.Position:
+        return vapix.parse_position(self._request(vapix.PTZ_PATH, {"query": "position"}).text)
+
+    def limits(self) -> Limits:
+        return vapix.parse_limits(self._request(vapix.PTZ_PATH, {"query": "limits"}).text)
+
+    def set_ir_cut_filter(self, mode: str) -> None:
+        if mode not in ("on", "off", "auto"):
+            raise ValueError(f"IR cut filter mode must be on, off or auto, not {mode!r}")
+        self._request(vapix.PTZ_PATH, {"ircutfilter": mode})
+
+    def snapshot(self, resolution: str = "704x576") -> np.ndarray:
+        """The current image as a gray uint8 array."""
+        reply = self._request(vapix.IMAGE_PATH, {"resolution": resolution})
+        if not reply.headers.get("content-type", "").startswith("image/jpeg"):
+            raise PtzRejected(f"{self.name}: snapshot is not a JPEG")
+        image = cv2.imdecode(np.frombuffer(reply.content, np.uint8), cv2.IMREAD_GRAYSCALE)
+        if image is None:
+            raise PtzRejected(f"{self.name}: snapshot JPEG does not decode")
+        return image
+
+    def _request(self, path: str, params: dict[str, str]) -> httpx.Response:
+        """The one I/O call: every request goes through here and its errors are ours."""
+        try:
+            reply = self.client.get(path, params=params)
+        except httpx.TransportError as err:
+            raise PtzUnreachable(f"{self.name}: {type(err).__name__}: {err}") from err
+        if reply.status_code in (401, 403):
+            raise PtzUnauthorized(f"{self.name}: HTTP {reply.status_code} (check user/password)")
+        if reply.status_code >= 400:
+            raise PtzRejected(f"{self.name}: HTTP {reply.status_code} for {path}")
+        if reply.headers.get("content-type", "").startswith("text/"):
+            message = vapix.error_message(reply.text)
+            if message is not None:
+                raise PtzRejected(f"{self.name}: {message}")
+        return reply
+
+
+def http_client(url: str, user: str, password: str, auth: str = "digest",
+                timeout_s: float = 2.0) -> httpx.Client:
+    """An httpx client for one camera: Digest (AXIS default) or Basic auth, bounded timeouts."""
+    credentials: httpx.Auth | None = None
+    if auth == "digest":
+        credentials = httpx.DigestAuth(user, password)
+    elif auth == "basic":
+        credentials = httpx.BasicAuth(user, password)
+    return httpx.Client(base_url=url, auth=credentials, timeout=httpx.Timeout(timeout_s))

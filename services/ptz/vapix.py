@@ -1,0 +1,79 @@
+"""VAPIX, the client's side: build PTZ requests and parse the camera's replies (pure).
+
+Documented limits: pan/tilt −180…180°, zoom 1…9999 (AXIS 215: 3.8–46 mm), speed 1…100.
+Success is ``204`` (or ``200`` with data); a refused request is ``200`` with ``Error: ...``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from services.ptz.aim import Limits
+
+PTZ_PATH = "/axis-cgi/com/ptz.cgi"
+IMAGE_PATH = "/axis-cgi/jpg/image.cgi"
+_RANGES = {"pan": (-180.0, 180.0), "tilt": (-180.0, 180.0), "zoom": (1, 9999),
+           "speed": (1, 100)}
+
+
+@dataclass(frozen=True)
+class Position:
+    pan_deg: float
+    tilt_deg: float
+    zoom: int
+    ir_cut_filter: str | None = None
+
+
+class VapixReplyError(ValueError):
+    """A reply that is not what VAPIX specifies (the camera or something else answered)."""
+
+
+def move_params(pan_deg: float | None = None, tilt_deg: float | None = None,
+                zoom: int | None = None, speed: int | None = None) -> dict[str, str]:
+    """Query parameters of an absolute move, clamped to VAPIX's documented ranges."""
+    out: dict[str, str] = {}
+    for name, value in (("pan", pan_deg), ("tilt", tilt_deg)):
+        if value is not None:
+            lo, hi = _RANGES[name]
+            out[name] = f"{min(max(float(value), lo), hi):.4f}"
+    for name, value in (("zoom", zoom), ("speed", speed)):
+        if value is not None:
+            lo, hi = _RANGES[name]
+            out[name] = str(int(min(max(int(value), lo), hi)))
+    return out
+
+
+def error_message(body: str) -> str | None:
+    """The camera's complaint if the body is an ``Error:`` reply, else None."""
+    stripped = body.strip()
+    return stripped[len("Error:"):].strip() if stripped.startswith("Error:") else None
+
+
+def parse_values(body: str) -> dict[str, str]:
+    """``key=value`` lines (CRLF or LF) into a dict."""
+    values = {}
+    for line in body.splitlines():
+        key, sep, value = line.strip().partition("=")
+        if sep:
+            values[key.strip()] = value.strip()
+    return values
+
+
+def parse_position(body: str) -> Position:
+    values = parse_values(body)
+    try:
+        return Position(float(values["pan"]), float(values["tilt"]),
+                        int(float(values.get("zoom", "1"))), values.get("ircutfilter"))
+    except (KeyError, ValueError) as err:
+        raise VapixReplyError(f"not a position reply: {body[:80]!r}") from err
+
+
+def parse_limits(body: str) -> Limits:
+    values = parse_values(body)
+    try:
+        return Limits(float(values["MinPan"]), float(values["MaxPan"]),
+                      float(values["MinTilt"]), float(values["MaxTilt"]),
+                      int(float(values.get("MinZoom", "1"))),
+                      int(float(values.get("MaxZoom", "9999"))))
+    except (KeyError, ValueError) as err:
+        raise VapixReplyError(f"not a limits reply: {body[:80]!r}") from err
