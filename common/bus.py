@@ -104,7 +104,7 @@ class _RateLimitedLog:
         self._last: dict[tuple[str, str], tuple[float, int]] = {}
         self._lock = threading.Lock()
 
-    def warning(self, key: str, reason: str, detail: str) -> None:
+    def warning(self, key: str, reason: str, detail: str, *, exc_info: bool = False) -> None:
         now = time.monotonic()
         with self._lock:
             last, suppressed = self._last.get((key, reason), (-1e18, 0))
@@ -113,7 +113,7 @@ class _RateLimitedLog:
                 return
             self._last[(key, reason)] = (now, 0)
         more = f" (+{suppressed} more since last report)" if suppressed else ""
-        log.warning("dropped sample on %s: %s%s", key, detail, more)
+        log.warning("dropped sample on %s: %s%s", key, detail, more, exc_info=exc_info)
 
 
 @dataclass
@@ -292,10 +292,8 @@ class Bus:
         with self._stats_lock:
             dropped = self._stats.setdefault(key, _Stats()).dropped
             dropped[reason] = dropped.get(reason, 0) + 1
-        if exc_info:
-            log.exception("handler for %s failed", key)
-        elif log_it:
-            self._log.warning(key, reason, detail)
+        if log_it:
+            self._log.warning(key, reason, detail, exc_info=exc_info)
 
     # --- latest-value queries and liveliness ------------------------------------------------
 

@@ -22,6 +22,8 @@ class ServiceInfo:
 SERVICES: dict[str, ServiceInfo] = {
     "router": ServiceInfo("embedded Zenoh router (lab: eclipse/zenoh or this)",
                           "services.router.settings:RouterSettings"),
+    "tracker": ServiceInfo("Qualisys QTM in; every frame's markers and the robot's position out",
+                           "services.tracker.settings:TrackerSettings"),
     "sim": ServiceInfo("the simulated lab: QTM RT mocap, VAPIX cameras, Modbus crane, frames",
                        "services.sim.settings:SimSettings"),
 }
@@ -36,7 +38,7 @@ TOOLS: dict[str, ServiceInfo] = {
                           ""),
 }
 
-DEFAULT_UP: tuple[str, ...] = ("router", "sim")
+DEFAULT_UP: tuple[str, ...] = ("router", "sim", "tracker")
 """What ``stb up`` starts when the lab file does not say: everything that exists so far."""
 
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import socket
 import subprocess
 import sys
 import time
@@ -16,14 +15,10 @@ import zenoh
 
 from common.bus import Bus, open_session
 from common.settings import BusSettings, ZenohSettings
+from tests.ports import free_port
+from tests.simlab import crater, crater_file, lab  # noqa: F401 - shared fixtures
 
 ROOT = Path(__file__).resolve().parent.parent
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def client_settings(endpoint: str, **bus: object) -> BusSettings:

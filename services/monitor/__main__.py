@@ -7,6 +7,7 @@ line. It joins the bus as a client (``--connect tcp/ROUTER:7447``) and never pub
 
 from __future__ import annotations
 
+import os
 import sys
 import threading
 import time
@@ -56,7 +57,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _raw(bus: Bus, key_expr: str, stop: threading.Event, duration: float | None) -> None:
     def show(item: tuple[str, object]) -> None:
-        print(json_line(*item), flush=True)  # type: ignore[arg-type]
+        if stop.is_set():
+            return
+        try:
+            print(json_line(*item), flush=True)  # type: ignore[arg-type]
+        except BrokenPipeError:  # the reader went away (| head): stop quietly
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            stop.set()
 
     bus.subscribe_any(key_expr, show)
     stop.wait(duration)

@@ -12,7 +12,7 @@ import qtm_rt
 
 from services.sim.lab import Lab
 from services.sim.mocap_server import MocapServer, MocapSource
-from tests.sim.conftest import sim_settings
+from tests.simlab import sim_settings
 
 
 def _run(lab: Lab, client: Callable[[int], Awaitable[object]], *, capturing: bool = True,

@@ -27,6 +27,8 @@ def write_lab(tmp_path: Path, router_endpoint: str, crater_file: Path) -> tuple[
     lab.write_text(f"""
 [bus.zenoh]
 connect = ["{router_endpoint}"]
+[tracker]
+qtm_port = {ports["mocap"]}
 [sim]
 crater_file = "{crater_file}"
 [sim.mocap]

@@ -1,4 +1,4 @@
-"""Sim fixtures: a small lab on free loopback ports, its crater made once per session."""
+"""A small simulated lab for tests: settings on free loopback ports, the crater made once."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from services.sim.lab import Lab, load_or_make_crater
 from services.sim.settings import CraneSettings, MocapSettings, PtzCameraSettings, SimSettings
 from services.sim.world import CraterMap
-from tests.conftest import free_port
+from tests.ports import free_port
 
 
 def sim_settings(crater_file: Path, **changes: object) -> SimSettings:

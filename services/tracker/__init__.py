@@ -1,0 +1,1 @@
+"""Tracker service: motion capture in, marker poses and the robot's position out."""

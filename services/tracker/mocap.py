@@ -1,0 +1,139 @@
+"""The motion-capture driver: a small interface and Qualisys QTM over its RT protocol (qtm-rt).
+
+``QualisysMocap.run`` connects, reads the 3D labels, streams ``3d`` and ``3dnolabels`` and
+hands every frame on as a ``MarkerFrame``; when QTM goes away it reconnects with backoff.
+NaN markers (lost by QTM) are left out, never sent as zero.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import threading
+import time
+import xml.etree.ElementTree as ET
+from collections.abc import Callable
+from typing import Protocol
+
+import qtm_rt
+
+from common.messages import Marker, MarkerFrame
+
+log = logging.getLogger(__name__)
+
+FrameHandler = Callable[[MarkerFrame], None]
+StateHandler = Callable[[bool, str], None]
+
+
+class MocapSource(Protocol):
+    def run(self, on_frame: FrameHandler, stop: threading.Event,
+            on_state: StateHandler = ...) -> None: ...
+
+
+def labels_from_xml(xml: bytes | str) -> list[str]:
+    """The 3D labels from a ``getparameters 3d`` reply, in QTM's order."""
+    root = ET.fromstring(xml)
+    return [(label.findtext("Name") or "").strip() for label in root.iter("Label")]
+
+
+class ClockSync:
+    """Maps QTM's capture time stamps onto the wall clock: the smallest observed
+    (arrival − stamp) is the transport delay floor; it may creep up slowly for clock drift."""
+
+    def __init__(self, creep_per_s: float = 1e-4) -> None:
+        self._offset: float | None = None
+        self._last: float | None = None
+        self._creep = creep_per_s
+
+    def measured(self, stamp_s: float, arrived_s: float) -> float:
+        sample = arrived_s - stamp_s
+        if self._offset is None or self._last is None:
+            self._offset = sample
+        else:
+            self._offset = min(self._offset + self._creep * (arrived_s - self._last), sample)
+        self._last = arrived_s
+        return stamp_s + self._offset
+
+
+def frame_from_packet(packet: qtm_rt.QRTPacket, labels: list[str],
+                      measured_s: float) -> MarkerFrame:
+    """A MarkerFrame from a QTM data packet; lost (NaN) markers are left out."""
+    markers = []
+    labelled = packet.get_3d_markers()
+    if labelled is not None:
+        for label, m in zip(labels, labelled[1], strict=False):
+            if all(math.isfinite(c) for c in (m.x, m.y, m.z)):
+                markers.append(Marker(label=label, x_mm=m.x, y_mm=m.y, z_mm=m.z))
+    unlabelled = packet.get_3d_markers_no_label()
+    if unlabelled is not None:
+        for m in unlabelled[1]:
+            if all(math.isfinite(c) for c in (m.x, m.y, m.z)) and m.id >= 0:
+                markers.append(Marker(id=m.id, x_mm=m.x, y_mm=m.y, z_mm=m.z))
+    return MarkerFrame(measured_s=measured_s, frame=packet.framenumber, markers=markers[:1000])
+
+
+class QualisysMocap:
+    def __init__(self, host: str = "127.0.0.1", port: int = 22223, *,
+                 frames: str = "allframes", timeout_s: float = 5.0,
+                 retry_initial_s: float = 0.5, retry_max_s: float = 5.0,
+                 clock: Callable[[], float] = time.time) -> None:
+        self.host, self.port, self.frames = host, port, frames
+        self.timeout_s, self.retry_initial_s, self.retry_max_s = (timeout_s, retry_initial_s,
+                                                                  retry_max_s)
+        self.clock = clock
+
+    def run(self, on_frame: FrameHandler, stop: threading.Event,
+            on_state: StateHandler = lambda connected, why: None) -> None:
+        """Stream until ``stop`` is set, reconnecting whenever QTM goes away."""
+        asyncio.run(self._main(on_frame, stop, on_state))
+
+    async def _main(self, on_frame: FrameHandler, stop: threading.Event,
+                    on_state: StateHandler) -> None:
+        delay = self.retry_initial_s
+        while not stop.is_set():
+            lost = asyncio.Event()
+            conn = await qtm_rt.connect(self.host, port=self.port, version="1.25",
+                                        on_disconnect=lambda _exc, lost=lost: lost.set(),
+                                        timeout=self.timeout_s)
+            if conn is None:
+                on_state(False, f"QTM at {self.host}:{self.port} does not answer")
+                await _wait(stop, delay)
+                delay = min(delay * 2, self.retry_max_s)
+                continue
+            try:
+                await self._stream(conn, on_frame, stop, lost, on_state)
+                delay = self.retry_initial_s
+            except (TimeoutError, qtm_rt.QRTCommandException, ET.ParseError) as err:
+                on_state(False, f"QTM at {self.host}:{self.port}: {err}")
+                await _wait(stop, delay)
+                delay = min(delay * 2, self.retry_max_s)
+            finally:
+                if conn.has_transport():  # qtm-rt's disconnect() fails once QTM has gone
+                    conn.disconnect()
+
+    async def _stream(self, conn: qtm_rt.QRTConnection, on_frame: FrameHandler,
+                      stop: threading.Event, lost: asyncio.Event,
+                      on_state: StateHandler) -> None:
+        labels = labels_from_xml(await conn.get_parameters(parameters=["3d"]))
+        sync = ClockSync()
+
+        def on_packet(packet: qtm_rt.QRTPacket) -> None:
+            measured = sync.measured(packet.timestamp / 1e6, self.clock())
+            on_frame(frame_from_packet(packet, labels, measured))
+
+        await conn.stream_frames(frames=self.frames, components=["3d", "3dnolabels"],
+                                 on_packet=on_packet)
+        on_state(True, f"streaming from QTM at {self.host}:{self.port} ({len(labels)} labels)")
+        while not stop.is_set() and not lost.is_set():
+            await asyncio.sleep(0.05)
+        if lost.is_set():
+            on_state(False, f"QTM at {self.host}:{self.port} went away")
+        else:
+            await conn.stream_frames_stop()
+
+
+async def _wait(stop: threading.Event, seconds: float) -> None:
+    end = time.monotonic() + seconds
+    while not stop.is_set() and time.monotonic() < end:
+        await asyncio.sleep(0.05)

@@ -1,0 +1,50 @@
+"""Tracker service: every mocap frame's markers, and the robot marker's position and velocity.
+
+Reads:      Qualisys QTM over the RT protocol (qtm_host:qtm_port)
+Publishes:  stb/tracker/markers (MarkerFrame), every frame
+            stb/tracker/robot   (RobotPosition), every frame in which the robot is seen
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from common import keys
+from common import messages as m
+from common.node import Node
+from services.tracker.mocap import MocapSource, QualisysMocap
+from services.tracker.robot import RobotPicker, Seen, Volume
+from services.tracker.settings import TrackerSettings
+
+
+def make_mocap(settings: TrackerSettings) -> QualisysMocap:
+    return QualisysMocap(settings.qtm_host, settings.qtm_port, frames=settings.frames)
+
+
+def make_picker(settings: TrackerSettings) -> RobotPicker:
+    volume = Volume(settings.x_min_mm, settings.x_max_mm, settings.y_min_mm, settings.y_max_mm,
+                    settings.z_min_mm, settings.z_max_mm)
+    return RobotPicker(settings.robot_label, volume, min_motion_mm=settings.min_motion_mm,
+                       velocity_window_s=settings.velocity_window_s)
+
+
+def run(node: Node, mocap: MocapSource | None = None) -> None:
+    settings: TrackerSettings = node.settings  # type: ignore[assignment]
+    mocap = mocap or make_mocap(settings)
+    picker = make_picker(settings)
+
+    def on_frame(frame: m.MarkerFrame) -> None:
+        node.bus.publish(keys.TRACKER_MARKERS, frame)
+        seen = [Seen(mk.label, mk.id, np.array([mk.x_mm, mk.y_mm, mk.z_mm]))
+                for mk in frame.markers]
+        robot = picker.update(frame.measured_s, seen)
+        if robot is not None:
+            (x, y, z), (vx, vy, vz) = robot
+            node.bus.publish(keys.TRACKER_ROBOT, m.RobotPosition(
+                measured_s=frame.measured_s, label=settings.robot_label, x_mm=x, y_mm=y,
+                z_mm=z, vx_mm_s=vx, vy_mm_s=vy, vz_mm_s=vz))
+
+    def on_state(connected: bool, why: str) -> None:
+        node.set_status("ok" if connected else "degraded", "" if connected else why)
+
+    mocap.run(on_frame, node.stop, on_state)

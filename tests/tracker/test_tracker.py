@@ -1,0 +1,146 @@
+"""The Qualisys driver and the tracker service against the sim's QTM RT server."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+from collections.abc import Callable, Iterator
+
+import numpy as np
+import pytest
+
+from common import keys
+from common import messages as m
+from common.bus import Bus
+from common.node import Node
+from services.sim.lab import Lab
+from services.sim.mocap_server import MocapServer, MocapSource
+from services.tracker.mocap import QualisysMocap, labels_from_xml
+from services.tracker.service import run
+from services.tracker.settings import TrackerSettings
+from tests.conftest import free_port, wait_for
+
+
+class QtmThread:
+    """The sim's QTM RT server on a loop thread of its own; stop() and start() it again."""
+
+    def __init__(self, lab: Lab, port: int) -> None:
+        self.lab, self.port, self.t0 = lab, port, time.monotonic()
+        self.loop = asyncio.new_event_loop()
+        threading.Thread(target=self.loop.run_forever, daemon=True).start()
+        self.server: MocapServer | None = None
+
+    def sim_time(self) -> float:
+        return time.monotonic() - self.t0
+
+    def start(self) -> None:
+        rate = self.lab.settings.mocap.rate_hz
+        source = MocapSource(self.lab.labels, rate, self.lab.mocap_frame,
+                             lambda: int(self.sim_time() * rate))
+        self.server = MocapServer(source, "127.0.0.1", self.port)
+        asyncio.run_coroutine_threadsafe(self.server.start(), self.loop).result(5)
+
+    def stop(self) -> None:
+        if self.server is not None:
+            asyncio.run_coroutine_threadsafe(self.server.close(), self.loop).result(5)
+            self.server = None
+
+
+@pytest.fixture
+def qtm(lab: Lab) -> Iterator[QtmThread]:
+    server = QtmThread(lab, free_port())
+    server.start()
+    yield server
+    server.stop()
+    server.loop.call_soon_threadsafe(server.loop.stop)
+
+
+def _stream(port: int, seconds: float) -> tuple[list[m.MarkerFrame], list[tuple[bool, str]]]:
+    frames: list[m.MarkerFrame] = []
+    states: list[tuple[bool, str]] = []
+    stop = threading.Event()
+    driver = QualisysMocap("127.0.0.1", port, retry_initial_s=0.1, retry_max_s=0.2)
+    thread = threading.Thread(target=driver.run, args=(frames.append, stop,
+                                                       lambda *s: states.append(s)))
+    thread.start()
+    time.sleep(seconds)
+    stop.set()
+    thread.join(5)
+    assert not thread.is_alive(), "the driver stops when asked"
+    return frames, states
+
+
+def test_driver_streams_labelled_frames_equal_to_the_truth(lab: Lab, qtm: QtmThread) -> None:
+    frames, states = _stream(qtm.port, 1.2)
+    assert states[0][0] is True and "streaming" in states[0][1]
+    assert len(frames) > 80
+    labels = {mk.label for f in frames for mk in f.markers}
+    assert {"robot", "static_1", "static_2", "static_3"} <= labels
+    errors = []
+    for frame in frames:
+        robot = [mk for mk in frame.markers if mk.label == "robot"]
+        if robot:
+            truth = lab.robot(frame.frame / lab.settings.mocap.rate_hz)
+            errors.append(np.linalg.norm([robot[0].x_mm - truth[0], robot[0].y_mm - truth[1],
+                                          robot[0].z_mm - truth[2]]))
+    assert np.sqrt(np.mean(np.square(errors))) < 1.5
+    stamps = np.array([f.measured_s for f in frames])
+    assert np.all(np.diff(stamps) > 0) and abs(time.time() - stamps[-1]) < 1.5
+
+
+def test_driver_reconnects_when_qtm_comes_back(qtm: QtmThread) -> None:
+    frames: list[m.MarkerFrame] = []
+    states: list[tuple[bool, str]] = []
+    stop = threading.Event()
+    driver = QualisysMocap("127.0.0.1", qtm.port, retry_initial_s=0.1, retry_max_s=0.3)
+    thread = threading.Thread(target=driver.run, args=(frames.append, stop,
+                                                       lambda *s: states.append(s)))
+    thread.start()
+    try:
+        wait_for(lambda: len(frames) > 10)
+        qtm.stop()
+        wait_for(lambda: states and states[-1][0] is False, timeout=5)
+        count = len(frames)
+        time.sleep(0.5)
+        qtm.start()
+        wait_for(lambda: len(frames) > count + 20, timeout=5)
+        assert states[-1][0] is True
+    finally:
+        stop.set()
+        thread.join(5)
+
+
+def test_missing_markers_are_left_out_never_zero(lab: Lab, qtm: QtmThread) -> None:
+    frames, _ = _stream(qtm.port, 2.5)
+    counts = [len(f.markers) for f in frames]
+    assert min(counts) < max(counts), "some frames lose a marker"
+    assert all(mk.x_mm or mk.y_mm or mk.z_mm for f in frames for mk in f.markers)
+
+
+def test_labels_from_the_parameters_xml() -> None:
+    xml = (b"<QTM_Parameters_Ver_1.25><The_3D><Labels>2</Labels><Label><Name>robot</Name>"
+           b"</Label><Label><Name>static_1</Name></Label></The_3D></QTM_Parameters_Ver_1.25>")
+    assert labels_from_xml(xml) == ["robot", "static_1"]
+
+
+def test_service_publishes_markers_and_the_robot(lab: Lab, qtm: QtmThread,
+                                                 make_bus: Callable[..., Bus]) -> None:
+    service_bus, watcher = make_bus(), make_bus()
+    node = Node("tracker", TrackerSettings(qtm_port=qtm.port), service_bus)
+    robots: list[m.RobotPosition] = []
+    frames: list[m.MarkerFrame] = []
+    watcher.subscribe(keys.TRACKER_ROBOT, robots.append, latest=False)
+    watcher.subscribe(keys.TRACKER_MARKERS, frames.append)
+    thread = threading.Thread(target=run, args=(node,))
+    thread.start()
+    try:
+        wait_for(lambda: len(robots) > 50 and frames, timeout=10)
+        last = robots[-1]
+        truth = lab.robot(qtm.sim_time())
+        assert np.hypot(last.x_mm - truth[0], last.y_mm - truth[1]) < 60  # ≤ 0.2 s at 290 mm/s
+        assert last.label == "robot"
+        assert node.health().status == "ok"
+    finally:
+        node.stop.set()
+        thread.join(5)
