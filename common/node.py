@@ -63,6 +63,8 @@ class Node:
 
 def configure_logging(level: str) -> None:
     logging.basicConfig(level=level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    for chatty in ("httpx", "httpcore", "pymodbus", "qtm_rt"):  # one line per request/frame
+        logging.getLogger(chatty).setLevel(max(logging.WARNING, logging.getLogger().level))
 
 
 def run_node(service: str, settings: ServiceSettings, body: Callable[[Node], None]) -> int:

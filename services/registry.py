@@ -24,6 +24,8 @@ SERVICES: dict[str, ServiceInfo] = {
                           "services.router.settings:RouterSettings"),
     "tracker": ServiceInfo("Qualisys QTM in; every frame's markers and the robot's position out",
                            "services.tracker.settings:TrackerSettings"),
+    "ptz": ServiceInfo("one AXIS camera follows the robot (--instance ptz1|ptz2); "
+                       "stb ptz aim: eq. 4", "services.ptz.settings:PtzSettings"),
     "sim": ServiceInfo("the simulated lab: QTM RT mocap, VAPIX cameras, Modbus crane, frames",
                        "services.sim.settings:SimSettings"),
 }
@@ -38,7 +40,7 @@ TOOLS: dict[str, ServiceInfo] = {
                           ""),
 }
 
-DEFAULT_UP: tuple[str, ...] = ("router", "sim", "tracker")
+DEFAULT_UP: tuple[str, ...] = ("router", "sim", "tracker", "ptz:ptz1", "ptz:ptz2")
 """What ``stb up`` starts when the lab file does not say: everything that exists so far."""
 
 

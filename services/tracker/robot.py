@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from common.volume import Volume
+
 
 @dataclass(frozen=True)
 class Seen:
@@ -20,24 +22,6 @@ class Seen:
     label: str
     id: int
     xyz_mm: np.ndarray
-
-
-@dataclass(frozen=True)
-class Volume:
-    """Where a robot can be; anything outside (a reflection, a glitch) is ignored."""
-
-    x_min_mm: float = -5000.0
-    x_max_mm: float = 5000.0
-    y_min_mm: float = -5000.0
-    y_max_mm: float = 5000.0
-    z_min_mm: float = -1000.0
-    z_max_mm: float = 4000.0
-
-    def contains(self, xyz: np.ndarray) -> bool:
-        x, y, z = xyz
-        return bool(np.all(np.isfinite(xyz)) and self.x_min_mm <= x <= self.x_max_mm
-                    and self.y_min_mm <= y <= self.y_max_mm
-                    and self.z_min_mm <= z <= self.z_max_mm)
 
 
 @dataclass

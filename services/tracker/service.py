@@ -12,8 +12,9 @@ import numpy as np
 from common import keys
 from common import messages as m
 from common.node import Node
+from common.volume import Volume
 from services.tracker.mocap import MocapSource, QualisysMocap
-from services.tracker.robot import RobotPicker, Seen, Volume
+from services.tracker.robot import RobotPicker, Seen
 from services.tracker.settings import TrackerSettings
 
 

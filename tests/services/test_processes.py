@@ -206,18 +206,20 @@ def test_up_restarts_a_killed_service_within_two_seconds(tmp_path: Path) -> None
         alive = AliveWatcher(session)
         healths: list[m.ServiceHealth] = []
         bus.subscribe(keys.HEALTH, healths.append, latest=False)
-        for service in DEFAULT_UP:
-            key = f"stb/alive/{service}/main"
+        for spec in DEFAULT_UP:
+            service, _, instance = spec.partition(":")
+            key = f"stb/alive/{service}/{instance or 'main'}"
             wait_for(lambda key=key: alive.alive(key), timeout=15)
-            pid = wait_for(lambda s=service: next(
-                (h.pid for h in reversed(healths) if h.service == s), None), timeout=5)
+            pid = wait_for(lambda s=service, i=instance or "main": next(
+                (h.pid for h in reversed(healths) if (h.service, h.instance) == (s, i)), None),
+                timeout=5)
             killed_at = time.monotonic()
             os.kill(pid, signal.SIGKILL)
             back_at = wait_for(lambda key=key, t=killed_at: alive.first_put_after(key, t),
                                timeout=10)
             took_s = back_at - killed_at
-            print(f"{service} alive again {took_s:.2f} s after kill -9")
-            assert took_s < 2.0, f"{service} back after {took_s:.2f} s"
+            print(f"{spec} alive again {took_s:.2f} s after kill -9")
+            assert took_s < 2.0, f"{spec} back after {took_s:.2f} s"
             wait_for(lambda s=service, p=pid: any(h.service == s and h.pid != p
                                                   for h in healths), timeout=5)
         bus.close()

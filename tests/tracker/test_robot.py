@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from services.tracker.robot import RobotPicker, Seen, Volume
+from common.volume import Volume
+from services.tracker.robot import RobotPicker, Seen
 
 
 def _frames(rng: np.random.Generator, seconds: float = 3.0, hz: float = 100.0):

@@ -1,0 +1,46 @@
+"""``stb ptz aim``: pan and tilt that point a calibrated camera at a world point (eq. 4)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from common.camera import Pose
+from services.ptz.aim import Limits, aim_at
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="stb ptz aim", description=__doc__)
+    parser.add_argument("--pose", type=Path, required=True,
+                        help="JSON with position_mm [3] and orientation_deg [3] "
+                             "(as stb calib solve prints it)")
+    parser.add_argument("--target", required=True, help="X,Y,Z in mm (world frame)")
+    parser.add_argument("--mount", choices=["standing", "hanging"], default="standing",
+                        help="camera mounting; AXIS keeps the camera frame the same for both")
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args(argv)
+    try:
+        pose = _read_pose(args.pose)
+        target = np.array([float(v) for v in args.target.split(",")])
+        if target.shape != (3,) or not np.all(np.isfinite(target)):
+            raise ValueError("--target needs three finite numbers X,Y,Z")
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        print(f"stb ptz aim: {err}", file=sys.stderr)
+        return 2
+    pan, tilt = aim_at(target, pose, Limits(-180.0, 180.0, -90.0, 90.0))
+    out = {"pan_deg": pan, "tilt_deg": tilt, "mount": args.mount}
+    print(json.dumps(out) if args.json else f"pan {pan:.3f}°  tilt {tilt:.3f}°")
+    return 0
+
+
+def _read_pose(path: Path) -> Pose:
+    data = json.loads(path.read_text())
+    position, orientation = data["position_mm"], data["orientation_deg"]
+    if len(position) != 3 or len(orientation) != 3:
+        raise ValueError(f"{path}: position_mm and orientation_deg need three numbers each")
+    return Pose(*map(float, position), *map(float, orientation))

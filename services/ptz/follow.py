@@ -1,0 +1,68 @@
+"""When and where to move the camera to follow the robot (pure; times in seconds)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from common.camera import Pose
+from common.volume import Volume
+from services.ptz.aim import Limits, aim_at, predict, zoom_for_size
+
+
+@dataclass(frozen=True)
+class Command:
+    pan_deg: float
+    tilt_deg: float
+    zoom: int
+    measured_s: float  # the robot sample it is based on
+
+
+@dataclass
+class Follower:
+    """Turns robot positions into rate-limited, dead-banded camera commands.
+
+    The target is the robot predicted ``latency_s`` past *now* from its measured position and
+    velocity (bounded), to make up for the camera's command latency and motion.
+    """
+
+    limits: Limits = Limits()
+    deadband_deg: float = 0.3
+    latency_s: float = 0.25
+    min_interval_s: float = 0.1
+    zoom: int = 1
+    target_size_mm: float | None = None
+    image_fraction: float = 0.3
+    volume: Volume = Volume()
+    max_age_s: float = 1.0
+    _last: Command | None = None
+    _last_at: float = -math.inf
+
+    def command(self, now_s: float, position_mm: np.ndarray, velocity_mm_s: np.ndarray,
+                measured_s: float, pose: Pose) -> Command | None:
+        """A command to send now, or None (too soon, too small, or a sample to ignore)."""
+        if now_s - self._last_at < self.min_interval_s:
+            return None
+        if not self.volume.contains(position_mm) or now_s - measured_s > self.max_age_s:
+            return None
+        ahead = (now_s - measured_s) + self.latency_s
+        target = predict(position_mm, velocity_mm_s, ahead, max_ahead_s=1.0)
+        current = (self._last.pan_deg, self._last.tilt_deg) if self._last else (0.0, 0.0)
+        pan, tilt = aim_at(target, pose, self.limits, current_pan_deg=current[0],
+                           current_tilt_deg=current[1])
+        zoom = self._zoom(target, pose)
+        if self._last is not None and zoom == self._last.zoom and max(
+                abs(pan - self._last.pan_deg), abs(tilt - self._last.tilt_deg)) < self.deadband_deg:
+            return None
+        self._last = Command(pan, tilt, zoom, measured_s)
+        self._last_at = now_s
+        return self._last
+
+    def _zoom(self, target: np.ndarray, pose: Pose) -> int:
+        if self.target_size_mm is None:
+            return self.zoom
+        distance = float(np.linalg.norm(target - pose.position))
+        return zoom_for_size(distance, object_mm=self.target_size_mm,
+                             image_fraction=self.image_fraction, limits=self.limits)

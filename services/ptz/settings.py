@@ -1,0 +1,54 @@
+"""PTZ settings: which camera this instance drives, and how it follows the robot."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, SecretStr, model_validator
+
+from common.settings import ServiceSettings
+
+
+class CameraConnection(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    url: str = Field(pattern=r"^https?://")
+    user: str = "root"
+    password: SecretStr = SecretStr("pass")
+    auth: Literal["digest", "basic", "none"] = "digest"
+    mount: Literal["standing", "hanging"] = "standing"
+
+
+def _default_cameras() -> dict[str, CameraConnection]:
+    return {"ptz1": CameraConnection(url="http://127.0.0.1:8081"),
+            "ptz2": CameraConnection(url="http://127.0.0.1:8082", mount="hanging")}
+
+
+class PtzSettings(ServiceSettings):
+    """One instance per camera: ``stb ptz --instance ptz2`` drives ``cameras.ptz2``."""
+
+    section = "ptz"
+
+    instance: str = Field("ptz1", pattern=r"^[A-Za-z0-9_.-]{1,64}$")
+    cameras: dict[str, CameraConnection] = Field(default_factory=_default_cameras)
+    timeout_s: float = Field(1.0, gt=0, description="every HTTP request to the camera")
+    command_hz: float = Field(10.0, gt=0, le=30, description="at most this many moves a second")
+    deadband_deg: float = Field(0.3, ge=0, description="smaller corrections are not sent")
+    latency_s: float = Field(0.25, ge=0, le=1.0,
+                             description="aim this far ahead: command latency plus motion")
+    state_hz: float = Field(5.0, gt=0, le=20, description="position queries and state messages")
+    zoom: int = Field(1, ge=1, le=9999, description="fixed zoom step (1 = wide, 3.8 mm)")
+    target_size_mm: float | None = Field(
+        None, gt=0, description="if set: zoom so that this size fills image_fraction")
+    image_fraction: float = Field(0.3, gt=0, le=1)
+    speed: int = Field(100, ge=1, le=100, description="VAPIX pan/tilt speed")
+
+    @model_validator(mode="after")
+    def _instance_has_a_camera(self) -> PtzSettings:
+        if self.instance not in self.cameras:
+            raise ValueError(f"instance {self.instance!r} has no entry in cameras "
+                             f"(known: {', '.join(self.cameras) or 'none'})")
+        return self
+
+    def connection(self) -> CameraConnection:
+        return self.cameras[self.instance]

@@ -1,0 +1,127 @@
+"""The PTZ service with the sim's camera over HTTP and a loopback bus (the test plays calib
+and tracker by publishing a pose and robot positions)."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Iterator
+
+import numpy as np
+import pytest
+
+from common import keys
+from common import messages as m
+from common.bus import Bus
+from common.camera import Pose
+from common.node import Node
+from services.ptz.aim import aim_error_deg
+from services.ptz.service import run
+from services.ptz.settings import CameraConnection, PtzSettings
+from services.sim.camera_server import CameraServer, SimCamera
+from services.sim.ptz import PtzHead
+from tests.conftest import free_port, wait_for
+
+MOUNT = Pose(3550, 1090, 2190, 180, 30, 165)
+TARGET = np.array([-300.0, 200.0, 100.0])
+
+
+def _camera_server(port: int) -> CameraServer:
+    t0 = time.monotonic()
+    sim = SimCamera("ptz1", PtzHead(MOUNT, latency_s=0.05), lambda: TARGET[None, :], [],
+                    lambda: time.monotonic() - t0, np.random.default_rng(0))
+    return CameraServer(sim, "127.0.0.1", port).start()
+
+
+@pytest.fixture
+def service(make_bus: Callable[..., Bus]) -> Iterator[dict]:
+    port = free_port()
+    settings = PtzSettings(instance="ptz1", state_hz=10, cameras={
+        "ptz1": CameraConnection(url=f"http://127.0.0.1:{port}")}, timeout_s=0.3)
+    node = Node("ptz", settings, make_bus())
+    world = make_bus()
+    states: list[m.PtzState] = []
+    world.subscribe(keys.PTZ_STATE, states.append, latest=False, camera="ptz1")
+    servers: list[CameraServer] = []
+    thread = threading.Thread(target=run, args=(node,))
+    ctx = {"port": port, "node": node, "world": world, "states": states, "servers": servers,
+           "thread": thread}
+    yield ctx
+    node.stop.set()
+    thread.join(5)
+    assert not thread.is_alive(), "the service stops when asked"
+    for server in servers:
+        server.close()
+
+
+def _publish_pose(world: Bus) -> None:
+    world.publish(keys.CALIB_POSE, m.CameraPose(
+        measured_s=time.time(), camera="ptz1", x_mm=MOUNT.x_mm, y_mm=MOUNT.y_mm, z_mm=MOUNT.z_mm,
+        rx_deg=MOUNT.rx_deg, ry_deg=MOUNT.ry_deg, rz_deg=MOUNT.rz_deg, focal_mm=3.8,
+        mean_error_px=1.0, passpoints=100), camera="ptz1")
+
+
+def _publish_robot(world: Bus, xyz: np.ndarray) -> None:
+    world.publish(keys.TRACKER_ROBOT, m.RobotPosition(
+        measured_s=time.time(), label="robot", x_mm=xyz[0], y_mm=xyz[1], z_mm=xyz[2],
+        vx_mm_s=0.0, vy_mm_s=0.0, vz_mm_s=0.0))
+
+
+def test_waits_for_a_pose_then_follows_the_robot(service: dict) -> None:
+    service["servers"].append(_camera_server(service["port"]))
+    service["thread"].start()
+    world, states = service["world"], service["states"]
+    for _ in range(10):
+        _publish_robot(world, TARGET)
+        time.sleep(0.05)
+    wait_for(lambda: states and states[-1].status == "waiting_for_pose")
+    assert states[-1].pan_deg == 0.0 and states[-1].tilt_deg == 0.0, "no move without a pose"
+    _publish_pose(world)
+
+    def on_target() -> bool:
+        _publish_robot(world, TARGET)
+        last = states[-1]
+        return last.status == "tracking" and last.aim_error_deg < 0.5
+
+    wait_for(on_target, timeout=5, period=0.05)
+    last = states[-1]
+    assert aim_error_deg(TARGET, MOUNT, last.pan_deg, last.tilt_deg) < 0.5
+    assert last.zoom == 1 and last.focal_mm == 3.8
+
+
+def test_late_start_gets_the_pose_by_query(service: dict, make_bus: Callable[..., Bus]) -> None:
+    calib = make_bus()
+    pose = m.CameraPose(measured_s=time.time(), camera="ptz1", x_mm=MOUNT.x_mm,
+                        y_mm=MOUNT.y_mm, z_mm=MOUNT.z_mm, rx_deg=MOUNT.rx_deg,
+                        ry_deg=MOUNT.ry_deg, rz_deg=MOUNT.rz_deg, focal_mm=3.8,
+                        mean_error_px=1.0, passpoints=100)
+    calib.serve_latest(keys.CALIB_POSE, lambda: pose, camera="ptz1")
+    time.sleep(0.3)
+    service["servers"].append(_camera_server(service["port"]))
+    service["thread"].start()
+    wait_for(lambda: service["states"] and service["states"][-1].status in ("idle", "tracking"))
+
+
+def test_camera_away_is_reported_and_the_service_recovers(service: dict) -> None:
+    service["thread"].start()
+    states = service["states"]
+    wait_for(lambda: states and states[-1].status == "camera_unreachable", timeout=5)
+    assert service["node"].health().status == "degraded"
+    assert "ptz1" in service["node"].health().detail
+    service["servers"].append(_camera_server(service["port"]))
+    _publish_pose(service["world"])
+    wait_for(lambda: states[-1].status in ("idle", "tracking"), timeout=10)
+    assert service["thread"].is_alive()
+
+
+def test_positions_far_outside_the_crater_are_ignored(service: dict) -> None:
+    service["servers"].append(_camera_server(service["port"]))
+    service["thread"].start()
+    world, states = service["world"], service["states"]
+    wait_for(lambda: states)  # the service is up and subscribed
+    _publish_pose(world)
+    for _ in range(20):
+        _publish_robot(world, np.array([90_000.0, 0.0, 0.0]))
+        time.sleep(0.05)
+    wait_for(lambda: states and states[-1].status == "tracking")
+    assert states[-1].pan_deg == 0.0 and states[-1].tilt_deg == 0.0
