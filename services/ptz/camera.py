@@ -32,7 +32,8 @@ class PtzCamera(Protocol):
     name: str
 
     def move_to(self, pan_deg: float | None, tilt_deg: float | None,
-                zoom: int | None = None, speed: int | None = None) -> None: ...
+                zoom: int | None = None, speed: int | None = None,
+                measured_s: float | None = None) -> None: ...
 
     def position(self) -> vapix.Position: ...
 
@@ -51,8 +52,13 @@ class AxisPtzCamera:
         self.name = name
 
     def move_to(self, pan_deg: float | None, tilt_deg: float | None,
-                zoom: int | None = None, speed: int | None = None) -> None:
-        self._request(vapix.PTZ_PATH, vapix.move_params(pan_deg, tilt_deg, zoom, speed))
+                zoom: int | None = None, speed: int | None = None,
+                measured_s: float | None = None) -> None:
+        """Absolute move; ``measured_s`` (when the data behind it was measured) travels as a
+        trace header that cameras ignore and the sim records, to measure the chain's latency."""
+        headers = {vapix.TRACE_HEADER: f"{measured_s:.6f}"} if measured_s is not None else None
+        self._request(vapix.PTZ_PATH, vapix.move_params(pan_deg, tilt_deg, zoom, speed),
+                      headers)
 
     def stop(self) -> None:
         self._request(vapix.PTZ_PATH, {"move": "stop"})
@@ -78,10 +84,11 @@ class AxisPtzCamera:
             raise PtzRejected(f"{self.name}: snapshot JPEG does not decode")
         return image
 
-    def _request(self, path: str, params: dict[str, str]) -> httpx.Response:
+    def _request(self, path: str, params: dict[str, str],
+                 headers: dict[str, str] | None = None) -> httpx.Response:
         """The one I/O call: every request goes through here and its errors are ours."""
         try:
-            reply = self.client.get(path, params=params)
+            reply = self.client.get(path, params=params, headers=headers)
         except httpx.TransportError as err:
             raise PtzUnreachable(f"{self.name}: {type(err).__name__}: {err}") from err
         if reply.status_code in (401, 403):

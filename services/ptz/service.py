@@ -34,105 +34,98 @@ def make_camera(settings: PtzSettings) -> AxisPtzCamera:
     return AxisPtzCamera(client, settings.instance)
 
 
-class _Latest:
-    """The newest robot sample and camera pose, written by subscriptions, read by the loop."""
-
-    def __init__(self) -> None:
-        self.robot: m.RobotPosition | None = None
-        self.pose: m.CameraPose | None = None
-        self.lock = threading.Lock()
-
-    def set_robot(self, msg: m.RobotPosition) -> None:
-        with self.lock:
-            self.robot = msg
-
-    def set_pose(self, msg: m.CameraPose) -> None:
-        with self.lock:
-            if self.pose is None or msg.measured_s >= self.pose.measured_s:
-                if self.pose is None:
-                    log.info("camera pose received (fit error %.2f px)", msg.mean_error_px)
-                self.pose = msg
-
-
 def run(node: Node, camera: PtzCamera | None = None) -> None:
     settings: PtzSettings = node.settings  # type: ignore[assignment]
-    camera = camera or make_camera(settings)
+    loop = _Loop(node, settings, camera or make_camera(settings))
     name = settings.instance
-    latest = _Latest()
-    node.bus.subscribe(keys.TRACKER_ROBOT, latest.set_robot)
-    node.bus.subscribe(keys.CALIB_POSE, latest.set_pose, latest=False, camera=name)
+    node.bus.subscribe(keys.CALIB_POSE, loop.on_pose, latest=False, camera=name)
     for pose in node.bus.query_latest(keys.CALIB_POSE, timeout_s=1.0, camera=name):
-        latest.set_pose(pose)
-    _Loop(node, settings, camera, latest).run()
+        loop.on_pose(pose)
+    node.bus.subscribe(keys.TRACKER_ROBOT, loop.on_robot)
+    loop.run()
 
 
 class _Loop:
-    def __init__(self, node: Node, settings: PtzSettings, camera: PtzCamera,
-                 latest: _Latest) -> None:
-        self.node, self.settings, self.camera, self.latest = node, settings, camera, latest
+    """Commands go out as robot samples arrive (no polling delay); camera state is queried
+    and published ``state_hz`` times a second. One lock serialises the camera."""
+
+    def __init__(self, node: Node, settings: PtzSettings, camera: PtzCamera) -> None:
+        self.node, self.settings, self.camera = node, settings, camera
         self.follower = Follower(deadband_deg=settings.deadband_deg,
                                  latency_s=settings.latency_s,
                                  min_interval_s=1 / settings.command_hz, zoom=settings.zoom,
                                  target_size_mm=settings.target_size_mm,
                                  image_fraction=settings.image_fraction)
+        self.lock = threading.Lock()
+        self.pose: m.CameraPose | None = None
+        self.robot: m.RobotPosition | None = None
         self.limits: Limits | None = None
         self.retry_at, self.retry_s = 0.0, 0.5
-        self.next_state = 0.0
 
-    def run(self) -> None:
-        period = 1 / (2 * self.settings.command_hz)
-        while not self.node.stop.wait(period):
+    def on_pose(self, msg: m.CameraPose) -> None:
+        with self.lock:
+            if self.pose is None or msg.measured_s >= self.pose.measured_s:
+                log.info("camera pose received (fit error %.2f px)", msg.mean_error_px)
+                self.pose = msg
+
+    def on_robot(self, msg: m.RobotPosition) -> None:
+        with self.lock:
+            self.robot = msg
+            pose = _pose(self.pose)
             now = time.time()
-            if now < self.retry_at:
-                continue
+            if pose is None or self.limits is None or now < self.retry_at:
+                return
+            command = self.follower.command(now, _xyz(msg), _velocity(msg), msg.measured_s,
+                                            pose)
+            if command is None:
+                return
             try:
-                self._step(now)
-                self.retry_s = 0.5
+                self.camera.move_to(command.pan_deg, command.tilt_deg, command.zoom,
+                                    self.settings.speed, measured_s=command.measured_s)
             except PtzError as err:
                 self._unreachable(now, err)
 
-    def _step(self, now: float) -> None:
+    def run(self) -> None:
+        period = 1 / self.settings.state_hz
+        while not self.node.stop.wait(period):
+            with self.lock:
+                now = time.time()
+                if now < self.retry_at:
+                    continue
+                try:
+                    self._report(now)
+                    self.retry_s = 0.5
+                except PtzError as err:
+                    self._unreachable(now, err)
+
+    def _report(self, now: float) -> None:
         if self.limits is None:
             self.limits = self.camera.limits()
             self.follower.limits = self.limits
             log.info("camera %s limits: %s", self.camera.name, self.limits)
-        with self.latest.lock:
-            robot, pose_msg = self.latest.robot, self.latest.pose
-        pose = _pose(pose_msg)
-        status = "waiting_for_pose" if pose is None else ("tracking" if robot else "idle")
+        pose = _pose(self.pose)
+        status = "waiting_for_pose" if pose is None else ("tracking" if self.robot else "idle")
         self.node.set_status("ok" if pose else "degraded",
                              "" if pose else "waiting for a camera pose from calib")
-        if pose is not None and robot is not None:
-            command = self.follower.command(now, _xyz(robot), _velocity(robot),
-                                            robot.measured_s, pose)
-            if command is not None:
-                self.camera.move_to(command.pan_deg, command.tilt_deg, command.zoom,
-                                    self.settings.speed)
-        if now >= self.next_state:
-            self.next_state = now + 1 / self.settings.state_hz
-            self._publish_state(status, robot, pose)
-
-    def _publish_state(self, status: str, robot: m.RobotPosition | None,
-                       pose: Pose | None) -> None:
         position = self.camera.position()
         error = 0.0
-        if pose is not None and robot is not None:
-            error = aim_error_deg(_xyz(robot), pose, position.pan_deg, position.tilt_deg)
+        if pose is not None and self.robot is not None:
+            error = aim_error_deg(_xyz(self.robot), pose, position.pan_deg, position.tilt_deg)
+        self._publish(status, position.pan_deg, position.tilt_deg, position.zoom, error, now)
+
+    def _publish(self, status: str, pan: float, tilt: float, zoom: int, error: float,
+                 now: float) -> None:
         self.node.bus.publish(keys.PTZ_STATE, m.PtzState(
-            measured_s=time.time(), camera=self.settings.instance, status=status,
-            pan_deg=min(max(position.pan_deg, -180.0), 180.0),
-            tilt_deg=min(max(position.tilt_deg, -90.0), 90.0),
-            zoom=min(max(position.zoom, 1), 19999), focal_mm=focal_mm_for_zoom(position.zoom),
+            measured_s=now, camera=self.settings.instance, status=status,
+            pan_deg=min(max(pan, -180.0), 180.0), tilt_deg=min(max(tilt, -90.0), 90.0),
+            zoom=min(max(zoom, 1), 19999), focal_mm=focal_mm_for_zoom(zoom),
             aim_error_deg=error), camera=self.settings.instance)
 
     def _unreachable(self, now: float, err: PtzError) -> None:
         self.node.set_status("degraded", str(err))
         self.retry_at, self.retry_s = now + self.retry_s, min(self.retry_s * 2, RETRY_MAX_S)
         self.limits = None  # ask again: the camera may have been replaced or reconfigured
-        self.node.bus.publish(keys.PTZ_STATE, m.PtzState(
-            measured_s=now, camera=self.settings.instance, status="camera_unreachable",
-            pan_deg=0.0, tilt_deg=0.0, zoom=1, focal_mm=focal_mm_for_zoom(1),
-            aim_error_deg=0.0), camera=self.settings.instance)
+        self._publish("camera_unreachable", 0.0, 0.0, 1, 0.0, now)
 
 
 def _pose(msg: m.CameraPose | None) -> Pose | None:

@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import base64
+import contextlib
 import hashlib
 import hmac
 import logging
 import secrets
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Literal
 from urllib.parse import parse_qsl, urlsplit
@@ -19,6 +21,7 @@ import cv2
 import numpy as np
 
 from common.camera import Intrinsics
+from services.ptz.vapix import TRACE_HEADER
 from services.sim import vapix
 from services.sim.ptz import PtzHead
 from services.sim.render import Glint, draw, glint_blobs, marker_blobs
@@ -43,6 +46,8 @@ class SimCamera:
     password: str = "pass"
     auth: Literal["digest", "basic", "none"] = "digest"
     jpeg_quality: int = 90
+    commands: deque[tuple[float, float]] = field(default_factory=lambda: deque(maxlen=100_000))
+    """(arrival wall time, X-STB-Measured) of every traced PTZ command: latency figures."""
 
     def snapshot(self, width: int, height: int) -> np.ndarray:
         now = self.clock()
@@ -167,12 +172,19 @@ class CameraServer:
             return
         now = self.camera.clock()
         if url.path == vapix.PTZ_PATH:
+            self._trace(request)
             reply = vapix.handle_ptz(args, self.camera.head, now)
         elif url.path == vapix.IMAGE_PATH:
             reply = self._image(args)
         else:
             reply = vapix.Reply(404, "text/plain", b"Not Found\r\n")
         self._send(request, reply)
+
+    def _trace(self, request: BaseHTTPRequestHandler) -> None:
+        measured = request.headers.get(TRACE_HEADER)
+        if measured is not None:
+            with contextlib.suppress(ValueError):  # a malformed trace header: not recorded
+                self.camera.commands.append((time.time(), float(measured)))
 
     def _authorized(self, request: BaseHTTPRequestHandler, method: str) -> bool:
         cam = self.camera
