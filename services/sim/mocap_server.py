@@ -123,7 +123,11 @@ class MocapSource:
     labels: list[str]
     rate_hz: float
     frame_at: Callable[[int], MocapFrame]
-    frame_now: Callable[[], int]  # the frame number the capture is at
+    clock: Callable[[], float]  # seconds since the capture started
+
+    def frame_now(self) -> int:
+        """The frame number the capture is at."""
+        return int(self.clock() * self.rate_hz)
 
 
 _CONTROL_REPLIES = {
@@ -271,7 +275,9 @@ class MocapServer:
                 log.warning("QTM client is not reading; closing its connection")
                 writer.close()
                 return
-            await asyncio.sleep(period)
+            # Wake when the next frame is due (as QTM sends a frame when it is captured).
+            due = (newest + divisor) / src.rate_hz - src.clock()
+            await asyncio.sleep(min(max(due, 0.0005), period))
 
 
 def _cancel(task: asyncio.Task | None) -> None:

@@ -14,6 +14,13 @@ import numpy as np
 from common.camera import Pose, focal_mm_for_zoom, rot_y, rot_z
 
 
+def head_pose(mount: Pose, pan_deg: float, tilt_deg: float) -> Pose:
+    """The camera's pose at a pan and tilt: mount · Rz(pan) · Ry(tilt) (x optical axis,
+    z down in the image: positive pan turns right, positive tilt turns up)."""
+    rotation = mount.rotation @ rot_z(np.radians(pan_deg)) @ rot_y(np.radians(tilt_deg))
+    return Pose.from_matrix(rotation, mount.position)
+
+
 @dataclass(frozen=True)
 class PtzLimits:
     min_pan: float = -170.0
@@ -93,11 +100,9 @@ class PtzHead:
         return self._pan.position, self._tilt.position, int(round(self._zoom.position)), moving
 
     def pose(self, now: float) -> Pose:
-        """Where the camera looks at ``now``: mount · Rz(pan) · Ry(tilt) (x optical axis,
-        z down in the image: positive pan turns right, positive tilt turns up)."""
+        """Where the camera looks at ``now`` (see ``head_pose``)."""
         pan, tilt, _, _ = self.state(now)
-        rotation = self.mount.rotation @ rot_z(np.radians(pan)) @ rot_y(np.radians(tilt))
-        return Pose.from_matrix(rotation, self.mount.position)
+        return head_pose(self.mount, pan, tilt)
 
     def focal_mm(self, now: float) -> float:
         return focal_mm_for_zoom(self.state(now)[2])

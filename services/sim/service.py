@@ -31,11 +31,15 @@ log = logging.getLogger(__name__)
 
 
 class Clock:
-    """Sim time: seconds since start (monotonic), and the wall time of a sim instant."""
+    """Sim time: seconds since start (monotonic), and the wall time of a sim instant.
 
-    def __init__(self) -> None:
-        self._t0 = time.monotonic()
-        self._wall0 = time.time()
+    ``t0_monotonic`` lets several processes share one sim time (monotonic time is
+    system-wide)."""
+
+    def __init__(self, t0_monotonic: float | None = None) -> None:
+        now_mono, now_wall = time.monotonic(), time.time()
+        self._t0 = now_mono if t0_monotonic is None else t0_monotonic
+        self._wall0 = now_wall - (now_mono - self._t0)
 
     def __call__(self) -> float:
         return time.monotonic() - self._t0
@@ -48,8 +52,8 @@ def run(node: Node) -> None:
     settings: SimSettings = node.settings  # type: ignore[assignment]
     lab = Lab.build(settings)
     clock = Clock()
-    cameras = _start_cameras(lab, settings, clock)
-    devices = _DeviceLoop(lab, settings, clock)
+    cameras = start_cameras(lab, settings, clock)
+    devices = DeviceLoop(lab, settings, clock)
     try:
         devices.start()
         log.info("sim running scenario %s (seed %d)", settings.scenario, settings.seed)
@@ -67,7 +71,7 @@ def run(node: Node) -> None:
             server.close()
 
 
-def _start_cameras(lab: Lab, settings: SimSettings, clock: Clock) -> list[CameraServer]:
+def start_cameras(lab: Lab, settings: SimSettings, clock: Clock) -> list[CameraServer]:
     servers = []
     for i, cam in enumerate(settings.cameras):
         sim_camera = SimCamera(cam.name, lab.heads[cam.name], lambda: lab.bright_points(clock()),
@@ -84,13 +88,12 @@ def _start_cameras(lab: Lab, settings: SimSettings, clock: Clock) -> list[Camera
     return servers
 
 
-class _DeviceLoop:
+class DeviceLoop:
     """The asyncio devices (QTM RT server, Modbus crane) on a thread of their own."""
 
     def __init__(self, lab: Lab, settings: SimSettings, clock: Clock) -> None:
         m_ = settings.mocap
-        source = MocapSource(lab.labels, m_.rate_hz, lab.mocap_frame,
-                             lambda: int(clock() * m_.rate_hz))
+        source = MocapSource(lab.labels, m_.rate_hz, lab.mocap_frame, clock)
         self.mocap = MocapServer(source, settings.host_of(m_.host), m_.port)
         self.crane = CraneServer(lab.crane, clock, lab.crane_lock,
                                  settings.host_of(settings.crane.host), settings.crane.port)

@@ -19,8 +19,7 @@ def _run(lab: Lab, client: Callable[[int], Awaitable[object]], *, capturing: boo
          rate_hz: float | None = None) -> object:
     rate = rate_hz or lab.settings.mocap.rate_hz
     t0 = time.monotonic()
-    source = MocapSource(lab.labels, rate, lab.mocap_frame,
-                         lambda: int((time.monotonic() - t0) * rate))
+    source = MocapSource(lab.labels, rate, lab.mocap_frame, lambda: time.monotonic() - t0)
 
     async def main() -> object:
         server = MocapServer(source, "127.0.0.1", 0, capturing=capturing)

@@ -36,8 +36,7 @@ class QtmThread:
 
     def start(self) -> None:
         rate = self.lab.settings.mocap.rate_hz
-        source = MocapSource(self.lab.labels, rate, self.lab.mocap_frame,
-                             lambda: int(self.sim_time() * rate))
+        source = MocapSource(self.lab.labels, rate, self.lab.mocap_frame, self.sim_time)
         self.server = MocapServer(source, "127.0.0.1", self.port)
         asyncio.run_coroutine_threadsafe(self.server.start(), self.loop).result(5)
 

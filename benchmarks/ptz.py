@@ -1,0 +1,245 @@
+"""PTZ chain in the sim: how well the cameras keep the robot centred, and how fast they react.
+
+    .venv/bin/python -m benchmarks.ptz [--seconds 30] [--scenario locomotive walker]
+
+For each scenario this runs the real chain as separate processes on loopback: the sim's QTM
+RT server and VAPIX cameras, `stb router`, `stb tracker`, `stb ptz --instance ptz1|ptz2`.
+This process plays the calibration service: it serves each camera's true mount pose on
+stb/calib/{camera}/pose (what a perfect calibration would find), so the figures isolate the
+PTZ chain. Zoom 1 (3.8 mm).
+
+* pointing error: 4 times a second each camera's snapshot (VAPIX image.cgi, IR cut filter
+  off) goes through the marker detector; the robot's marker (the detection nearest to where
+  the true robot projects) is measured from the image centre (352, 288) in pixels: median,
+  p95, and how many snapshots lost it;
+* latency: every PTZ command carries the measured time of the mocap frame it is based on
+  (the tracker maps QTM's stamp to the wall clock by the smallest observed delay: when the
+  frame left the sim); the camera server records when the command arrived: p50 and p99.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import httpx
+import numpy as np
+
+from common import keys
+from common import messages as m
+from common.bus import Bus, BusUnreachable, open_session
+from common.camera import Intrinsics, Pose, focal_mm_for_zoom, project
+from common.markers import closest, detect
+from common.settings import BusSettings, ZenohSettings
+from services.ptz import vapix
+from services.sim.lab import Lab
+from services.sim.ptz import head_pose
+from services.sim.settings import CraneSettings, MocapSettings, PtzCameraSettings, SimSettings
+from tests.ports import free_port
+
+CENTRE = np.array([352.0, 288.0])
+
+
+def _sim_process(settings_json: str, part: str, t0: float,
+                 conn: mp.connection.Connection) -> None:
+    """Part of the sim in a process of its own, on the shared sim time ``t0``: the QTM server
+    and crane ("devices"), or the cameras, so that rendering snapshots cannot delay mocap
+    frames (a real QTM is not slowed down by a camera). Returns the cameras' command logs."""
+    from services.sim.service import Clock, DeviceLoop, start_cameras
+
+    settings = SimSettings.model_validate_json(settings_json)
+    lab = Lab.build(settings)
+    clock = Clock(t0)
+    cameras = start_cameras(lab, settings, clock) if part == "cameras" else []
+    devices = DeviceLoop(lab, settings, clock) if part == "devices" else None
+    if devices is not None:
+        devices.start()
+    for server in cameras:
+        server.camera.head.ir_cut_filter = "off"
+    conn.send(clock.wall(0.0))
+    conn.recv()  # "start measuring"
+    for server in cameras:
+        server.camera.commands.clear()
+    conn.recv()  # "stop"
+    conn.send({s.camera.name: list(s.camera.commands) for s in cameras})
+    if devices is not None:
+        devices.stop()
+    for server in cameras:
+        server.close()
+
+
+def run_scenario(scenario: str, seconds: float, workdir: Path) -> dict:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    base = SimSettings()
+    settings = SimSettings(
+        scenario=scenario, crater_file=workdir / "crater.npz", loop=True,
+        mocap=MocapSettings(port=free_port()), crane=CraneSettings(port=free_port()),
+        cameras=[PtzCameraSettings(**{**c.model_dump(), "port": free_port()})
+                 for c in base.cameras])
+    Lab.build(settings)  # writes the crater file once, before the sim processes read it
+    t0 = time.monotonic() + 3.0  # the shared sim time starts once both parts are up
+    pipes, sims = [], []
+    for part in ("devices", "cameras"):
+        parent, child = mp.Pipe()
+        sims.append(mp.get_context("spawn").Process(
+            target=_sim_process, args=(settings.model_dump_json(), part, t0, child)))
+        sims[-1].start()
+        pipes.append(parent)
+    t0_wall = [pipe.recv() for pipe in pipes][1]
+    lab = Lab.build(settings)  # the same lab (same seed): the robot's true path
+    lab_file = _lab_file(workdir / f"{scenario}.toml", endpoint, settings)
+    procs = [_stb("router", "--listen", endpoint, lab=lab_file)]
+    session = _open(endpoint)
+    bus = Bus(session, BusSettings(zenoh=ZenohSettings(connect=[endpoint])))
+    clients = {c.name: httpx.Client(base_url=f"http://127.0.0.1:{c.port}", timeout=2,
+                                    auth=httpx.DigestAuth(c.user, c.password))
+               for c in settings.cameras}
+    try:
+        for cam in settings.cameras:
+            pose = _true_pose(cam)
+            bus.serve_latest(keys.CALIB_POSE, lambda p=pose: p, camera=cam.name)
+        procs += [_stb("tracker", lab=lab_file)]
+        procs += [_stb("ptz", "--instance", cam.name, lab=lab_file) for cam in settings.cameras]
+        time.sleep(max(0.0, t0 - time.monotonic()) + 3.0)  # start-up and first aim
+        for pipe in pipes:
+            pipe.send("start")
+        errors = _pointing_errors(lab, settings, clients, t0_wall, seconds)
+        commands: dict = {}
+        for pipe in pipes:
+            pipe.send("stop")
+            commands.update(pipe.recv())
+        return _summary(scenario, seconds, errors, commands)
+    finally:
+        for proc in procs[::-1]:
+            proc.terminate()
+        for proc in procs[::-1]:
+            proc.wait(10)
+        for client in clients.values():
+            client.close()
+        bus.close()
+        session.close()
+        for sim in sims:
+            sim.join(10)
+
+
+def _pointing_errors(lab: Lab, settings: SimSettings, clients: dict[str, httpx.Client],
+                     t0_wall: float, seconds: float) -> dict[str, list[float]]:
+    mounts = {c.name: Pose(c.x_mm, c.y_mm, c.z_mm, c.rx_deg, c.ry_deg, c.rz_deg)
+              for c in settings.cameras}
+    errors: dict[str, list[float]] = {name: [] for name in clients}
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        for name, client in clients.items():
+            asked = time.time()
+            reply = client.get(vapix.IMAGE_PATH, params={"compression": "0"})
+            position = vapix.parse_position(
+                client.get(vapix.PTZ_PATH, params={"query": "position"}).text)
+            image = _decode(reply.content)
+            pose = head_pose(mounts[name], position.pan_deg, position.tilt_deg)
+            robot = lab.robot(asked - t0_wall)
+            predicted = project(robot[None, :], pose,
+                                Intrinsics(focal_mm_for_zoom(position.zoom)))[0]
+            marker = None
+            if np.all(np.isfinite(predicted)):
+                # The 19 mm marker is only ~1.3 px in radius at 5 m and 3.8 mm: accept
+                # single-pixel runs and tiny areas, as one would for this measurement.
+                found = detect(image, l_min=1, min_area=1, max_markers=50)
+                marker = closest(found.markers, *predicted, max_distance_px=40.0)
+            errors[name].append(float("inf") if marker is None else float(
+                np.hypot(marker.u - CENTRE[0], marker.v - CENTRE[1])))
+        time.sleep(0.25)
+    return errors
+
+
+def _decode(jpeg: bytes) -> np.ndarray:
+    import cv2
+
+    return cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_GRAYSCALE)
+
+
+def _summary(scenario: str, seconds: float, errors: dict[str, list[float]],
+             commands: dict[str, list[tuple[float, float]]]) -> dict:
+    out: dict = {"scenario": scenario, "seconds": seconds, "cameras": {}}
+    for name, values in errors.items():
+        values_a = np.array(values)
+        seen = values_a[np.isfinite(values_a)]
+        latencies = np.array([(arrived - measured) * 1e3 for arrived, measured in
+                              commands.get(name, [])])
+        out["cameras"][name] = {
+            "snapshots": len(values_a), "marker_lost": int((~np.isfinite(values_a)).sum()),
+            "error_px_median": float(np.median(seen)) if len(seen) else None,
+            "error_px_p95": float(np.percentile(seen, 95)) if len(seen) else None,
+            "commands": len(latencies),
+            "latency_ms_p50": float(np.percentile(latencies, 50)) if len(latencies) else None,
+            "latency_ms_p99": float(np.percentile(latencies, 99)) if len(latencies) else None,
+        }
+    return out
+
+
+def _true_pose(cam: PtzCameraSettings) -> m.CameraPose:
+    return m.CameraPose(measured_s=time.time(), camera=cam.name, x_mm=cam.x_mm, y_mm=cam.y_mm,
+                        z_mm=cam.z_mm, rx_deg=cam.rx_deg, ry_deg=cam.ry_deg, rz_deg=cam.rz_deg,
+                        focal_mm=3.8, mean_error_px=0.0, passpoints=0)
+
+
+def _lab_file(path: Path, endpoint: str, settings: SimSettings) -> Path:
+    lines = ["[bus.zenoh]", f'connect = ["{endpoint}"]', "[tracker]",
+             f"qtm_port = {settings.mocap.port}"]
+    for cam in settings.cameras:
+        lines += [f"[ptz.cameras.{cam.name}]", f'url = "http://127.0.0.1:{cam.port}"']
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _stb(*args: str, lab: Path) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "services.cli", args[0], "--lab", str(lab),
+                             *args[1:]], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def _open(endpoint: str):  # noqa: ANN202 - a zenoh.Session
+    deadline = time.monotonic() + 15
+    while True:
+        try:
+            return open_session(ZenohSettings(connect=[endpoint], connect_timeout_ms=0))
+        except BusUnreachable:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.2)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--seconds", type=float, default=30.0)
+    parser.add_argument("--scenario", nargs="+", default=["locomotive", "walker"],
+                        choices=["locomotive", "walker"])
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        results = [run_scenario(s, args.seconds, Path(tmp)) for s in args.scenario]
+    if args.json:
+        print(json.dumps(results, indent=2))
+        return
+    print("| scenario | camera | snapshots (lost) | error px median | p95 | commands | "
+          "latency ms p50 | p99 |")
+    print("|---|---|---|---|---|---|---|---|")
+    for r in results:
+        for name, c in r["cameras"].items():
+            print(f"| {r['scenario']} | {name} | {c['snapshots']} ({c['marker_lost']}) | "
+                  f"{_fmt(c['error_px_median'])} | {_fmt(c['error_px_p95'])} | "
+                  f"{c['commands']} | {_fmt(c['latency_ms_p50'])} | "
+                  f"{_fmt(c['latency_ms_p99'])} |")
+
+
+def _fmt(value: float | None) -> str:
+    return "—" if value is None else f"{value:.1f}"
+
+
+if __name__ == "__main__":
+    main()
