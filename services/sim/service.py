@@ -139,6 +139,10 @@ class DeviceLoop:
             await self.mocap.close()
             with contextlib.suppress(Exception):
                 await self.crane.close()
+            others = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+            for task in others:
+                task.cancel()
+            await asyncio.gather(*others, return_exceptions=True)
             self._loop.stop()
 
         asyncio.run_coroutine_threadsafe(shutdown(), self._loop)
