@@ -26,6 +26,11 @@ class Limits:
     min_zoom: int = 1
     max_zoom: int = 9999
 
+    def clamp(self, pan: float, tilt: float, zoom: float) -> tuple[float, float, float]:
+        return (min(max(pan, self.min_pan), self.max_pan),
+                min(max(tilt, self.min_tilt), self.max_tilt),
+                min(max(zoom, self.min_zoom), self.max_zoom))
+
 
 def pan_tilt(x: float, y: float, z: float, *, current_pan_deg: float = 0.0,
              current_tilt_deg: float = 0.0) -> tuple[float, float]:
@@ -51,8 +56,8 @@ def pan_tilt(x: float, y: float, z: float, *, current_pan_deg: float = 0.0,
 
 def within_limits(pan_deg: float, tilt_deg: float, limits: Limits) -> tuple[float, float]:
     """Clamp to what the camera can reach."""
-    return (min(max(pan_deg, limits.min_pan), limits.max_pan),
-            min(max(tilt_deg, limits.min_tilt), limits.max_tilt))
+    pan, tilt, _ = limits.clamp(pan_deg, tilt_deg, limits.min_zoom)
+    return pan, tilt
 
 
 def aim_at(target_world: np.ndarray, pose: Pose, limits: Limits = Limits(), *,

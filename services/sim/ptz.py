@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from common.camera import Pose, focal_mm_for_zoom, rot_y, rot_z
+from services.ptz.aim import Limits
 
 
 def head_pose(mount: Pose, pan_deg: float, tilt_deg: float) -> Pose:
@@ -19,21 +20,6 @@ def head_pose(mount: Pose, pan_deg: float, tilt_deg: float) -> Pose:
     z down in the image: positive pan turns right, positive tilt turns up)."""
     rotation = mount.rotation @ rot_z(np.radians(pan_deg)) @ rot_y(np.radians(tilt_deg))
     return Pose.from_matrix(rotation, mount.position)
-
-
-@dataclass(frozen=True)
-class PtzLimits:
-    min_pan: float = -170.0
-    max_pan: float = 170.0
-    min_tilt: float = -90.0
-    max_tilt: float = 90.0
-    min_zoom: int = 1
-    max_zoom: int = 9999
-
-    def clamp(self, pan: float, tilt: float, zoom: float) -> tuple[float, float, float]:
-        return (min(max(pan, self.min_pan), self.max_pan),
-                min(max(tilt, self.min_tilt), self.max_tilt),
-                min(max(zoom, self.min_zoom), self.max_zoom))
 
 
 @dataclass
@@ -58,7 +44,7 @@ class PtzHead:
     """The moving part of a simulated PTZ camera; ``mount`` is its pose at pan = tilt = 0."""
 
     mount: Pose
-    limits: PtzLimits = PtzLimits()
+    limits: Limits = Limits()
     pan_speed_deg_s: float = 100.0
     tilt_speed_deg_s: float = 90.0
     zoom_steps_s: float = 4000.0

@@ -12,7 +12,6 @@ import numpy as np
 from common import keys
 from common import messages as m
 from common.node import Node
-from common.volume import Volume
 from services.tracker.mocap import MocapSource, QualisysMocap
 from services.tracker.robot import RobotPicker, Seen
 from services.tracker.settings import TrackerSettings
@@ -23,9 +22,8 @@ def make_mocap(settings: TrackerSettings) -> QualisysMocap:
 
 
 def make_picker(settings: TrackerSettings) -> RobotPicker:
-    volume = Volume(settings.x_min_mm, settings.x_max_mm, settings.y_min_mm, settings.y_max_mm,
-                    settings.z_min_mm, settings.z_max_mm)
-    return RobotPicker(settings.robot_label, volume, min_motion_mm=settings.min_motion_mm,
+    return RobotPicker(settings.robot_label, settings.volume,
+                       min_motion_mm=settings.min_motion_mm,
                        velocity_window_s=settings.velocity_window_s)
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pydantic import Field
 
 from common.settings import ServiceSettings
+from common.volume import Volume
 
 
 class TrackerSettings(ServiceSettings):
@@ -18,9 +19,4 @@ class TrackerSettings(ServiceSettings):
                              "unidentified marker that moves")
     min_motion_mm: float = Field(15.0, gt=0, description="unlabelled: motion that marks the robot")
     velocity_window_s: float = Field(0.1, gt=0)
-    x_min_mm: float = -5000.0
-    x_max_mm: float = 5000.0
-    y_min_mm: float = -5000.0
-    y_max_mm: float = 5000.0
-    z_min_mm: float = -1000.0
-    z_max_mm: float = 4000.0
+    volume: Volume = Field(Volume(), description="robot positions outside are ignored (mm)")
