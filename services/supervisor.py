@@ -21,7 +21,7 @@ import zenoh
 from pydantic import Field, field_validator
 
 from common import keys
-from common.bus import Bus, BusUnreachable, open_session
+from common.bus import SUPERSEDED, Bus, BusUnreachable, open_session
 from common.messages import ServiceHealth
 from common.settings import ServiceSettings
 from services.registry import DEFAULT_UP, SERVICES
@@ -147,7 +147,9 @@ class Supervisor:
                      for c in self.children)
 
     def set_health(self, health: ServiceHealth) -> None:
-        dropped = sum(sum(k.dropped.values()) for k in health.keys.values())
+        # "superseded" is latest-value delivery doing its job, not bad input.
+        dropped = sum(n for k in health.keys.values() for reason, n in k.dropped.items()
+                      if reason != SUPERSEDED)
         text = health.status + (f" ({health.detail})" if health.detail else "")
         text += f", {dropped} dropped" if dropped else ""
         with self._lock:
@@ -166,8 +168,9 @@ class Supervisor:
                 state = "alive" if c.alive else "starting"
             pid = str(c.process.pid) if c.process else "-"
             exit_code = "-" if c.last_exit is None else str(c.last_exit)
+            health = (c.health if c.process else "")[:60]
             lines.append(f"{c.name:<24} {pid:>7}  {state:<22} {c.restarts:>8}  {exit_code:>9}"
-                         f"  {c.health if c.process else ''}")
+                         f"  {health}")
         return "\n".join(lines)
 
 
