@@ -9,6 +9,7 @@ maps camera coordinates into the world frame (eq. 1): ``X_world = R @ x_cam + t`
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -61,11 +62,11 @@ class Pose:
     ry_deg: float
     rz_deg: float
 
-    @property
+    @cached_property
     def rotation(self) -> np.ndarray:
         return rotation_xyz(self.rx_deg, self.ry_deg, self.rz_deg)
 
-    @property
+    @cached_property
     def position(self) -> np.ndarray:
         return np.array([self.x_mm, self.y_mm, self.z_mm])
 

@@ -159,6 +159,7 @@ class CameraServer:
         return Handler
 
     def _serve(self, request: BaseHTTPRequestHandler, method: str) -> None:
+        arrived = time.time()
         url = urlsplit(request.path)
         args = dict(parse_qsl(url.query, keep_blank_values=True))
         if method == "POST":
@@ -172,7 +173,7 @@ class CameraServer:
             return
         now = self.camera.clock()
         if url.path == vapix.PTZ_PATH:
-            self._trace(request)
+            self._trace(request, arrived)
             reply = vapix.handle_ptz(args, self.camera.head, now)
         elif url.path == vapix.IMAGE_PATH:
             reply = self._image(args)
@@ -180,11 +181,11 @@ class CameraServer:
             reply = vapix.Reply(404, "text/plain", b"Not Found\r\n")
         self._send(request, reply)
 
-    def _trace(self, request: BaseHTTPRequestHandler) -> None:
+    def _trace(self, request: BaseHTTPRequestHandler, arrived: float) -> None:
         measured = request.headers.get(TRACE_HEADER)
         if measured is not None:
             with contextlib.suppress(ValueError):  # a malformed trace header: not recorded
-                self.camera.commands.append((time.time(), float(measured)))
+                self.camera.commands.append((arrived, float(measured)))
 
     def _authorized(self, request: BaseHTTPRequestHandler, method: str) -> bool:
         cam = self.camera

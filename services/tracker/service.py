@@ -33,15 +33,15 @@ def run(node: Node, mocap: MocapSource | None = None) -> None:
     picker = make_picker(settings)
 
     def on_frame(frame: m.MarkerFrame) -> None:
-        node.bus.publish(keys.TRACKER_MARKERS, frame)
         seen = [Seen(mk.label, mk.id, np.array([mk.x_mm, mk.y_mm, mk.z_mm]))
                 for mk in frame.markers]
         robot = picker.update(frame.measured_s, seen)
-        if robot is not None:
+        if robot is not None:  # first: the robot sample is what the cameras wait for
             (x, y, z), (vx, vy, vz) = robot
             node.bus.publish(keys.TRACKER_ROBOT, m.RobotPosition(
                 measured_s=frame.measured_s, label=settings.robot_label, x_mm=x, y_mm=y,
                 z_mm=z, vx_mm_s=vx, vy_mm_s=vy, vz_mm_s=vz))
+        node.bus.publish(keys.TRACKER_MARKERS, frame)
 
     def on_state(connected: bool, why: str) -> None:
         node.set_status("ok" if connected else "degraded", "" if connected else why)
