@@ -64,6 +64,8 @@ class RobotPicker:
 
     def _velocity(self, history: deque[tuple[float, np.ndarray]], t_s: float) -> np.ndarray:
         recent = [(t, p) for t, p in history if t_s - t <= self.velocity_window_s]
+        if len(recent) < 3:  # just back from an occlusion: bridge it with older samples
+            recent = [(t, p) for t, p in history if t_s - t <= self.motion_window_s][-3:]
         if len(recent) < 2:
             return np.zeros(3)
         times = np.array([t for t, _ in recent])

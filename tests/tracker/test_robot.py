@@ -55,3 +55,15 @@ def test_labelled_robot_and_bad_positions(rng: np.random.Generator) -> None:
     assert picker.update(0.01, [Seen("robot", 0, np.array([np.nan, 0, 0]))]) is None
     assert picker.update(0.02, [Seen("robot", 0, np.array([9000.0, 0, 0]))]) is None
     assert picker.update(0.03, [Seen("static_1", 0, np.zeros(3))]) is None
+
+
+def test_velocity_survives_a_short_occlusion(rng: np.random.Generator) -> None:
+    picker = RobotPicker()
+    frames = list(_frames(rng))
+    for n, (t, seen) in enumerate(frames):
+        if 150 <= n < 180:  # the robot marker is lost for 0.3 s
+            seen = seen[:2]
+        out = picker.update(t, seen)
+        if n == 180:
+            assert out is not None
+            np.testing.assert_allclose(out[1], [200.0, 0.0, 0.0], atol=40.0)
