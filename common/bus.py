@@ -14,8 +14,7 @@ import logging
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
@@ -343,15 +342,3 @@ class Bus:
         self._subscriptions.clear()
         self._declared.clear()
         self._publishers.clear()
-
-
-@contextmanager
-def connect(settings: BusSettings) -> Iterator[Bus]:
-    """Open a session and a Bus on it; both are closed on exit."""
-    session = open_session(settings.zenoh)
-    bus = Bus(session, settings)
-    try:
-        yield bus
-    finally:
-        bus.close()
-        session.close()
