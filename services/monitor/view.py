@@ -38,10 +38,13 @@ def json_line(key: str, msg: BaseModel | dict) -> str:
 def summary(msg: BaseModel | dict, width: int = 60) -> str:
     """A short one-line digest of a message for the table."""
     parts = []
-    for name, value in to_plain(msg).items():
+    data = msg.model_dump() if isinstance(msg, BaseModel) else dict(msg)
+    for name, value in data.items():
         if name in ("measured_s", "sent_s"):
             continue
-        if isinstance(value, float):
+        if isinstance(value, bytes):  # frames: say how big, do not encode them every redraw
+            value = f"<{len(value)} bytes>"
+        elif isinstance(value, float):
             value = f"{value:.1f}"
         elif isinstance(value, list):
             value = f"[{len(value)}]"

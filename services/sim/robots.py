@@ -126,7 +126,7 @@ def walker(world: CraterMap, rng: np.random.Generator, *, duration_s: float = 24
             else:
                 heading = to_target / dist
                 pos += heading * speed_mm_s * dt
-            slope = _slope_at(world, pos)
+            slope = world.slope_at(*pos)
             if slope > steep_deg and rng.random() < slide_per_s * dt:
                 slide_dir = world.downhill(*pos)
                 slide_left = rng.uniform(*slide_mm)
@@ -140,13 +140,6 @@ def walker(world: CraterMap, rng: np.random.Generator, *, duration_s: float = 24
     z = (world.height_at(swayed[:, 0], swayed[:, 1]) + marker_height_mm
          + bob_mm * np.abs(np.sin(phase)))
     return Trajectory("walker", t, np.column_stack([swayed, z]))
-
-
-def _slope_at(world: CraterMap, pos: np.ndarray) -> float:
-    step = world.resolution_mm
-    gx = (world.height_at(pos[0] + step, pos[1]) - world.height_at(pos[0] - step, pos[1]))
-    gy = (world.height_at(pos[0], pos[1] + step) - world.height_at(pos[0], pos[1] - step))
-    return float(np.degrees(np.arctan(np.hypot(gx, gy) / (2 * step))))
 
 
 # --- calibration: a marker carried through the cameras' view -----------------------------------

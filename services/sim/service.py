@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import logging
 import threading
 import time
@@ -170,7 +171,7 @@ def _frame_publisher(node: Node, lab: Lab, settings: SimSettings, clock: Clock
                      ) -> Callable[[], None]:
     rng = np.random.default_rng((settings.seed, 5))
     cam = settings.tracking_camera
-    seq = iter(range(1 << 62))
+    seq = itertools.count()
 
     def publish() -> None:
         t = clock()

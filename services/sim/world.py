@@ -50,12 +50,20 @@ class CraterMap:
         gy, gx = np.gradient(self.heights_mm.astype(float), self.resolution_mm)
         return np.degrees(np.arctan(np.hypot(gx, gy)))
 
-    def downhill(self, x_mm: float, y_mm: float) -> np.ndarray:
-        """Unit vector (x, y) pointing downhill at a point (zero on flat ground)."""
+    def gradient(self, x_mm: float, y_mm: float) -> np.ndarray:
+        """(dz/dx, dz/dy) at a point, by central differences over one grid step."""
         step = self.resolution_mm
         gx = (self.height_at(x_mm + step, y_mm) - self.height_at(x_mm - step, y_mm)) / (2 * step)
         gy = (self.height_at(x_mm, y_mm + step) - self.height_at(x_mm, y_mm - step)) / (2 * step)
-        g = np.array([-float(gx), -float(gy)])
+        return np.array([float(gx), float(gy)])
+
+    def slope_at(self, x_mm: float, y_mm: float) -> float:
+        """Steepest slope at a point, degrees."""
+        return float(np.degrees(np.arctan(np.linalg.norm(self.gradient(x_mm, y_mm)))))
+
+    def downhill(self, x_mm: float, y_mm: float) -> np.ndarray:
+        """Unit vector (x, y) pointing downhill at a point (zero on flat ground)."""
+        g = -self.gradient(x_mm, y_mm)
         n = np.linalg.norm(g)
         return g / n if n > 1e-9 else np.zeros(2)
 
