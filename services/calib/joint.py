@@ -1,0 +1,73 @@
+"""Beyond the paper: fit the focal length and the camera-to-mocap clock offset with the pose.
+
+A passpoint's image was taken at ``t`` on the camera clock; its marker was where the mocap
+track was at ``t + time_offset_s`` (mocap clock). The offset is found on a grid first (a pose
+refined per candidate offset), then refined jointly with the pose (and the focal length) by
+least squares on the inliers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
+
+from common.camera import Intrinsics, Pose, project
+from services.calib.passpoints import Passpoints, Track
+from services.calib.pnp import refine_lm, reprojection_px
+
+OFFSET_GRID_STEP_S = 0.01
+
+
+@dataclass(frozen=True)
+class JointFit:
+    pose: Pose
+    focal_mm: float
+    time_offset_s: float | None
+    evaluations: int
+
+
+def best_offset_on_grid(pose: Pose, points: Passpoints, track: Track, intr: Intrinsics,
+                        max_offset_s: float) -> tuple[float, Pose]:
+    """The grid offset whose refined pose reprojects best (mean px), and that pose."""
+    assert points.times_s is not None
+    best = (np.inf, 0.0, pose)
+    for offset in np.arange(-max_offset_s, max_offset_s + 1e-9, OFFSET_GRID_STEP_S):
+        world = track.at(points.times_s + offset)
+        candidate = refine_lm(pose, world, points.pixels, intr)
+        error = float(np.mean(np.minimum(reprojection_px(candidate, world, points.pixels, intr),
+                                         1e4)))
+        if error < best[0]:
+            best = (error, float(offset), candidate)
+    return best[1], best[2]
+
+
+def refine_jointly(pose: Pose, points: Passpoints, intr: Intrinsics, *, fit_focal: bool,
+                   track: Track | None = None, time_offset_s: float = 0.0) -> JointFit:
+    """Least squares over the pose and, as asked, the focal length and the clock offset."""
+    fit_offset = track is not None
+    if fit_offset and points.times_s is None:
+        raise ValueError("a clock offset needs passpoint times")
+    start = np.concatenate([Rotation.from_matrix(pose.rotation).as_rotvec(), pose.position,
+                            [intr.focal_mm] if fit_focal else [],
+                            [time_offset_s] if fit_offset else []])
+    scale = np.concatenate([[0.01] * 3, [10.0] * 3, [0.05] if fit_focal else [],
+                            [0.005] if fit_offset else []])
+
+    def unpack(p: np.ndarray) -> tuple[Pose, Intrinsics, float]:
+        rotation = Rotation.from_rotvec(p[0:3]).as_matrix()
+        focal = p[6] if fit_focal else intr.focal_mm
+        offset = p[-1] if fit_offset else 0.0
+        return Pose.from_matrix(rotation, p[3:6]), intr.with_focal(float(focal)), float(offset)
+
+    def residuals(p: np.ndarray) -> np.ndarray:
+        candidate, intr_p, offset = unpack(p)
+        world = track.at(points.times_s + offset) if track is not None else points.world_mm
+        uv = project(world, candidate, intr_p)
+        return np.nan_to_num(uv - points.pixels, nan=1e4).ravel()
+
+    result = least_squares(residuals, start, x_scale=scale, method="lm")
+    fitted, intr_fit, offset = unpack(result.x)
+    return JointFit(fitted, intr_fit.focal_mm, offset if fit_offset else None, int(result.nfev))

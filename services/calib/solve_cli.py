@@ -1,0 +1,97 @@
+"""``stb calib solve PASSPOINTS.csv``: a camera's pose from passpoints (paper §2.2).
+
+PASSPOINTS.csv has the header X,Y,Z,u,v (mm, px) and optionally t (the image's time in s on
+the camera clock). With --mocap-track TRACK.csv (header t,X,Y,Z on the mocap clock) a
+passpoint's marker position is the track at t + time_offset_s, and the offset is fitted.
+Exit status: 0 solved, 2 bad arguments or input, 3 no trustworthy pose.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from common.camera import Pose
+from services.calib.passpoints import CalibrationError, read_passpoints, read_track
+from services.calib.solve import Options, solve
+
+EXIT_BAD_INPUT = 2
+EXIT_NO_POSE = 3
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="stb calib solve", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("passpoints", type=Path, help="CSV: X,Y,Z,u,v[,t]")
+    parser.add_argument("--initial", help="rough pose tx,ty,tz,rx,ry,rz (mm, deg) for the "
+                        "paper's searches; method auto needs none")
+    parser.add_argument("--method", choices=["auto", "cmaes", "simplex"], default="auto",
+                        help="auto: SQPnP + RANSAC + LM, no guess (default); cmaes / simplex: "
+                             "the paper's searches from --initial")
+    focal = parser.add_mutually_exclusive_group()
+    focal.add_argument("--focal-mm", type=float, default=3.8,
+                       help="focal length of the images (default 3.8, the AXIS 215 at wide)")
+    focal.add_argument("--fit-focal", action="store_true", help="fit the focal length too")
+    parser.add_argument("--mocap-track", type=Path, help="CSV: t,X,Y,Z; fits the clock offset")
+    parser.add_argument("--max-offset-s", type=float, default=0.5,
+                        help="largest clock offset searched (default 0.5 s)")
+    parser.add_argument("--inlier-px", type=float, default=10.0,
+                        help="passpoints farther than this from the fit are rejected (default 10)")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--plot", type=Path, metavar="DIR",
+                        help="write fitness.png (searches) and residuals.png here")
+    parser.add_argument("--json", action="store_true", help="print the result as JSON")
+    args = parser.parse_args(argv)
+    try:
+        points = read_passpoints(args.passpoints)
+        options = Options(method=args.method, initial=_parse_pose(args.initial),
+                          focal_mm=args.focal_mm, fit_focal=args.fit_focal,
+                          track=read_track(args.mocap_track) if args.mocap_track else None,
+                          max_time_offset_s=args.max_offset_s, inlier_px=args.inlier_px,
+                          seed=args.seed)
+    except (CalibrationError, ValueError) as err:
+        print(f"stb calib solve: {err}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        solution = solve(points, options)
+    except CalibrationError as err:
+        print(f"stb calib solve: {err}", file=sys.stderr)
+        return EXIT_NO_POSE
+    report = solution.report()
+    if args.plot:
+        from services.calib.plot import write_plots
+
+        report["plots"] = [str(p) for p in write_plots(solution, points, args.plot)]
+    print(json.dumps(report) if args.json else _human(report))
+    return 0
+
+
+def _parse_pose(text: str | None) -> Pose | None:
+    if text is None:
+        return None
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError as err:
+        raise ValueError(f"--initial {text!r}: {err}") from err
+    if len(values) != 6:
+        raise ValueError(f"--initial needs six numbers tx,ty,tz,rx,ry,rz, got {len(values)}")
+    return Pose(*values)
+
+
+def _human(report: dict) -> str:
+    x, y, z = report["position_mm"]
+    rx, ry, rz = report["orientation_deg"]
+    lines = [f"position    {x:9.1f} {y:9.1f} {z:9.1f} mm",
+             f"orientation {rx:9.3f} {ry:9.3f} {rz:9.3f} deg (R = Rx·Ry·Rz)",
+             f"focal       {report['focal_mm']:.3f} mm",
+             f"error       {report['mean_error_px']:.2f} px mean over "
+             f"{len(report['inliers'])} inliers; rejected {report['rejected'] or 'none'}",
+             f"method      {report['method']}, {report['evaluations']} evaluations, "
+             f"{report['seconds'] * 1e3:.1f} ms"]
+    if "time_offset_s" in report:
+        lines.append(f"clock       mocap = camera + {report['time_offset_s'] * 1e3:.1f} ms")
+    lines += [f"plot        {p}" for p in report.get("plots", [])]
+    return "\n".join(lines)
