@@ -86,6 +86,15 @@ TRACKER_ROBOT = Topic("tracker/robot", m.RobotPosition, "robot marker position a
 PTZ_STATE = Topic("ptz/{camera}/state", m.PtzState, "pan, tilt, zoom and aim error of a camera")
 PTZ_DETECTIONS = Topic("ptz/{camera}/detections", m.MarkerDetections,
                        "markers detected in a PTZ snapshot (calibration mode)")
+PTZ_CALIBRATION = Topic("ptz/{camera}/calibration", m.CalibrationMode,
+                        "puts a camera into calibration mode (with a lease) or out of it",
+                        stream=False)
+PTZ_SNAPSHOT = Topic("ptz/{camera}/snapshot", m.CameraFrame,
+                     "JPEG snapshots of a camera in calibration mode", max_payload_bytes=2 * MIB)
+CALIB_COLLECT = Topic("calib/{camera}/collect", m.CollectRequest,
+                      "starts or cancels a passpoint collection", stream=False)
+CALIB_PROGRESS = Topic("calib/{camera}/progress", m.CollectProgress,
+                       "progress and outcome of a passpoint collection", stream=False)
 CALIB_POSE = Topic("calib/{camera}/pose", m.CameraPose,
                    "calibrated camera pose; also answered as a queryable", stream=False)
 GANTRY_FRAME = Topic("gantry/camera/frame", m.CameraFrame, "raw tracking-camera frames",
@@ -103,7 +112,8 @@ HEALTH = Topic("health/{service}/{instance}", m.ServiceHealth,
                "each service's health, 1 Hz", stream=False)
 
 ALL_TOPICS: tuple[Topic, ...] = (
-    TRACKER_MARKERS, TRACKER_ROBOT, PTZ_STATE, PTZ_DETECTIONS, CALIB_POSE, GANTRY_FRAME,
+    TRACKER_MARKERS, TRACKER_ROBOT, PTZ_STATE, PTZ_DETECTIONS, PTZ_CALIBRATION, PTZ_SNAPSHOT,
+    CALIB_COLLECT, CALIB_PROGRESS, CALIB_POSE, GANTRY_FRAME,
     GANTRY_DETECTIONS, GANTRY_ESTIMATE, GANTRY_SETPOINT, GANTRY_STATE, TRUTH_ROBOT, TRUTH_CRANE,
     TRUTH_PTZ, HEALTH,
 )

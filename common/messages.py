@@ -125,7 +125,46 @@ class CameraPose(Message):
     focal_mm: float = Field(gt=0, description="focal length the pose was fitted with")
     mean_error_px: float = Field(ge=0, description="mean reprojection error over the inliers")
     passpoints: int = Field(ge=0, description="passpoints used (inliers)")
-    time_offset_s: float = Field(0.0, description="camera clock minus mocap clock, if fitted")
+    time_offset_s: float = Field(0.0, description="mocap clock minus camera clock (add it to a "
+                                 "snapshot's time to get the mocap time), if fitted")
+
+
+class CalibrationMode(Message):
+    """Asks a PTZ service to hold its camera still for passpoint collection (paper §2.1): IR cut
+    filter off, pan/tilt/zoom fixed, snapshots detected and published. The mode ends when
+    ``active`` is false or no request came for ``lease_s`` (a dead collector frees the camera)."""
+
+    camera: Name
+    active: bool
+    pan_deg: float | None = Field(None, ge=-180, le=180, description="None: keep the current")
+    tilt_deg: float | None = Field(None, ge=-90, le=90)
+    zoom: int | None = Field(None, ge=1, le=19999)
+    lease_s: float = Field(3.0, gt=0, le=60)
+
+
+class CollectRequest(Message):
+    """Asks the calib service to collect passpoints for a camera, then solve and publish."""
+
+    camera: Name
+    action: Literal["start", "cancel"] = "start"
+    count: int = Field(100, ge=6, le=10_000, description="passpoints to collect")
+    timeout_s: float = Field(600.0, gt=0, description="give up after this long")
+
+
+CollectState = Literal["collecting", "solving", "done", "failed", "cancelled"]
+
+
+class CollectProgress(Message):
+    """How a passpoint collection goes; the last one of a run is done, failed or cancelled."""
+
+    camera: Name
+    state: CollectState
+    passpoints: int = Field(ge=0)
+    target: int = Field(ge=0)
+    snapshots: int = Field(ge=0, description="snapshots seen so far")
+    skipped: dict[str, int] = Field(description="snapshots not used, by reason")
+    message: str = Field("", max_length=500)
+    mean_error_px: float | None = Field(None, ge=0, description="of the solved pose (done)")
 
 
 # --- gantry -------------------------------------------------------------------------------------

@@ -36,6 +36,12 @@ EXAMPLES: dict[type[m.Message], m.Message] = {
     m.CameraPose: m.CameraPose(measured_s=_T, camera="ptz1", x_mm=3413.0, y_mm=1093.0,
                                z_mm=2163.0, rx_deg=197.0, ry_deg=27.0, rz_deg=159.0,
                                focal_mm=3.8, mean_error_px=6.79, passpoints=100),
+    m.CalibrationMode: m.CalibrationMode(measured_s=_T, camera="ptz1", active=True, pan_deg=0.0,
+                                         tilt_deg=0.0, zoom=1, lease_s=3.0),
+    m.CollectRequest: m.CollectRequest(measured_s=_T, camera="ptz1", action="start", count=100),
+    m.CollectProgress: m.CollectProgress(
+        measured_s=_T, camera="ptz1", state="collecting", passpoints=42, target=100,
+        snapshots=97, skipped={"no marker": 30, "too many": 5, "not moved": 20}),
     m.CameraFrame: m.CameraFrame(measured_s=_T, camera="tracking", seq=88, width_px=4,
                                  height_px=2, encoding="mono8", data=bytes(8)),
     m.RobotEstimate: m.RobotEstimate(measured_s=_T, algorithm="default", valid=True,

@@ -250,7 +250,10 @@ def test_backlog_after_a_network_stall_never_reaches_the_handler(
         stop.set()
         dropped = consumer.key_stats()["stb/tracker/robot"].dropped
         print("after stall:", dropped, f"max age {max(ages):.3f} s")
-        assert dropped.get("stale", 0) > 0, "the backlog must have arrived and been dropped"
+        # the backlog arrives in a burst: the mailbox supersedes most of it, and whatever is
+        # taken out of the mailbox too late is dropped as stale; either way it is counted
+        backlog = dropped.get("stale", 0) + dropped.get("superseded", 0)
+        assert backlog > 0, "the backlog must have arrived and been dropped"
         assert max(ages) < 0.3, f"a sample {max(ages):.2f} s old reached the handler"
     finally:
         producer.close()
