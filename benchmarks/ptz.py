@@ -34,12 +34,11 @@ import numpy as np
 from common import keys
 from common import messages as m
 from common.bus import Bus, BusUnreachable, open_session
-from common.camera import Intrinsics, Pose, focal_mm_for_zoom, project
+from common.camera import Intrinsics, Pose, focal_mm_for_zoom, head_pose, project
 from common.markers import closest, detect
 from common.settings import BusSettings, ZenohSettings
 from services.ptz import vapix
 from services.sim.lab import Lab
-from services.sim.ptz import head_pose
 from services.sim.settings import CraneSettings, MocapSettings, PtzCameraSettings, SimSettings
 from tests.ports import free_port
 

@@ -131,6 +131,21 @@ def project(points_world: np.ndarray, pose: Pose, intr: Intrinsics) -> np.ndarra
     return project_camera(pose.to_camera(points_world), intr)
 
 
+def head_pose(mount: Pose, pan_deg: float, tilt_deg: float) -> Pose:
+    """A PTZ camera's pose at a pan and tilt: mount · Rz(pan) · Ry(tilt), where ``mount`` is
+    its pose at pan = tilt = 0 (x optical axis, z down in the image: positive pan turns right,
+    positive tilt turns up)."""
+    rotation = mount.rotation @ rot_z(np.radians(pan_deg)) @ rot_y(np.radians(tilt_deg))
+    return Pose.from_matrix(rotation, mount.position)
+
+
+def mount_pose(head: Pose, pan_deg: float, tilt_deg: float) -> Pose:
+    """Inverse of ``head_pose``: the pose at pan = tilt = 0 of a camera seen at pan and tilt
+    (calibration may run at any fixed pan and tilt; the PTZ chain needs the mount)."""
+    rotation = head.rotation @ rot_y(np.radians(-tilt_deg)) @ rot_z(np.radians(-pan_deg))
+    return Pose.from_matrix(rotation, head.position)
+
+
 def focal_mm_for_zoom(zoom: float, *, focal_range_mm: tuple[float, float] = AXIS_215_FOCAL_MM,
                       zoom_steps: tuple[int, int] = AXIS_215_ZOOM_STEPS) -> float:
     """VAPIX zoom step → focal length, linear over the lens's range (documented assumption)."""

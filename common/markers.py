@@ -28,6 +28,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 
 from common.markers_kernel import regions_kernel, row_maxima
+from common.messages import DetectedMarker, MarkerDetections
 
 Status = Literal["ok", "none", "too_many"]
 _SMALL_AREA = 30  # below this (radius ≲ 3 px) the binary shape is too coarse to judge
@@ -163,3 +164,22 @@ def annotate(frame: np.ndarray, result: Detection) -> np.ndarray:
     text = f"{result.status} t={result.threshold} markers={len(result.markers)}"
     cv2.putText(image, text, (5, 15), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 0), 1)
     return image
+
+
+def to_message(result: Detection, camera: str, measured_s: float, width_px: int,
+               height_px: int) -> MarkerDetections:
+    """The bus message of a detection (``measured_s`` = when the image was captured)."""
+    return MarkerDetections(
+        measured_s=measured_s, camera=camera, status=result.status, threshold=result.threshold,
+        width_px=width_px, height_px=height_px,
+        markers=[DetectedMarker(u_px=mk.u, v_px=mk.v, radius_long_px=mk.radius_long,
+                                radius_short_px=mk.radius_short,
+                                angle_deg=min(max(mk.angle_deg, -180.0), 180.0),
+                                roundness=max(mk.roundness, 1.0), area_px=mk.area)
+                 for mk in result.markers[:256]])
+
+
+def marker_of(d: DetectedMarker) -> Marker:
+    """A detected marker from the bus back as the detector's own tuple (to annotate, say)."""
+    return Marker(d.u_px, d.v_px, d.radius_long_px, d.radius_short_px, d.angle_deg,
+                  d.roundness, d.area_px)

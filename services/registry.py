@@ -26,6 +26,8 @@ SERVICES: dict[str, ServiceInfo] = {
                            "services.tracker.settings:TrackerSettings"),
     "ptz": ServiceInfo("one AXIS camera follows the robot (--instance ptz1|ptz2); "
                        "stb ptz aim: eq. 4", "services.ptz.settings:PtzSettings"),
+    "calib": ServiceInfo("camera poses from passpoints (paper §2.2); stb calib solve | collect",
+                         "services.calib.settings:CalibSettings"),
     "sim": ServiceInfo("the simulated lab: QTM RT mocap, VAPIX cameras, Modbus crane, frames",
                        "services.sim.settings:SimSettings"),
 }
@@ -40,7 +42,7 @@ TOOLS: dict[str, ServiceInfo] = {
                           ""),
 }
 
-DEFAULT_UP: tuple[str, ...] = ("router", "sim", "tracker", "ptz:ptz1", "ptz:ptz2")
+DEFAULT_UP: tuple[str, ...] = ("router", "sim", "tracker", "calib", "ptz:ptz1", "ptz:ptz2")
 """What ``stb up`` starts when the lab file does not say: everything that exists so far."""
 
 

@@ -41,6 +41,8 @@ class PtzCamera(Protocol):
 
     def snapshot(self) -> np.ndarray: ...
 
+    def snapshot_jpeg(self) -> bytes: ...
+
     def set_ir_cut_filter(self, mode: str) -> None: ...
 
 
@@ -76,13 +78,14 @@ class AxisPtzCamera:
 
     def snapshot(self, resolution: str = "704x576") -> np.ndarray:
         """The current image as a gray uint8 array."""
+        return decode_jpeg(self.snapshot_jpeg(resolution), self.name)
+
+    def snapshot_jpeg(self, resolution: str = "704x576") -> bytes:
+        """The current image as the camera sent it (JPEG)."""
         reply = self._request(vapix.IMAGE_PATH, {"resolution": resolution})
         if not reply.headers.get("content-type", "").startswith("image/jpeg"):
             raise PtzRejected(f"{self.name}: snapshot is not a JPEG")
-        image = cv2.imdecode(np.frombuffer(reply.content, np.uint8), cv2.IMREAD_GRAYSCALE)
-        if image is None:
-            raise PtzRejected(f"{self.name}: snapshot JPEG does not decode")
-        return image
+        return reply.content
 
     def _request(self, path: str, params: dict[str, str],
                  headers: dict[str, str] | None = None) -> httpx.Response:
@@ -100,6 +103,14 @@ class AxisPtzCamera:
             if message is not None:
                 raise PtzRejected(f"{self.name}: {message}")
         return reply
+
+
+def decode_jpeg(data: bytes, name: str) -> np.ndarray:
+    """A camera's JPEG as a gray uint8 array; PtzRejected if it does not decode."""
+    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
+    if image is None:
+        raise PtzRejected(f"{name}: snapshot JPEG does not decode")
+    return image
 
 
 def http_client(url: str, user: str, password: str, auth: str = "digest",

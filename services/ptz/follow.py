@@ -40,6 +40,10 @@ class Follower:
     _last: Command | None = None
     _last_at: float = -math.inf
 
+    def forget(self) -> None:
+        """Send the next command whatever the last one was (the camera was moved away)."""
+        self._last, self._last_at = None, -math.inf
+
     def command(self, now_s: float, position_mm: np.ndarray, velocity_mm_s: np.ndarray,
                 measured_s: float, pose: Pose) -> Command | None:
         """A command to send now, or None (too soon, too small, or a sample to ignore)."""

@@ -2,7 +2,9 @@
 
 Subscribes: stb/tracker/robot (RobotPosition), stb/calib/{camera}/pose (CameraPose; also
             queried at start for a pose published before this service ran)
+            stb/ptz/{camera}/calibration (CalibrationMode: hold still and detect, with a lease)
 Publishes:  stb/ptz/{camera}/state (PtzState: pan, tilt, zoom, status, aim error), state_hz
+            in calibration mode: stb/ptz/{camera}/detections and .../snapshot per snapshot
 Drives:     the camera over VAPIX (pan/tilt/zoom), at most command_hz, with a dead band
 """
 
@@ -19,6 +21,7 @@ from common import messages as m
 from common.camera import Pose, focal_mm_for_zoom
 from common.node import Node
 from services.ptz.aim import Limits, aim_error_deg
+from services.ptz.calibration import CalibrationMode
 from services.ptz.camera import AxisPtzCamera, PtzCamera, PtzError, http_client
 from services.ptz.follow import Follower
 from services.ptz.settings import PtzSettings
@@ -42,6 +45,7 @@ def run(node: Node, camera: PtzCamera | None = None) -> None:
     for pose in node.bus.query_latest(keys.CALIB_POSE, timeout_s=1.0, camera=name):
         loop.on_pose(pose)
     node.bus.subscribe(keys.TRACKER_ROBOT, loop.on_robot)
+    node.bus.subscribe(keys.PTZ_CALIBRATION, loop.on_calibration, latest=False, camera=name)
     loop.run()
 
 
@@ -61,6 +65,13 @@ class _Loop:
         self.robot: m.RobotPosition | None = None
         self.limits: Limits | None = None
         self.retry_at, self.retry_s = 0.0, 0.5
+        name = settings.instance
+        self.calibration = CalibrationMode(
+            camera,
+            lambda msg: node.bus.publish(keys.PTZ_DETECTIONS, msg, camera=name),
+            lambda msg: node.bus.publish(keys.PTZ_SNAPSHOT, msg, camera=name),
+            max_markers=settings.calibration_max_markers)
+        self.state_due = 0.0
 
     def on_pose(self, msg: m.CameraPose) -> None:
         with self.lock:
@@ -68,12 +79,23 @@ class _Loop:
                 log.info("camera pose received (fit error %.2f px)", msg.mean_error_px)
                 self.pose = msg
 
+    def on_calibration(self, msg: m.CalibrationMode) -> None:
+        with self.lock:
+            now = time.time()
+            try:
+                self.calibration.on_request(msg, now)
+            except PtzError as err:
+                self._unreachable(now, err)
+            if not self.calibration.active(now):
+                self.follower.forget()
+
     def on_robot(self, msg: m.RobotPosition) -> None:
         with self.lock:
             self.robot = msg
             pose = _pose(self.pose)
             now = time.time()
-            if pose is None or self.limits is None or now < self.retry_at:
+            if (pose is None or self.limits is None or now < self.retry_at
+                    or self.calibration.active(now)):
                 return
             command = self.follower.command(now, _xyz(msg), _velocity(msg), msg.measured_s,
                                             pose)
@@ -86,17 +108,36 @@ class _Loop:
                 self._unreachable(now, err)
 
     def run(self) -> None:
-        period = 1 / self.settings.state_hz
+        state_period = 1 / self.settings.state_hz
+        snapshot_period = 1 / self.settings.calibration_snapshot_hz
+        period = state_period
         while not self.node.stop.wait(period):
             with self.lock:
                 now = time.time()
                 if now < self.retry_at:
                     continue
                 try:
-                    self._report(now)
+                    calibrating = self._calibration_step(now)
+                    if now >= self.state_due:
+                        self.state_due = now + state_period
+                        self._report(now)
                     self.retry_s = 0.5
                 except PtzError as err:
                     self._unreachable(now, err)
+                    calibrating = False
+            period = snapshot_period if calibrating else min(state_period,
+                                                             max(self.state_due - now, 0.0))
+
+    def _calibration_step(self, now: float) -> bool:
+        """A calibration snapshot if the mode is on; leaves it when the lease ran out."""
+        if self.calibration.request is None:
+            return False
+        if not self.calibration.active(now):
+            self.calibration.leave()
+            self.follower.forget()
+            return False
+        self.calibration.cycle()
+        return True
 
     def _report(self, now: float) -> None:
         if self.limits is None:
@@ -105,6 +146,8 @@ class _Loop:
             log.info("camera %s limits: %s", self.camera.name, self.limits)
         pose = _pose(self.pose)
         status = "waiting_for_pose" if pose is None else ("tracking" if self.robot else "idle")
+        if self.calibration.active(now):
+            status = "calibrating"
         self.node.set_status("ok" if pose else "degraded",
                              "" if pose else "waiting for a camera pose from calib")
         position = self.camera.position()

@@ -42,6 +42,10 @@ class PtzSettings(ServiceSettings):
         None, gt=0, description="if set: zoom so that this size fills image_fraction")
     image_fraction: float = Field(0.3, gt=0, le=1)
     speed: int = Field(100, ge=1, le=100, description="VAPIX pan/tilt speed")
+    calibration_snapshot_hz: float = Field(10.0, gt=0, le=30,
+                                           description="snapshots a second in calibration mode")
+    calibration_max_markers: int = Field(8, ge=1, le=256, description="more bright round "
+                                         "spots than this in a snapshot → too_many")
 
     @model_validator(mode="after")
     def _instance_has_a_camera(self) -> PtzSettings:

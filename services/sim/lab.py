@@ -17,13 +17,15 @@ from services.sim.crane import CraneModel, CraneParams
 from services.sim.mocap_server import MocapFrame
 from services.sim.ptz import PtzHead
 from services.sim.render import MARKER_RADIUS_MM, Blob, Glint, TrackingCamera, draw
-from services.sim.robots import Trajectory, make_trajectory, railway_keep_clear
+from services.sim.robots import Trajectory, calibration, make_trajectory, railway_keep_clear
 from services.sim.settings import SimSettings
 from services.sim.world import CraterMap, CraterShape, generate_crater
 
 log = logging.getLogger(__name__)
 
 LOOP_PAUSE_S = 5.0
+WAND_LABEL = "wand"
+"""The calibration marker on a pole: its own labelled marker, moving while the robot waits."""
 OCCLUSION_WINDOW_S = 2.0
 
 
@@ -53,12 +55,19 @@ class Lab:
     crane: CraneModel
     crane_lock: threading.Lock
     tracking: TrackingCamera
+    wand: Trajectory
+    robot_start_s: float | None = 0.0
+    """Sim time the robot's scenario starts; None: the robot waits at its start while the
+    calibration wand is carried through the cameras' view."""
 
     @classmethod
     def build(cls, settings: SimSettings, crater: CraterMap | None = None) -> Lab:
         crater = crater if crater is not None else load_or_make_crater(settings)
         rng = np.random.default_rng(settings.seed)
         trajectory = make_trajectory(settings.scenario, crater, rng)
+        wand = calibration(crater, np.random.default_rng((settings.seed, 11)),
+                           speed_mm_s=settings.wand_speed_mm_s, dwell_s=settings.wand_dwell_s)
+        waiting = settings.scenario == "calibration" or bool(settings.calibrate_first)
         c = settings.crane
         params = CraneParams(c.x_min_mm, c.x_max_mm, c.y_min_mm, c.y_max_mm, c.max_speed_mm_s,
                              c.max_accel_mm_s2, c.reaction_s, c.cycle_s, c.watchdog_s)
@@ -81,32 +90,52 @@ class Lab:
                    for cam in settings.cameras},
             crane=crane, crane_lock=threading.Lock(),
             tracking=TrackingCamera(t.focal_mm, t.pixel_mm, t.width_px, t.height_px,
-                                    t.height_mm))
+                                    t.height_mm),
+            wand=wand, robot_start_s=None if waiting else 0.0)
 
     # --- the robot ---------------------------------------------------------------------------
 
     def scenario_time(self, t: float) -> float:
+        if self.robot_start_s is None:
+            return 0.0
+        t = max(t - self.robot_start_s, 0.0)
         if not self.settings.loop:
             return t
         return t % (self.trajectory.duration_s + LOOP_PAUSE_S)
+
+    def start_robot(self, t: float) -> None:
+        """End the calibration phase: the wand leaves, the robot's scenario starts at ``t``."""
+        if self.robot_start_s is None:
+            self.robot_start_s = t
+            log.info("calibration phase over at t = %.1f s: %s starts", t, self.trajectory.name)
 
     def robot(self, t: float) -> np.ndarray:
         """The robot marker's true world position (mm) at sim time ``t``."""
         return self.trajectory.position(self.scenario_time(t))
 
     def robot_velocity(self, t: float) -> np.ndarray:
+        if self.robot_start_s is None or t < self.robot_start_s:
+            return np.zeros(3)
         return self.trajectory.velocity(self.scenario_time(t))
 
+    def wand_position(self, t: float) -> np.ndarray | None:
+        """The calibration wand's marker while the robot waits (looping), else None."""
+        if self.robot_start_s is not None and t >= self.robot_start_s:
+            return None
+        return self.wand.position(t % self.wand.duration_s)
+
     def bright_points(self, t: float) -> np.ndarray:
-        """Every IR marker a PTZ camera can see at ``t``: the robot's and the static ones."""
-        return np.vstack([self.robot(t)[None, :], self.static_markers])
+        """Every IR marker a PTZ camera can see at ``t``: robot, wand and static ones."""
+        wand = self.wand_position(t)
+        extra = [] if wand is None else [wand[None, :]]
+        return np.vstack([self.robot(t)[None, :], *extra, self.static_markers])
 
     # --- motion capture -----------------------------------------------------------------------
 
     @property
     def labels(self) -> list[str]:
         robot = [self.settings.mocap.robot_label] if self.settings.mocap.robot_label else []
-        return robot + [f"static_{i + 1}" for i in range(len(self.static_markers))]
+        return robot + [WAND_LABEL] + [f"static_{i + 1}" for i in range(len(self.static_markers))]
 
     def mocap_frame(self, number: int) -> MocapFrame:
         """Frame ``number`` as QTM would measure it: noise, dropouts, occlusions."""
@@ -116,7 +145,9 @@ class Lab:
         robot = self.robot(t)
         if self._occluded(t):
             robot = np.full(3, np.nan)
-        noisy = np.vstack([robot[None, :], self.static_markers])
+        wand = self.wand_position(t)
+        wand = np.full(3, np.nan) if wand is None else wand
+        noisy = np.vstack([robot[None, :], wand[None, :], self.static_markers])
         noisy = noisy + rng.normal(0.0, m.noise_mm, size=noisy.shape)
         noisy[rng.random(len(noisy)) < m.dropout] = np.nan
         unlabelled = [(100 + i, xyz) for i, xyz in enumerate(self.ghost_markers)

@@ -11,15 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from common.camera import Pose, focal_mm_for_zoom, rot_y, rot_z
+from common.camera import Pose, focal_mm_for_zoom, head_pose
 from services.ptz.aim import Limits
-
-
-def head_pose(mount: Pose, pan_deg: float, tilt_deg: float) -> Pose:
-    """The camera's pose at a pan and tilt: mount · Rz(pan) · Ry(tilt) (x optical axis,
-    z down in the image: positive pan turns right, positive tilt turns up)."""
-    rotation = mount.rotation @ rot_z(np.radians(pan_deg)) @ rot_y(np.radians(tilt_deg))
-    return Pose.from_matrix(rotation, mount.position)
 
 
 @dataclass

@@ -58,6 +58,8 @@ def run(node: Node) -> None:
     try:
         devices.start()
         log.info("sim running scenario %s (seed %d)", settings.scenario, settings.seed)
+        if settings.calibrate_first and settings.scenario != "calibration":
+            _start_robot_once_calibrated(node, lab, settings.calibrate_first, clock)
         threads = [
             _every(1 / settings.tracking_camera.rate_hz, node.stop,
                    _frame_publisher(node, lab, settings, clock)),
@@ -70,6 +72,25 @@ def run(node: Node) -> None:
         devices.stop()
         for server in cameras:
             server.close()
+
+
+def _start_robot_once_calibrated(node: Node, lab: Lab, cameras: list[str], clock: Clock
+                                 ) -> None:
+    """The demo's order of things: the wand until every listed camera has a pose on the bus
+    (from the calib service — the sim never hands out its own poses), then the robot."""
+    calibrated: set[str] = set()
+    lock = threading.Lock()
+
+    def on_pose(pose: m.CameraPose) -> None:
+        with lock:
+            calibrated.add(pose.camera)
+            if calibrated >= set(cameras):
+                lab.start_robot(clock())
+
+    log.info("calibration phase: the wand moves until %s have poses", ", ".join(cameras))
+    node.bus.subscribe(keys.CALIB_POSE, on_pose, latest=False)
+    for pose in node.bus.query_latest(keys.CALIB_POSE, timeout_s=1.0):
+        on_pose(pose)
 
 
 def start_cameras(lab: Lab, settings: SimSettings, clock: Clock) -> list[CameraServer]:

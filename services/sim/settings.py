@@ -93,6 +93,11 @@ class SimSettings(ServiceSettings):
     crater_file: Path = Field(Path("run/sim/crater.npz"),
                               description="height map; generated from the seed if missing")
     truth_rate_hz: float = Field(20.0, gt=0, le=200)
+    calibrate_first: list[str] = Field(
+        default_factory=list, description="cameras to calibrate before the robot starts: the "
+        "wand is carried through the view until each has a pose on stb/calib/{camera}/pose")
+    wand_speed_mm_s: float = Field(600.0, gt=0, description="calibration wand between points")
+    wand_dwell_s: float = Field(0.5, ge=0, description="calibration wand held still per point")
     bind: str | None = Field(None, description="if set, every device listens on this address "
                              "instead of its own host (e.g. 0.0.0.0 in a container)")
     mocap: MocapSettings = MocapSettings()

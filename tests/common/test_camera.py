@@ -75,3 +75,13 @@ def test_thin_lens_equation_5() -> None:
     assert thin_lens_image_distance_mm(8.0, 3000.0) == pytest.approx(1 / (1 / 8 - 1 / 3000))
     with pytest.raises(ValueError):
         thin_lens_image_distance_mm(8.0, 5.0)
+
+
+def test_mount_pose_undoes_head_pose() -> None:
+    from common.camera import head_pose, mount_pose
+
+    mount = Pose(3550.0, 1090.0, 2190.0, 180.0, 30.0, 165.0)
+    for pan, tilt in [(0.0, 0.0), (35.0, -20.0), (-170.0, 60.0)]:
+        back = mount_pose(head_pose(mount, pan, tilt), pan, tilt)
+        assert np.allclose(back.rotation, mount.rotation, atol=1e-12)
+        assert np.allclose(back.position, mount.position)

@@ -1,0 +1,128 @@
+"""Passpoint collection (paper §2.1–2.2), pure: mocap frames and a camera's detections in,
+passpoints out.
+
+The calibration marker is followed in the mocap stream (by label, or as the unlabelled marker
+that moves) and kept as a track. A snapshot's detections become a passpoint when exactly one
+detected spot can be the marker: spots that stay put while the marker moves (static markers,
+reflections, a parked robot) are left out. The marker's position is interpolated from the
+track at the snapshot's capture time — not "the next frame", the paper's source of error —
+and the track itself goes to the solver, which fits what clock offset remains.
+"""
+
+from __future__ import annotations
+
+from collections import Counter, deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from common import messages as m
+from services.calib.passpoints import Passpoints, Track
+from services.tracker.robot import RobotPicker, Seen
+
+STATIC_WINDOW_S = 4.0
+STATIC_SHARE = 0.8
+STATIC_PX = 3.0
+MARKER_MOVED_MM = 150.0
+MAX_GAP_S = 0.1
+
+
+@dataclass
+class Collector:
+    target: int
+    marker_label: str = "wand"
+    min_spacing_mm: float = 50.0
+    picker: RobotPicker = field(init=False)
+    track_t: list[float] = field(default_factory=list)
+    track_xyz: list[np.ndarray] = field(default_factory=list)
+    times: list[float] = field(default_factory=list)
+    world: list[np.ndarray] = field(default_factory=list)
+    pixels: list[tuple[float, float]] = field(default_factory=list)
+    skipped: Counter[str] = field(default_factory=Counter)
+    snapshots: int = 0
+    _spots: deque[tuple[float, list[tuple[float, float]]]] = field(default_factory=deque)
+
+    def __post_init__(self) -> None:
+        self.picker = RobotPicker(self.marker_label)
+
+    @property
+    def done(self) -> bool:
+        return len(self.times) >= self.target
+
+    def on_frame(self, frame: m.MarkerFrame) -> None:
+        seen = [Seen(mk.label, mk.id, np.array([mk.x_mm, mk.y_mm, mk.z_mm]))
+                for mk in frame.markers]
+        found = self.picker.update(frame.measured_s, seen)
+        if found is None or (self.track_t and frame.measured_s <= self.track_t[-1]):
+            return
+        self.track_t.append(frame.measured_s)
+        self.track_xyz.append(found[0])
+
+    def on_detections(self, msg: m.MarkerDetections) -> str | None:
+        """Take a snapshot's detections; returns why it gave no passpoint, or None if it did.
+        Call it once the mocap stream has passed the snapshot's time (see ``track_covers``)."""
+        self.snapshots += 1
+        t = msg.measured_s
+        spots = [(d.u_px, d.v_px) for d in msg.markers]
+        self._spots.append((t, spots))
+        while self._spots and t - self._spots[0][0] > STATIC_WINDOW_S:
+            self._spots.popleft()
+        reason = self._reason(msg, spots)
+        if reason is not None:
+            self.skipped[reason] += 1
+            return reason
+        return None
+
+    def track_covers(self, t: float) -> bool:
+        return bool(self.track_t) and self.track_t[-1] >= t
+
+    def passpoints(self) -> Passpoints:
+        return Passpoints(np.array(self.world).reshape(-1, 3),
+                          np.array(self.pixels, dtype=float).reshape(-1, 2),
+                          np.array(self.times, dtype=float))
+
+    def track(self) -> Track:
+        return Track(np.array(self.track_t), np.array(self.track_xyz).reshape(-1, 3))
+
+    def _reason(self, msg: m.MarkerDetections, spots: list[tuple[float, float]]) -> str | None:
+        if msg.status == "too_many":
+            return "too many"
+        xyz = self._marker_at(msg.measured_s)
+        if xyz is None:
+            return "marker not in mocap"
+        moving = [s for s in spots if not self._static(s, msg.measured_s)]
+        if not moving:
+            return "no marker"
+        if len(moving) > 1:
+            return "too many"
+        if self.world and np.linalg.norm(xyz - self.world[-1]) < self.min_spacing_mm:
+            return "not moved"
+        self.times.append(msg.measured_s)
+        self.world.append(xyz)
+        self.pixels.append(moving[0])
+        return None
+
+    def _marker_at(self, t: float) -> np.ndarray | None:
+        """The marker's position at ``t`` from the two mocap samples around it, if close."""
+        i = int(np.searchsorted(self.track_t, t))
+        if i == 0 or i >= len(self.track_t) or self.track_t[i] - self.track_t[i - 1] > MAX_GAP_S:
+            return None
+        t0, t1 = self.track_t[i - 1], self.track_t[i]
+        a = (t - t0) / (t1 - t0)
+        return (1 - a) * self.track_xyz[i - 1] + a * self.track_xyz[i]
+
+    def _static(self, spot: tuple[float, float], t: float) -> bool:
+        """A spot seen in the same place in most recent snapshots while the marker moved."""
+        recent = [s for ts, s in self._spots if t - ts <= STATIC_WINDOW_S]
+        if len(recent) < 5:
+            return False
+        hits = sum(any(np.hypot(u - spot[0], v - spot[1]) <= STATIC_PX for u, v in s)
+                   for s in recent)
+        return hits >= STATIC_SHARE * len(recent) and self._marker_moved(t - STATIC_WINDOW_S, t)
+
+    def _marker_moved(self, t0: float, t1: float) -> bool:
+        lo, hi = np.searchsorted(self.track_t, [t0, t1])
+        if hi - lo < 2:
+            return False
+        path = np.array(self.track_xyz[lo:hi])
+        return float(np.max(np.ptp(path, axis=0))) >= MARKER_MOVED_MM

@@ -1,0 +1,102 @@
+"""``stb calib collect --camera ptz1 [--count 100]``: collect passpoints for a camera, solve
+and publish its pose — done by the calib service; this command starts it and shows progress.
+
+Ctrl-C cancels the collection. Exit status: 0 solved, 2 bad arguments, 3 no calib service or
+no router, 4 the collection failed or was cancelled.
+"""
+
+from __future__ import annotations
+
+import queue
+import sys
+import threading
+import time
+from collections.abc import Sequence
+
+from common import keys
+from common import messages as m
+from common.bus import Bus, BusUnreachable, open_session
+from common.node import configure_logging, stop_on_signals
+from common.settings import ConfigError, load_settings
+from services.calib.settings import CalibSettings
+from services.entry import EXIT_CONFIG, base_parser, overrides_from
+
+EXIT_NO_SERVICE = 3
+EXIT_FAILED = 4
+FINAL = ("done", "failed", "cancelled")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = base_parser("stb calib collect", __doc__ or "")
+    parser.add_argument("--camera", required=True)
+    parser.add_argument("--count", type=int, help="passpoints (default: calib.count)")
+    parser.add_argument("--timeout", type=float, help="seconds (default: calib.timeout_s)")
+    args = parser.parse_args(argv)
+    try:
+        settings = load_settings(CalibSettings, args.lab, overrides_from(args))
+        request = m.CollectRequest(measured_s=time.time(), camera=args.camera,
+                                   count=args.count or settings.count,
+                                   timeout_s=args.timeout or settings.timeout_s)
+    except (ConfigError, ValueError) as err:
+        print(f"stb calib collect: {err}", file=sys.stderr)
+        return EXIT_CONFIG
+    configure_logging("WARNING")
+    try:
+        session = open_session(settings.zenoh_settings())
+    except BusUnreachable as err:
+        print(f"stb calib collect: {err}", file=sys.stderr)
+        return EXIT_NO_SERVICE
+    bus = Bus(session, settings.bus)
+    stop = threading.Event()
+    restore = stop_on_signals(stop)
+    try:
+        return _collect(bus, request, stop)
+    finally:
+        restore()
+        bus.close()
+        session.close()
+
+
+def _collect(bus: Bus, request: m.CollectRequest, stop: threading.Event) -> int:
+    alive = list(bus.session.liveliness().get(
+        keys.alive_key(bus.prefix, "calib", "*"), timeout=2.0))
+    if not any(r.ok is not None for r in alive):
+        print("stb calib collect: no calib service is running (start it: stb calib, or stb up)",
+              file=sys.stderr)
+        return EXIT_NO_SERVICE
+    updates: queue.Queue[m.CollectProgress] = queue.Queue()
+    bus.subscribe(keys.CALIB_PROGRESS, updates.put, latest=False, camera=request.camera)
+    time.sleep(0.2)  # let the subscription reach the router before the request goes out
+    bus.publish(keys.CALIB_COLLECT, request, camera=request.camera)
+    interactive = sys.stdout.isatty()
+    last = None
+    while True:
+        if stop.is_set():
+            bus.publish(keys.CALIB_COLLECT, request.model_copy(
+                update={"action": "cancel", "measured_s": time.time()}), camera=request.camera)
+            stop.clear()
+        try:
+            progress = updates.get(timeout=0.5)
+        except queue.Empty:
+            continue
+        line = _line(progress)
+        if line != last:
+            print(("\r" + line + "\x1b[K") if interactive else line, end="" if interactive
+                  and progress.state not in FINAL else "\n", flush=True)
+            last = line
+        if progress.state in FINAL:
+            return 0 if progress.state == "done" else EXIT_FAILED
+
+
+def _line(p: m.CollectProgress) -> str:
+    if p.state == "collecting":
+        width = 30
+        filled = int(width * p.passpoints / max(p.target, 1))
+        skipped = ", ".join(f"{n} {why}" for why, n in sorted(p.skipped.items())) or "none"
+        return (f"{p.camera}: [{'#' * filled}{'.' * (width - filled)}] {p.passpoints}/{p.target}"
+                f" passpoints from {p.snapshots} snapshots (skipped: {skipped})")
+    if p.state == "solving":
+        return f"{p.camera}: solving from {p.passpoints} passpoints…"
+    if p.state == "done":
+        return f"{p.camera}: done — {p.mean_error_px:.2f} px mean error; {p.message}"
+    return f"{p.camera}: {p.state} — {p.message}"

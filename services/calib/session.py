@@ -1,0 +1,209 @@
+"""One passpoint collection for one camera: calibration mode on, passpoints in, pose out.
+
+Runs in its own thread; the bus handlers hand it mocap frames, detections, snapshots and
+camera states. Detections wait until the mocap stream has passed their capture time, so that
+the marker's position is interpolated, never extrapolated.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import OrderedDict, deque
+from collections.abc import Callable
+
+import cv2
+
+from common import keys
+from common import messages as m
+from common.camera import mount_pose
+from common.markers import Detection, annotate, marker_of
+from common.node import Node
+from services.calib.collect import Collector
+from services.calib.passpoints import CalibrationError
+from services.calib.settings import CalibSettings
+from services.calib.solve import Options, solve
+from services.calib.store import PoseStore
+from services.ptz.camera import decode_jpeg
+
+log = logging.getLogger(__name__)
+TICK_S = 0.05
+PROGRESS_S = 0.5
+MOCAP_WAIT_S = 1.0
+SNAPSHOTS_KEPT = 30
+
+
+class Session:
+    def __init__(self, node: Node, settings: CalibSettings, store: PoseStore, camera: str,
+                 count: int, timeout_s: float,
+                 on_pose: Callable[[m.CameraPose], None]) -> None:
+        self.node, self.settings, self.store, self.camera = node, settings, store, camera
+        self.timeout_s, self.on_pose = timeout_s, on_pose
+        self.collector = Collector(count, settings.marker_label, settings.min_spacing_mm)
+        self.lock = threading.Lock()
+        self.running = True
+        self.state: m.CollectState = "collecting"
+        self.message = ""
+        self.mean_error_px: float | None = None
+        self._cancel = threading.Event()
+        self._pending: deque[m.MarkerDetections] = deque(maxlen=200)
+        self._snapshots: OrderedDict[float, bytes] = OrderedDict()
+        self._camera_state: m.PtzState | None = None
+        self._started = time.time()
+
+    # --- fed by bus handlers -----------------------------------------------------------------
+
+    def on_frame(self, msg: m.MarkerFrame) -> None:
+        with self.lock:
+            self.collector.on_frame(msg)
+
+    def on_detections(self, msg: m.MarkerDetections) -> None:
+        if msg.measured_s >= self._started:
+            with self.lock:
+                self._pending.append(msg)
+
+    def on_snapshot(self, msg: m.CameraFrame) -> None:
+        with self.lock:
+            self._snapshots[msg.measured_s] = msg.data
+            while len(self._snapshots) > SNAPSHOTS_KEPT:
+                self._snapshots.popitem(last=False)
+
+    def on_state(self, msg: m.PtzState) -> None:
+        if msg.status == "calibrating" and msg.measured_s >= self._started:
+            self._camera_state = msg
+
+    def cancel(self) -> None:
+        self._cancel.set()
+
+    # --- the run -----------------------------------------------------------------------------
+
+    def run(self) -> None:
+        try:
+            finished = self._collect()
+        finally:
+            self._calibration_mode(active=False)
+        try:
+            if finished:
+                self._solve()
+        except Exception as err:  # noqa: BLE001 - a failed solve must not kill the service
+            log.exception("%s: solving failed", self.camera)
+            self._finish("failed", f"solving failed: {err}")
+        self.running = False
+
+    def _collect(self) -> bool:
+        deadline = self._started + self.timeout_s
+        renew_at = progress_at = 0.0
+        while not self.node.stop.is_set():
+            now = time.time()
+            if self._cancel.is_set():
+                self._finish("cancelled", "cancelled")
+                return False
+            if now > deadline:
+                self._finish("failed", f"timed out after {self.timeout_s:g} s with "
+                             f"{len(self.collector.times)} of {self.collector.target} "
+                             f"passpoints ({self._skipped_text()})")
+                return False
+            if now >= renew_at:
+                self._calibration_mode(active=True)
+                renew_at = now + self.settings.lease_s / 3
+            self._take_pending(now)
+            if self.collector.done:
+                return True
+            if now >= progress_at:
+                self.publish_progress()
+                progress_at = now + PROGRESS_S
+            time.sleep(TICK_S)
+        return False
+
+    def _take_pending(self, now: float) -> None:
+        with self.lock:
+            while self._pending:
+                msg = self._pending[0]
+                if not self.collector.track_covers(msg.measured_s) and \
+                        now - msg.measured_s < MOCAP_WAIT_S:
+                    break
+                self._pending.popleft()
+                if self.collector.done:
+                    continue
+                if self.collector.on_detections(msg) is None:
+                    self._keep_image(msg, len(self.collector.times) - 1)
+
+    def _keep_image(self, msg: m.MarkerDetections, index: int) -> None:
+        jpeg = self._snapshots.get(msg.measured_s)
+        if jpeg is None:
+            return
+        try:
+            image = decode_jpeg(jpeg, self.camera)
+        except Exception:  # noqa: BLE001 - an image that does not decode is just not kept
+            return
+        u, v = self.collector.pixels[index]
+        markers = tuple(marker_of(d) for d in msg.markers)
+        chosen = tuple(mk for mk in markers if mk.u == u and mk.v == v)
+        drawn = annotate(image, Detection(msg.status, msg.threshold, chosen, markers))
+        cv2.imwrite(str(self.store.image_dir(self.camera) / f"{index:03d}.jpg"), drawn)
+
+    def _solve(self) -> None:
+        state = self._camera_state
+        if state is None:
+            self._finish("failed", "the camera never reported being in calibration mode")
+            return
+        self.state = "solving"
+        self.publish_progress()
+        with self.lock:
+            points, track = self.collector.passpoints(), self.collector.track()
+        self.store.save_inputs(self.camera, points, track)
+        s = self.settings
+        options = Options(focal_mm=state.focal_mm, fit_focal=s.fit_focal, track=track,
+                          max_time_offset_s=s.max_time_offset_s, inlier_px=s.inlier_px,
+                          max_mean_error_px=s.max_mean_error_px)
+        try:
+            solution = solve(points, options)
+        except CalibrationError as err:
+            self._finish("failed", str(err))
+            return
+        mount = mount_pose(solution.pose, state.pan_deg, state.tilt_deg)
+        pose = m.CameraPose(
+            measured_s=time.time(), camera=self.camera, x_mm=mount.x_mm, y_mm=mount.y_mm,
+            z_mm=mount.z_mm, rx_deg=mount.rx_deg, ry_deg=mount.ry_deg, rz_deg=mount.rz_deg,
+            focal_mm=solution.focal_mm, mean_error_px=solution.mean_error_px,
+            passpoints=len(solution.inliers), time_offset_s=solution.time_offset_s or 0.0)
+        report = solution.report() | {"pan_deg": state.pan_deg, "tilt_deg": state.tilt_deg,
+                                      "zoom": state.zoom}
+        self.store.save(pose, report)
+        self.on_pose(pose)
+        self.mean_error_px = solution.mean_error_px
+        rejected = report["rejected"]
+        self._finish("done", f"{len(solution.inliers)} passpoints, {len(rejected)} rejected, "
+                     f"clock offset {1e3 * (solution.time_offset_s or 0.0):.0f} ms")
+        log.info("%s: pose (%.0f, %.0f, %.0f) mm, (%.2f, %.2f, %.2f)°, %.2f px", self.camera,
+                 mount.x_mm, mount.y_mm, mount.z_mm, mount.rx_deg, mount.ry_deg, mount.rz_deg,
+                 solution.mean_error_px)
+
+    # --- the bus side ------------------------------------------------------------------------
+
+    def _calibration_mode(self, active: bool) -> None:
+        hold = self.settings.hold.get(self.camera)
+        self.node.bus.publish(keys.PTZ_CALIBRATION, m.CalibrationMode(
+            measured_s=time.time(), camera=self.camera, active=active,
+            pan_deg=hold.pan_deg if hold else None, tilt_deg=hold.tilt_deg if hold else None,
+            zoom=hold.zoom if hold else None, lease_s=self.settings.lease_s),
+            camera=self.camera)
+
+    def _finish(self, state: m.CollectState, message: str) -> None:
+        self.state, self.message = state, message
+        (log.info if state == "done" else log.warning)("%s: collection %s: %s", self.camera,
+                                                       state, message)
+        self.publish_progress()
+
+    def publish_progress(self) -> None:
+        c = self.collector
+        self.node.bus.publish(keys.CALIB_PROGRESS, m.CollectProgress(
+            measured_s=time.time(), camera=self.camera, state=self.state,
+            passpoints=len(c.times), target=c.target, snapshots=c.snapshots,
+            skipped=dict(c.skipped), message=self.message[:500],
+            mean_error_px=self.mean_error_px), camera=self.camera)
+
+    def _skipped_text(self) -> str:
+        skipped = self.collector.skipped
+        return ", ".join(f"{n} {why}" for why, n in skipped.most_common()) or "none skipped"

@@ -1,0 +1,41 @@
+"""Calib settings: which cameras, where poses and passpoints are kept, how to collect."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from common.settings import ServiceSettings
+
+
+class Hold(BaseModel):
+    """Where a camera is held while passpoints are collected (None: where it is)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    pan_deg: float | None = Field(None, ge=-180, le=180)
+    tilt_deg: float | None = Field(None, ge=-90, le=90)
+    zoom: int | None = Field(None, ge=1, le=19999)
+
+
+class CalibSettings(ServiceSettings):
+    section = "calib"
+
+    cameras: list[str] = Field(["ptz1", "ptz2"], description="cameras this service calibrates")
+    data_dir: Path = Field(Path("run/calib"), description="poses, passpoints and images")
+    collect_missing: bool = Field(False, description="at start, collect for every camera "
+                                  "without a stored pose (the demo does)")
+    marker_label: str = Field("wand", description='mocap label of the calibration marker; "" = '
+                              "the unlabelled marker that moves")
+    count: int = Field(100, ge=6, le=10_000, description="passpoints per collection")
+    timeout_s: float = Field(600.0, gt=0, description="a collection gives up after this long")
+    min_spacing_mm: float = Field(50.0, ge=0, description="a passpoint needs the marker this "
+                                  "far from the previous one")
+    hold: dict[str, Hold] = Field(default_factory=dict, description="per camera: pan, tilt, "
+                                  "zoom during collection")
+    fit_focal: bool = False
+    inlier_px: float = Field(10.0, gt=0)
+    max_time_offset_s: float = Field(0.5, ge=0, le=5)
+    max_mean_error_px: float = Field(20.0, gt=0)
+    lease_s: float = Field(3.0, gt=0, le=60, description="calibration mode lease on a camera")

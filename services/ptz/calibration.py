@@ -1,0 +1,81 @@
+"""Calibration mode of a PTZ camera (paper §2.1): held still, IR cut filter off, every snapshot
+run through the marker detector and published with its capture time.
+
+A collector asks for the mode with ``CalibrationMode`` requests and renews them; the mode ends
+when it says so or its lease runs out, so a collector that dies frees the camera. Detections
+are published only while the camera stands still (its position unchanged since the previous
+snapshot), so that no passpoint comes from a moving camera.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from common import messages as m
+from common.markers import detect, to_message
+from services.ptz.camera import PtzCamera, decode_jpeg
+
+log = logging.getLogger(__name__)
+STILL_DEG = 0.01
+
+
+@dataclass
+class CalibrationMode:
+    camera: PtzCamera
+    publish_detections: Callable[[m.MarkerDetections], None]
+    publish_snapshot: Callable[[m.CameraFrame], None]
+    max_markers: int = 8
+    request: m.CalibrationMode | None = None
+    expires_at: float = 0.0
+    _last_position: tuple[float, float, int] | None = None
+    _seq: int = 0
+
+    def active(self, now: float) -> bool:
+        return self.request is not None and now < self.expires_at
+
+    def on_request(self, msg: m.CalibrationMode, now: float) -> None:
+        """Enter, renew or leave the mode. Camera errors propagate (PtzError)."""
+        if not msg.active:
+            if self.request is not None:
+                self.leave()
+            return
+        entering = not self.active(now)
+        self.request, self.expires_at = msg, now + msg.lease_s
+        if entering:
+            log.info("%s: calibration mode (pan %s, tilt %s, zoom %s)", self.camera.name,
+                     msg.pan_deg, msg.tilt_deg, msg.zoom)
+            self._last_position = None
+            self.camera.set_ir_cut_filter("off")
+            if msg.pan_deg is not None or msg.tilt_deg is not None or msg.zoom is not None:
+                self.camera.move_to(msg.pan_deg, msg.tilt_deg, msg.zoom)
+
+    def leave(self) -> None:
+        log.info("%s: calibration mode ends", self.camera.name)
+        self.request = None
+        self.camera.set_ir_cut_filter("auto")
+
+    def cycle(self) -> None:
+        """One snapshot: detect, publish the image and — if the camera stood still — the
+        detections. Camera errors propagate (PtzError)."""
+        captured = time.time()
+        jpeg = self.camera.snapshot_jpeg()
+        position = self.camera.position()
+        now_position = (position.pan_deg, position.tilt_deg, position.zoom)
+        still = self._last_position is not None and (
+            abs(now_position[0] - self._last_position[0]) < STILL_DEG
+            and abs(now_position[1] - self._last_position[1]) < STILL_DEG
+            and now_position[2] == self._last_position[2])
+        self._last_position = now_position
+        image = decode_jpeg(jpeg, self.camera.name)
+        height, width = image.shape
+        self._seq += 1
+        self.publish_snapshot(m.CameraFrame(measured_s=captured, camera=self.camera.name,
+                                            seq=self._seq, width_px=width, height_px=height,
+                                            encoding="jpeg", data=jpeg))
+        if still:
+            result = detect(image, max_markers=self.max_markers)
+            self.publish_detections(to_message(result, self.camera.name, captured, width,
+                                               height))
