@@ -16,7 +16,7 @@ setup: $(STAMP)
 
 ## The whole local lab (router + every service that exists) with a live view; Ctrl-C stops it.
 demo: $(STAMP)
-	$(BIN)/stb up $(if $(LAB),--lab $(LAB),)
+	$(BIN)/stb up --lab $(or $(LAB),config/demo.toml)
 
 ## Lint, then the full test suite.
 test: $(STAMP)
