@@ -48,8 +48,14 @@ def refine_jointly(pose: Pose, points: Passpoints, intr: Intrinsics, *, fit_foca
                    track: Track | None = None, time_offset_s: float = 0.0) -> JointFit:
     """Least squares over the pose and, as asked, the focal length and the clock offset."""
     fit_offset = track is not None
-    if fit_offset and points.times_s is None:
-        raise ValueError("a clock offset needs passpoint times")
+    if fit_offset:
+        if points.times_s is None:
+            raise ValueError("a clock offset needs passpoint times")
+        # UNIX times carry ~0.2 µs resolution: too coarse for the finite differences that
+        # give the offset's derivative, so work in seconds since the first passpoint
+        t0 = float(points.times_s.min())
+        points = Passpoints(points.world_mm, points.pixels, points.times_s - t0)
+        track = Track(track.times_s - t0, track.xyz_mm)
     start = np.concatenate([Rotation.from_matrix(pose.rotation).as_rotvec(), pose.position,
                             [intr.focal_mm] if fit_focal else [],
                             [time_offset_s] if fit_offset else []])

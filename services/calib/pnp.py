@@ -79,3 +79,26 @@ def robust_refine(pose: Pose, world_mm: np.ndarray, pixels: np.ndarray, intr: In
             break
         inliers = again
     return pose, inliers
+
+
+def pose_std(pose: Pose, world_mm: np.ndarray, pixels: np.ndarray, intr: Intrinsics
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """1-σ uncertainty of a fitted pose from the residual scatter and the geometry
+    (σ² (JᵀJ)⁻¹): position (mm, world axes) and rotation (deg, about world axes). Large values
+    mean the passpoints do not pin the pose down (too few, or bunched in a small volume)."""
+    def residuals(delta: np.ndarray) -> np.ndarray:
+        turn = cv2.Rodrigues(delta[:3])[0]
+        moved = Pose.from_matrix(turn @ pose.rotation, pose.position + delta[3:])
+        return (project(world_mm, moved, intr) - pixels).ravel()
+
+    base = residuals(np.zeros(6))
+    steps = np.array([1e-6, 1e-6, 1e-6, 1e-3, 1e-3, 1e-3])
+    jacobian = np.column_stack([(residuals(np.eye(6)[i] * steps[i]) - base) / steps[i]
+                                for i in range(6)])
+    dof = max(base.size - 6, 1)
+    try:
+        covariance = (base @ base / dof) * np.linalg.inv(jacobian.T @ jacobian)
+    except np.linalg.LinAlgError:
+        return np.full(3, np.inf), np.full(3, np.inf)
+    std = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    return std[3:], np.degrees(std[:3])

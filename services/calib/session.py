@@ -14,6 +14,7 @@ from collections import OrderedDict, deque
 from collections.abc import Callable
 
 import cv2
+import numpy as np
 
 from common import keys
 from common import messages as m
@@ -174,8 +175,10 @@ class Session:
         self.on_pose(pose)
         self.mean_error_px = solution.mean_error_px
         rejected = report["rejected"]
+        spread = float(np.max(solution.position_std_mm))
         self._finish("done", f"{len(solution.inliers)} passpoints, {len(rejected)} rejected, "
-                     f"clock offset {1e3 * (solution.time_offset_s or 0.0):.0f} ms")
+                     f"position ±{spread:.1f} mm (1σ), "
+                     f"clock offset {1e3 * (solution.time_offset_s or 0.0):.1f} ms")
         log.info("%s: pose (%.0f, %.0f, %.0f) mm, (%.2f, %.2f, %.2f)°, %.2f px", self.camera,
                  mount.x_mm, mount.y_mm, mount.z_mm, mount.rx_deg, mount.ry_deg, mount.rz_deg,
                  solution.mean_error_px)

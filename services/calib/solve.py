@@ -23,7 +23,7 @@ from common.camera import Intrinsics, Pose
 from services.calib.cost import Fitness
 from services.calib.joint import best_offset_on_grid, refine_jointly
 from services.calib.passpoints import CalibrationError, Passpoints, Track
-from services.calib.pnp import ransac_seed, reprojection_px, robust_refine
+from services.calib.pnp import pose_std, ransac_seed, reprojection_px, robust_refine
 from services.calib.search import search
 
 Method = Literal["auto", "cmaes", "simplex"]
@@ -59,6 +59,8 @@ class Solution:
     method: str
     world_mm: np.ndarray  # the marker positions the pose was fitted to (track at the offset)
     time_offset_s: float | None = None
+    position_std_mm: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    orientation_std_deg: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
     fitness_curve: list[tuple[int, float]] = field(default_factory=list)
 
     def report(self) -> dict:
@@ -74,6 +76,8 @@ class Solution:
             "rejected": sorted(set(range(len(self.residuals_px))) - set(self.inliers.tolist())),
             "method": self.method,
             "focal_mm": round(self.focal_mm, 4),
+            "position_std_mm": [round(float(v), 3) for v in self.position_std_mm],
+            "orientation_std_deg": [round(float(v), 5) for v in self.orientation_std_deg],
         }
         if self.time_offset_s is not None:
             out["time_offset_s"] = round(self.time_offset_s, 5)
@@ -102,9 +106,14 @@ def solve(points: Passpoints, options: Options = Options()) -> Solution:
         assert points.times_s is not None
         points = points.with_world(options.track.at(points.times_s + (offset or 0.0)))
     residuals = reprojection_px(pose, points.world_mm, points.pixels, intr)
+    position_std, orientation_std = (pose_std(pose, points.world_mm[inliers],
+                                              points.pixels[inliers], intr)
+                                     if len(inliers) > MIN_PASSPOINTS else
+                                     (np.full(3, np.inf), np.full(3, np.inf)))
     solution = Solution(pose, intr.focal_mm, float(np.mean(residuals[inliers])) if len(inliers)
                         else np.inf, evaluations, time.perf_counter() - started, inliers,
-                        residuals, options.method, points.world_mm, offset, curve)
+                        residuals, options.method, points.world_mm, offset, position_std,
+                        orientation_std, curve)
     check_result(solution, points, options)
     return solution
 

@@ -86,6 +86,8 @@ def _human(report: dict) -> str:
     rx, ry, rz = report["orientation_deg"]
     lines = [f"position    {x:9.1f} {y:9.1f} {z:9.1f} mm",
              f"orientation {rx:9.3f} {ry:9.3f} {rz:9.3f} deg (R = Rx·Ry·Rz)",
+             "1σ          ±{:.1f} ±{:.1f} ±{:.1f} mm, ±{:.3f} ±{:.3f} ±{:.3f} deg".format(
+                 *report["position_std_mm"], *report["orientation_std_deg"]),
              f"focal       {report['focal_mm']:.3f} mm",
              f"error       {report['mean_error_px']:.2f} px mean over "
              f"{len(report['inliers'])} inliers; rejected {report['rejected'] or 'none'}",

@@ -4,7 +4,7 @@ run through the marker detector and published with its capture time.
 A collector asks for the mode with ``CalibrationMode`` requests and renews them; the mode ends
 when it says so or its lease runs out, so a collector that dies frees the camera. Detections
 are published only while the camera stands still (its position unchanged since the previous
-snapshot), so that no passpoint comes from a moving camera.
+snapshot, and where the request holds it), so that no passpoint comes from a moving camera.
 """
 
 from __future__ import annotations
@@ -20,6 +20,11 @@ from services.ptz.camera import PtzCamera, decode_jpeg
 
 log = logging.getLogger(__name__)
 STILL_DEG = 0.01
+AT_TARGET_DEG = 0.05
+
+
+def _wrap(angle_deg: float) -> float:
+    return (angle_deg + 180.0) % 360.0 - 180.0
 
 
 @dataclass
@@ -52,6 +57,16 @@ class CalibrationMode:
             if msg.pan_deg is not None or msg.tilt_deg is not None or msg.zoom is not None:
                 self.camera.move_to(msg.pan_deg, msg.tilt_deg, msg.zoom)
 
+    def _at_requested(self, pan: float, tilt: float, zoom: int) -> bool:
+        """True once the camera stands where the request holds it (a move takes effect only
+        after the camera's command latency: standing still is not enough)."""
+        r = self.request
+        if r is None:
+            return False
+        return ((r.pan_deg is None or abs(_wrap(pan - r.pan_deg)) < AT_TARGET_DEG)
+                and (r.tilt_deg is None or abs(tilt - r.tilt_deg) < AT_TARGET_DEG)
+                and (r.zoom is None or zoom == r.zoom))
+
     def leave(self) -> None:
         log.info("%s: calibration mode ends", self.camera.name)
         self.request = None
@@ -69,6 +84,7 @@ class CalibrationMode:
             and abs(now_position[1] - self._last_position[1]) < STILL_DEG
             and now_position[2] == self._last_position[2])
         self._last_position = now_position
+        still = still and self._at_requested(*now_position)
         image = decode_jpeg(jpeg, self.camera.name)
         height, width = image.shape
         self._seq += 1

@@ -74,6 +74,17 @@ def test_ten_percent_wrong_passpoints_are_rejected_and_reported(method: str) -> 
         assert errors(opencv_pnp_lm(points), truth)[0] > position, "OpenCV alone is fooled"
 
 
+def test_reported_uncertainty_matches_the_scatter_of_repeated_fits() -> None:
+    fits, predicted = [], []
+    for seed in range(30):
+        points, _ = passpoints(PAPER_POSE, np.random.default_rng(100 + seed))
+        solution = solve(points)
+        fits.append(solution.pose.position - PAPER_POSE.position)
+        predicted.append(solution.position_std_mm)
+    ratio = np.std(fits, axis=0) / np.mean(predicted, axis=0)
+    assert np.all((ratio > 0.6) & (ratio < 1.6)), ratio
+
+
 @pytest.mark.parametrize("method", ["auto", "cmaes"])
 def test_focal_length_fitted_within_2_percent(method: str) -> None:
     for focal in (3.8, 6.5, 12.0):

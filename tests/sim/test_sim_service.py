@@ -29,6 +29,8 @@ def write_lab(tmp_path: Path, router_endpoint: str, crater_file: Path) -> tuple[
 connect = ["{router_endpoint}"]
 [tracker]
 qtm_port = {ports["mocap"]}
+[calib]
+data_dir = "{tmp_path / 'calib'}"
 [ptz.cameras.ptz1]
 url = "http://127.0.0.1:{ports["ptz1"]}"
 [ptz.cameras.ptz2]
