@@ -125,3 +125,39 @@ def test_positions_far_outside_the_crater_are_ignored(service: dict) -> None:
         time.sleep(0.05)
     wait_for(lambda: states and states[-1].status == "tracking")
     assert states[-1].pan_deg == 0.0 and states[-1].tilt_deg == 0.0
+
+
+def test_calibration_mode_holds_still_detects_and_ends_with_its_lease(service: dict) -> None:
+    from common.camera import Intrinsics, head_pose, project
+
+    server = _camera_server(service["port"])
+    service["servers"].append(server)
+    service["thread"].start()
+    world, states = service["world"], service["states"]
+    detections: list[m.MarkerDetections] = []
+    snapshots: list[m.CameraFrame] = []
+    world.subscribe(keys.PTZ_DETECTIONS, detections.append, latest=False, camera="ptz1")
+    world.subscribe(keys.PTZ_SNAPSHOT, snapshots.append, latest=False, camera="ptz1")
+    wait_for(lambda: states)
+    held = (-4.0, 3.0)
+
+    def renew() -> bool:  # as a collector does, until it has what it needs
+        world.publish(keys.PTZ_CALIBRATION, m.CalibrationMode(
+            measured_s=time.time(), camera="ptz1", active=True, pan_deg=held[0],
+            tilt_deg=held[1], zoom=1, lease_s=1.0), camera="ptz1")
+        return len(detections) >= 5
+
+    wait_for(renew, timeout=10, period=0.3)
+    assert server.camera.head.ir_cut_filter == "off"
+    assert any(s.status == "calibrating" for s in states)
+    expected = project(TARGET[None, :], head_pose(MOUNT, *held), Intrinsics(3.8))[0]
+    for d in detections:  # none from before the camera stood where it was held
+        (marker,) = d.markers
+        assert abs(marker.u_px - expected[0]) < 1.0 and abs(marker.v_px - expected[1]) < 1.0
+    assert {d.measured_s for d in detections} <= {s.measured_s for s in snapshots}
+    assert snapshots[-1].encoding == "jpeg" and snapshots[-1].data[:2] == b"\xff\xd8"
+    wait_for(lambda: states[-1].status == "waiting_for_pose", timeout=4)  # lease ran out
+    assert server.camera.head.ir_cut_filter == "auto"
+    count = len(detections)
+    time.sleep(0.5)
+    assert len(detections) == count, "no more snapshots once the mode has ended"

@@ -1,0 +1,130 @@
+"""``stb calib solve`` from files, and the collector's pairing rules (pure)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from common import messages as m
+from common.camera import Intrinsics, project
+from services.calib.collect import Collector
+from services.calib.passpoints import Passpoints, format_passpoints, write_passpoints
+from services.calib.solve_cli import main
+from services.calib.synthetic import PAPER_GUESS, PAPER_POSE, moving_marker, passpoints
+from tests.calib.test_solve import errors
+
+
+def _write_track(path: Path, times: np.ndarray, xyz: np.ndarray) -> None:
+    rows = "\n".join(f"{t:.6f},{x:.3f},{y:.3f},{z:.3f}" for t, (x, y, z) in zip(times, xyz,
+                                                                                strict=True))
+    path.write_text("t,X,Y,Z\n" + rows + "\n")
+
+
+def test_solve_cli_prints_the_promised_json_and_plots(tmp_path: Path, capsys) -> None:  # noqa: ANN001
+    points, wrong = passpoints(PAPER_POSE, np.random.default_rng(4), wrong_fraction=0.05)
+    csv = tmp_path / "pp.csv"
+    write_passpoints(csv, points)
+    initial = ",".join(str(v) for v in (*PAPER_GUESS.position, PAPER_GUESS.rx_deg,
+                                        PAPER_GUESS.ry_deg, PAPER_GUESS.rz_deg))
+    code = main([str(csv), "--initial", initial, "--method", "cmaes", "--plot",
+                 str(tmp_path / "plots"), "--json"])
+    report = json.loads(capsys.readouterr().out)
+    assert code == 0
+    assert set(report) >= {"position_mm", "orientation_deg", "mean_error_px", "evaluations",
+                           "seconds", "inliers", "focal_mm"}
+    assert "time_offset_s" not in report, "only when a track is given"
+    assert report["rejected"] == wrong.tolist()
+    from common.camera import Pose
+
+    fitted = Pose(*report["position_mm"], *report["orientation_deg"])
+    assert errors(fitted, PAPER_POSE)[0] < 10.0
+    for name in ("fitness.png", "residuals.png"):
+        assert (tmp_path / "plots" / name).read_bytes()[:4] == b"\x89PNG"
+
+
+def test_solve_cli_with_a_track_and_a_fitted_focal_length(tmp_path: Path, capsys) -> None:  # noqa: ANN001
+    points, track = moving_marker(PAPER_POSE, np.random.default_rng(1), count=150,
+                                  speed_mm_s=800.0, offset_s=0.1)
+    csv, track_csv = tmp_path / "pp.csv", tmp_path / "track.csv"
+    csv.write_text(format_passpoints(points))
+    _write_track(track_csv, track.times_s, track.xyz_mm)
+    assert main([str(csv), "--mocap-track", str(track_csv), "--fit-focal", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert abs(report["time_offset_s"] - 0.1) < 0.01
+    assert abs(report["focal_mm"] / 3.8 - 1) < 0.02
+
+
+@pytest.mark.parametrize(("content", "args", "code", "message"), [
+    ("X,Y,u,v\n1,2,3,4\n", [], 2, "lacks Z"),
+    ("X,Y,Z,u,v\n1,2,3,4,five\n", [], 2, "row 2"),
+    ("X,Y,Z,u,v\n1,2,3,4,5\n", [], 3, "at least 6"),
+    ("X,Y,Z,u,v\n1,2,3,4,5\n", ["--initial", "1,2,3"], 2, "six numbers"),
+    ("X,Y,Z,u,v\n1,2,3,4,5\n", ["--mocap-track", "/nonexistent.csv"], 2, "cannot read"),
+])
+def test_solve_cli_errors_name_the_problem(tmp_path: Path, capsys, content: str,  # noqa: ANN001
+                                           args: list[str], code: int, message: str) -> None:
+    csv = tmp_path / "pp.csv"
+    csv.write_text(content)
+    assert main([str(csv), *args]) == code
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
+# --- the collector -----------------------------------------------------------------------------
+
+STATIC_PX = (120.0, 80.0)
+
+
+def _frame(t: float, wand: np.ndarray | None) -> m.MarkerFrame:
+    markers = [m.Marker(label="static_1", x_mm=0.0, y_mm=0.0, z_mm=0.0)]
+    if wand is not None:
+        markers.append(m.Marker(label="wand", x_mm=wand[0], y_mm=wand[1], z_mm=wand[2]))
+    return m.MarkerFrame(measured_s=t, frame=int(t * 100), markers=markers)
+
+
+def _detections(t: float, spots: list[tuple[float, float]]) -> m.MarkerDetections:
+    return m.MarkerDetections(
+        measured_s=t, camera="ptz1", status="ok", threshold=230, width_px=704, height_px=576,
+        markers=[m.DetectedMarker(u_px=u, v_px=v, radius_long_px=3, radius_short_px=3,
+                                  angle_deg=0, roundness=1.0, area_px=28) for u, v in spots])
+
+
+def test_collector_interpolates_the_wand_and_ignores_what_stays_put() -> None:
+    intr = Intrinsics(3.8)
+    collector = Collector(target=1000, marker_label="wand", min_spacing_mm=50.0)
+
+    def wand_at(t: float) -> np.ndarray:  # 500 mm/s along a slanted line in view
+        return np.array([-1000.0 + 300 * t, -800.0 + 400 * t, 300.0 + 50 * t])
+
+    reasons = []
+    for i in range(800):  # mocap at 100 Hz, a snapshot every 0.1 s (+ 37 ms)
+        t = i / 100
+        collector.on_frame(_frame(t, wand_at(t)))
+        if i % 10 == 0 and i > 10:
+            shot = t - 0.063
+            wand_px = project(wand_at(shot)[None, :], PAPER_POSE, intr)[0]
+            reasons.append(collector.on_detections(_detections(
+                shot, [STATIC_PX, (float(wand_px[0]), float(wand_px[1]))])))
+    assert reasons[:4] == ["too many"] * 4, "until a spot has stood still while the wand moved"
+    accepted = [r for r in reasons if r is None]
+    assert len(accepted) >= len(reasons) - 10
+    points = collector.passpoints()
+    for t, xyz in zip(points.times_s, points.world_mm, strict=True):
+        assert np.allclose(xyz, wand_at(t), atol=1e-6), "interpolated at the capture time"
+    assert collector.on_detections(_detections(7.9, [STATIC_PX])) == "no marker"
+    assert collector.on_detections(_detections(20.0, [(300.0, 300.0)])) == \
+        "marker not in mocap"
+    assert isinstance(collector.passpoints(), Passpoints)
+
+
+def test_collector_skips_a_marker_that_has_not_moved() -> None:
+    collector = Collector(target=10, marker_label="wand", min_spacing_mm=50.0)
+    for i in range(300):
+        collector.on_frame(_frame(i / 100, np.array([100.0, 200.0, 300.0 + (i > 200) * 80])))
+    assert collector.on_detections(_detections(1.0, [(300.0, 300.0)])) is None
+    assert collector.on_detections(_detections(1.5, [(300.0, 300.0)])) == "not moved"
+    assert collector.on_detections(_detections(2.5, [(300.0, 310.0)])) is None
+    assert collector.skipped == {"not moved": 1}
