@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from typing import Literal
 
-import cma
 import numpy as np
 from scipy.optimize import minimize
 
@@ -22,6 +21,8 @@ MAX_EVALUATIONS = 20_000
 
 def cmaes(fitness: Fitness, start: np.ndarray, seed: int, step: np.ndarray = STEP) -> np.ndarray:
     """Ask/tell CMA-ES, the population's cost evaluated at once; returns the best candidate."""
+    import cma  # 1 s to import (it pulls in matplotlib): only when asked for
+
     options = {"CMA_stds": list(step), "tolfun": TOLFUN_PX, "seed": seed,
                "maxfevals": MAX_EVALUATIONS, "verbose": -9, "verb_log": 0, "verb_disp": 0}
     es = cma.CMAEvolutionStrategy(list(start), 1.0, options)

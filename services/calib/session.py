@@ -24,7 +24,6 @@ from common.node import Node
 from services.calib.collect import Collector
 from services.calib.passpoints import CalibrationError
 from services.calib.settings import CalibSettings
-from services.calib.solve import Options, solve
 from services.calib.store import PoseStore
 from services.ptz.camera import decode_jpeg
 
@@ -154,6 +153,8 @@ class Session:
         with self.lock:
             points, track = self.collector.passpoints(), self.collector.track()
         self.store.save_inputs(self.camera, points, track)
+        from services.calib.solve import Options, solve  # scipy and OpenCV: only to solve
+
         s = self.settings
         options = Options(focal_mm=state.focal_mm, fit_focal=s.fit_focal, track=track,
                           max_time_offset_s=s.max_time_offset_s, inlier_px=s.inlier_px,
