@@ -29,19 +29,13 @@ import cma
 import cv2
 import numpy as np
 
-from common.camera import Intrinsics, Pose
+from common.camera import Intrinsics, Pose, pose_distance
 from services.calib.passpoints import Passpoints
 from services.calib.pnp import camera_matrix, pose_from_cv
 from services.calib.solve import Options, Solution, solve
 from services.calib.synthetic import PAPER_GUESS, PAPER_POSE, passpoints
 
 PAPER = {"cmaes": (0.08, 4446), "simplex": (0.04, None)}
-
-
-def pose_errors(estimate: Pose, truth: Pose) -> tuple[float, float]:
-    position = float(np.linalg.norm(estimate.position - truth.position))
-    relative = estimate.rotation.T @ truth.rotation
-    return position, float(np.degrees(np.arccos(np.clip((np.trace(relative) - 1) / 2, -1, 1))))
 
 
 def opencv_pnp(points: Passpoints) -> Pose:
@@ -87,7 +81,7 @@ def main() -> None:
                 pose, evaluations = fn(points)
                 times[name].append(time.perf_counter() - started)
                 if repeat == args.repeats - 1:  # runs are deterministic: keep the last
-                    mm, deg = pose_errors(pose, PAPER_POSE)
+                    mm, deg = pose_distance(pose, PAPER_POSE)
                     r = results[name]
                     r["evals"].append(evaluations)
                     r["mm"].append(mm)

@@ -131,6 +131,14 @@ def project(points_world: np.ndarray, pose: Pose, intr: Intrinsics) -> np.ndarra
     return project_camera(pose.to_camera(points_world), intr)
 
 
+def pose_distance(a: Pose, b: Pose) -> tuple[float, float]:
+    """How far apart two poses are: position (mm) and the angle of the rotation between them
+    (degrees) — what a calibration's accuracy is judged by."""
+    position = float(np.linalg.norm(a.position - b.position))
+    cos = (np.trace(a.rotation.T @ b.rotation) - 1) / 2
+    return position, float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+
+
 def head_pose(mount: Pose, pan_deg: float, tilt_deg: float) -> Pose:
     """A PTZ camera's pose at a pan and tilt: mount · Rz(pan) · Ry(tilt), where ``mount`` is
     its pose at pan = tilt = 0 (x optical axis, z down in the image: positive pan turns right,

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from common.camera import Intrinsics, Pose
+from common.camera import Intrinsics, Pose, pose_distance
 from services.calib.passpoints import CalibrationError, Passpoints
 from services.calib.pnp import camera_matrix, pose_from_cv
 from services.calib.solve import Options, solve
@@ -29,11 +29,7 @@ def rough_guess(truth: Pose) -> Pose:
                 truth.ry_deg + 15, truth.rz_deg + 15)
 
 
-def errors(estimate: Pose, truth: Pose) -> tuple[float, float]:
-    position = float(np.linalg.norm(estimate.position - truth.position))
-    relative = estimate.rotation.T @ truth.rotation
-    angle = float(np.degrees(np.arccos(np.clip((np.trace(relative) - 1) / 2, -1, 1))))
-    return position, angle
+errors = pose_distance
 
 
 def opencv_pnp_lm(points: Passpoints) -> Pose:
