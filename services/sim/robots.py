@@ -17,6 +17,8 @@ from services.sim.world import CraterMap
 Scenario = Literal["locomotive", "walker", "calibration"]
 SAMPLE_HZ = 100.0
 MARKER_DIAMETER_MM = 19.0
+MARKER_HEIGHT_MM = {"locomotive": 80.0, "walker": 350.0}
+"""How high above the ground each robot carries its marker (what the gantry's look-up needs)."""
 
 
 @dataclass(frozen=True)
@@ -77,7 +79,8 @@ class Oval:
 
 
 def locomotive(world: CraterMap, *, oval: Oval = Oval(), speed_mm_s: float = 290.0,
-               rounds: int = 5, accel_mm_s2: float = 300.0, marker_height_mm: float = 80.0,
+               rounds: int = 5, accel_mm_s2: float = 300.0,
+               marker_height_mm: float = MARKER_HEIGHT_MM["locomotive"],
                start_delay_s: float = 2.0) -> Trajectory:
     """Five rounds at ~29 cm/s, then a stop exactly at the start (paper §3.3)."""
     distance = rounds * oval.length_mm
@@ -102,7 +105,8 @@ def locomotive(world: CraterMap, *, oval: Oval = Oval(), speed_mm_s: float = 290
 def walker(world: CraterMap, rng: np.random.Generator, *, duration_s: float = 240.0,
            speed_mm_s: float = 60.0, step_hz: float = 0.8, sway_mm: float = 20.0,
            bob_mm: float = 8.0, slide_per_s: float = 0.04, slide_mm: tuple[float, float] =
-           (120.0, 300.0), steep_deg: float = 28.0, marker_height_mm: float = 350.0
+           (120.0, 300.0), steep_deg: float = 28.0,
+           marker_height_mm: float = MARKER_HEIGHT_MM["walker"]
            ) -> Trajectory:
     """Walks up and down the crater wall; its marker sways with every step, and on steep
     ground it now and then slides downhill (faster than it walks), as in paper §3.3."""

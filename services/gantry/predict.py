@@ -1,0 +1,186 @@
+"""Where the crane shall go next (paper §3.2; pure, seeded).
+
+A predictor is fed once per control period (4 Hz) with the robot's measured (x, y) — or None
+when the marker is lost — and returns the desired crane position, or None when it has nothing
+trustworthy to say (the safety layer then holds the crane).
+
+* ``basic`` — eq. 9–10: velocity from the last two measurements, one period ahead.
+* ``pf-position`` / ``pf-position-gauss`` — the particle filter of eq. 11 with the linear
+  (eq. 12) or a Gaussian perceptual model and systematic resampling; the desired position is
+  the mean of the believed particle positions.
+* ``pf-velocity`` — the same filter's weighted mean velocity in eq. 10.
+* ``default`` — ours: a constant-velocity Kalman filter (filterpy) whose prediction covers
+  the crane's reaction time plus one control period, bounded, with the velocity it uses
+  smoothed so that a robot's sway is not amplified.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal, Protocol
+
+import numpy as np
+from filterpy.common import Q_discrete_white_noise
+from filterpy.kalman import KalmanFilter
+from filterpy.monte_carlo import systematic_resample
+from scipy.linalg import block_diag
+
+AlgorithmName = Literal["basic", "pf-position", "pf-position-gauss", "pf-velocity", "default"]
+ALGORITHMS: tuple[AlgorithmName, ...] = ("basic", "pf-position", "pf-position-gauss",
+                                         "pf-velocity", "default")
+
+
+@dataclass(frozen=True)
+class Estimate:
+    position: np.ndarray  # (x, y) mm, filtered where the algorithm filters
+    velocity: np.ndarray  # (vx, vy) mm/s
+    desired: np.ndarray  # where the crane shall go
+
+
+class Predictor(Protocol):
+    name: AlgorithmName
+
+    def update(self, t_s: float, measured: np.ndarray | None) -> Estimate | None: ...
+
+
+@dataclass
+class Basic:
+    """Eq. 9–10."""
+
+    name: AlgorithmName = "basic"
+    _last: tuple[float, np.ndarray] | None = None
+
+    def update(self, t_s: float, measured: np.ndarray | None) -> Estimate | None:
+        if measured is None:
+            self._last = None
+            return None
+        z = np.asarray(measured, dtype=float)
+        if self._last is None or t_s <= self._last[0]:
+            self._last = (t_s, z)
+            return Estimate(z, np.zeros(2), z)
+        dt = t_s - self._last[0]
+        v = (z - self._last[1]) / dt  # eq. 9
+        self._last = (t_s, z)
+        return Estimate(z, v, z + v * dt)  # eq. 10
+
+
+@dataclass
+class ParticleFilter:
+    """Eq. 11–12. Particles carry a position and the (noisy) velocity they were moved with."""
+
+    name: AlgorithmName = "pf-position"
+    output: Literal["position", "velocity"] = "position"
+    model: Literal["linear", "gauss"] = "linear"
+    particles: int = 500
+    velocity_noise_mm_s: float = 40.0
+    diff_max_mm: float = 300.0  # eq. 12
+    gauss_sigma_mm: float = 60.0
+    seed: int = 0
+    _rng: np.random.Generator = field(init=False)
+    _pos: np.ndarray | None = None
+    _vel: np.ndarray | None = None
+    _last: tuple[float, np.ndarray] | None = None
+
+    def __post_init__(self) -> None:
+        self._rng = np.random.default_rng(self.seed)
+
+    def update(self, t_s: float, measured: np.ndarray | None) -> Estimate | None:
+        if measured is None:
+            self._pos = self._last = None
+            return None
+        z = np.asarray(measured, dtype=float)
+        if self._pos is None or self._last is None or t_s <= self._last[0]:
+            self._pos = z + self._rng.normal(0.0, 1.0, (self.particles, 2))
+            self._vel = np.zeros((self.particles, 2))
+            self._last = (t_s, z)
+            return Estimate(z, np.zeros(2), z)
+        dt = t_s - self._last[0]
+        v_measured = (z - self._last[1]) / dt  # eq. 9
+        self._last = (t_s, z)
+        weights = self._weights(np.hypot(*(self._pos - z).T))
+        if weights is None:  # every belief is far off: start again from the measurement
+            self._pos = None
+            return self.update(t_s, z)
+        assert self._vel is not None
+        v_filtered = weights @ self._vel
+        keep = systematic_resample(weights)
+        self._pos = self._pos[keep]
+        current = self._pos.mean(axis=0)
+        # eq. 11: move each particle with the measured velocity plus its own noise
+        self._vel = v_measured + self._rng.normal(0.0, self.velocity_noise_mm_s,
+                                                  (self.particles, 2))
+        self._pos = self._pos + self._vel * dt
+        if self.output == "velocity":
+            return Estimate(z, v_filtered, z + v_filtered * dt)
+        return Estimate(current, v_measured, self._pos.mean(axis=0))
+
+    def _weights(self, distance: np.ndarray) -> np.ndarray | None:
+        if self.model == "linear":
+            w = np.maximum(self.diff_max_mm - distance, 0.0)  # eq. 12
+        else:
+            w = np.exp(-0.5 * (distance / self.gauss_sigma_mm) ** 2)
+        total = float(w.sum())
+        return w / total if total > 0 and np.isfinite(total) else None
+
+
+@dataclass
+class KalmanPredictor:
+    """Constant-velocity Kalman filter; desired = position + velocity · horizon, where the
+    horizon is the crane's reaction time plus one control period (bounded)."""
+
+    name: AlgorithmName = "default"
+    horizon_s: float = 0.75
+    max_horizon_s: float = 1.0
+    measurement_noise_mm: float = 10.0
+    acceleration_noise_mm_s2: float = 150.0
+    velocity_smoothing: float = 0.5  # 0: the filter's velocity as is; →1: smoother
+    _kf: KalmanFilter | None = None
+    _t: float = 0.0
+    _v_smooth: np.ndarray = field(default_factory=lambda: np.zeros(2))
+
+    def update(self, t_s: float, measured: np.ndarray | None) -> Estimate | None:
+        if measured is None:
+            self._kf = None
+            return None
+        z = np.asarray(measured, dtype=float)
+        if self._kf is None or t_s <= self._t:
+            self._kf = self._new_filter(z)
+            self._t = t_s
+            self._v_smooth = np.zeros(2)
+            return Estimate(z, np.zeros(2), z)
+        dt = t_s - self._t
+        self._t = t_s
+        kf = self._kf
+        kf.F = np.array([[1, 0, dt, 0], [0, 1, 0, dt], [0, 0, 1, 0], [0, 0, 0, 1]], float)
+        q = Q_discrete_white_noise(dim=2, dt=dt, var=self.acceleration_noise_mm_s2 ** 2)
+        kf.Q = block_diag(q, q)[[0, 2, 1, 3]][:, [0, 2, 1, 3]]  # order (x, y, vx, vy)
+        kf.predict()
+        kf.update(z)
+        position, velocity = kf.x[:2].copy(), kf.x[2:].copy()
+        a = self.velocity_smoothing
+        self._v_smooth = a * self._v_smooth + (1 - a) * velocity
+        horizon = min(self.horizon_s, self.max_horizon_s)
+        return Estimate(position, self._v_smooth.copy(), position + self._v_smooth * horizon)
+
+    def _new_filter(self, z: np.ndarray) -> KalmanFilter:
+        kf = KalmanFilter(dim_x=4, dim_z=2)
+        kf.x = np.array([z[0], z[1], 0.0, 0.0])
+        kf.H = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
+        kf.R = np.eye(2) * self.measurement_noise_mm ** 2
+        kf.P = np.diag([self.measurement_noise_mm ** 2] * 2 + [300.0 ** 2] * 2)
+        return kf
+
+
+def make_predictor(name: AlgorithmName, *, seed: int = 0, horizon_s: float = 0.75
+                   ) -> Predictor:
+    if name == "basic":
+        return Basic()
+    if name == "pf-position":
+        return ParticleFilter(name, "position", "linear", seed=seed)
+    if name == "pf-position-gauss":
+        return ParticleFilter(name, "position", "gauss", seed=seed)
+    if name == "pf-velocity":
+        return ParticleFilter(name, "velocity", "linear", seed=seed)
+    if name == "default":
+        return KalmanPredictor(horizon_s=horizon_s)
+    raise ValueError(f"unknown algorithm {name!r}; choose one of {', '.join(ALGORITHMS)}")

@@ -1,0 +1,90 @@
+"""What keeps the crane safe, whatever the predictor says (DESIGN §5; pure).
+
+Every control period the guard turns a desired position into the setpoint actually sent:
+non-finite or missing input, or an estimate older than ``stale_after_s``, → hold (the crane
+is told to stay where it is now); otherwise the desired position is clamped to the workspace
+(with a margin) and the setpoint's own motion is limited in speed and acceleration, so a
+jump in the estimate never becomes a jump of the crane. The crane controller's watchdog
+(heartbeat) covers a dead or cut-off gantry service.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Workspace:
+    x_min_mm: float = -3000.0
+    x_max_mm: float = 3000.0
+    y_min_mm: float = -3000.0
+    y_max_mm: float = 3000.0
+    margin_mm: float = 50.0
+
+    def clamp(self, xy: np.ndarray) -> np.ndarray:
+        low = np.array([self.x_min_mm, self.y_min_mm]) + self.margin_mm
+        high = np.array([self.x_max_mm, self.y_max_mm]) - self.margin_mm
+        return np.clip(xy, low, high)
+
+    def contains(self, xy: np.ndarray) -> bool:
+        return bool(np.all(self.clamp(xy) == xy))
+
+
+@dataclass(frozen=True)
+class Decision:
+    setpoint: np.ndarray  # (x, y) mm, always inside the workspace
+    hold: bool
+    reason: str  # "" when tracking
+
+
+@dataclass
+class SetpointGuard:
+    workspace: Workspace = Workspace()
+    max_speed_mm_s: float = 450.0
+    max_accel_mm_s2: float = 550.0
+    stale_after_s: float = 0.6
+    _last: np.ndarray | None = None
+    _step_velocity: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    _last_t: float | None = None
+
+    def decide(self, now_s: float, desired: np.ndarray | None, measured_s: float | None,
+               crane_xy: np.ndarray) -> Decision:
+        crane = self.workspace.clamp(np.nan_to_num(np.asarray(crane_xy, dtype=float)))
+        reason = self._why_hold(now_s, desired, measured_s)
+        if reason:
+            self._last, self._last_t = crane, now_s
+            self._step_velocity = np.zeros(2)
+            return Decision(crane, True, reason)
+        assert desired is not None
+        target = self.workspace.clamp(np.asarray(desired, dtype=float))
+        last = crane if self._last is None else self._last
+        dt = 0.25 if self._last_t is None else max(now_s - self._last_t, 1e-3)
+        velocity = (target - last) / dt
+        velocity = _limit(velocity, self.max_speed_mm_s)
+        velocity = self._step_velocity + _limit(velocity - self._step_velocity,
+                                                self.max_accel_mm_s2 * dt)
+        velocity = _limit(velocity, self.max_speed_mm_s)
+        setpoint = self.workspace.clamp(last + velocity * dt)
+        self._step_velocity = (setpoint - last) / dt
+        self._last, self._last_t = setpoint, now_s
+        return Decision(setpoint, False, "")
+
+    def _why_hold(self, now_s: float, desired: np.ndarray | None,
+                  measured_s: float | None) -> str:
+        if desired is None or measured_s is None:
+            return "no estimate"
+        if not np.all(np.isfinite(desired)) or np.shape(desired) != (2,):
+            return "estimate is not a finite (x, y)"
+        age = now_s - measured_s
+        if age > self.stale_after_s:
+            return f"estimate {age:.2f} s old"
+        if age < -self.stale_after_s:
+            return "estimate from the future (clocks?)"
+        return ""
+
+
+def _limit(vector: np.ndarray, norm: float) -> np.ndarray:
+    length = float(np.hypot(*vector))
+    return vector if length <= norm else vector * (norm / length)
