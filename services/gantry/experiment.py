@@ -79,7 +79,7 @@ def make_lab(scenario: str, seed: int, crater_file: Path) -> Lab:
 
 
 def run(lab: Lab, algorithm: AlgorithmName, *, marker_height_mm: float, seed: int = 0,
-        end_s: float | None = None) -> Run:
+        end_s: float | None = None, report_age_s: float = 0.25) -> Run:
     """One experiment; ``lab`` is used up (its crane moves)."""
     started = time.perf_counter()
     cam = lab.tracking
@@ -101,13 +101,19 @@ def run(lab: Lab, algorithm: AlgorithmName, *, marker_height_mm: float, seed: in
     last_pixel: tuple[float, float] | None = None
     heartbeat = 0
     next_error = 0.0
+    history: list[tuple[float, np.ndarray]] = []
+    age_rng = np.random.default_rng((seed, 3))
     for tick in range(int(end / CONTROL_PERIOD_S) + 1):
         t = tick * CONTROL_PERIOD_S
         while next_error < t:  # error samples between ticks
             samples_t.append(next_error)
-            errors.append(lab.crane_state(next_error)[0] - lab.robot(next_error)[:2])
+            crane_at = lab.crane_state(next_error)[0]
+            history.append((next_error, crane_at))
+            errors.append(crane_at - lab.robot(next_error)[:2])
             next_error += ERROR_SAMPLE_S
-        crane_xy, _ = lab.crane_state(t)
+        lab.crane_state(t)
+        history.append((t, lab.crane_state(t)[0]))
+        crane_xy = _reported(history, t - float(age_rng.uniform(0.0, report_age_s)))
         frame = lab.tracking_frame(t, render_rng).astype(np.float64) + noise[tick % NOISE_FRAMES]
         image = np.clip(np.rint(frame), 0, 255).astype(np.uint8)
         measured, last_pixel = _measure(image, last_pixel, crane_xy, optics, lab,
@@ -126,6 +132,15 @@ def run(lab: Lab, algorithm: AlgorithmName, *, marker_height_mm: float, seed: in
     result.t_s, result.error_mm = np.array(samples_t), np.array(errors).reshape(-1, 2)
     result.wall_s = time.perf_counter() - started
     return result
+
+
+def _reported(history: list[tuple[float, np.ndarray]], t: float) -> np.ndarray:
+    """The crane's position as its controller reports it: measured some time before it is
+    read (the paper: "the delay and exact time of measurement of the gantry crane is roughly
+    known")."""
+    times = np.array([h[0] for h in history[-20:]])
+    xy = np.array([h[1] for h in history[-20:]])
+    return np.array([np.interp(t, times, xy[:, 0]), np.interp(t, times, xy[:, 1])])
 
 
 def _measure(image: np.ndarray, last_pixel: tuple[float, float] | None, crane_xy: np.ndarray,

@@ -15,14 +15,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from common.crane_registers import (  # noqa: F401 - its users import the bits from here
+    AT_TARGET,
+    CONTROL_ENABLE,
+    CONTROL_RESET,
+    ENABLED,
+    FAULT_CLAMPED,
+    FAULT_WATCHDOG,
+    FAULTED,
+    MOVING,
+)
+
 STEP_S = 0.005
 
-# status bits (input register STATUS)
-ENABLED, MOVING, AT_TARGET, FAULTED = 1, 2, 4, 8
-# fault bits (input register FAULTS)
-FAULT_WATCHDOG, FAULT_CLAMPED = 1, 2
-# control bits (holding register CONTROL)
-CONTROL_ENABLE, CONTROL_RESET = 1, 2
 
 
 @dataclass(frozen=True)

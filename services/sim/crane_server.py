@@ -13,29 +13,19 @@ from collections.abc import Callable
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
+from common.crane_registers import (
+    HR_CONTROL,
+    HR_COUNT,
+    HR_HEARTBEAT,
+    IR_COUNT,
+    int32_to_registers,
+    registers_to_int32,
+)
 from services.sim.crane import CraneModel
 
 log = logging.getLogger(__name__)
 
-# Holding registers (read/write): function codes 3, 6, 16.
-HR_SETPOINT_X, HR_SETPOINT_Y, HR_CONTROL, HR_HEARTBEAT, HR_COUNT = 0, 2, 4, 5, 6
-# Input registers (read only): function code 4.
-IR_ACTUAL_X, IR_ACTUAL_Y, IR_VELOCITY_X, IR_VELOCITY_Y = 0, 2, 4, 6
-IR_STATUS, IR_FAULTS, IR_HEARTBEAT, IR_SETPOINTS_TAKEN = 8, 9, 10, 11
-IR_TARGET_X, IR_TARGET_Y, IR_COUNT = 12, 14, 16
-
 _READ_INPUT, _WRITE_CODES = 4, {6, 16, 23}
-
-
-def int32_to_registers(value: float) -> list[int]:
-    """A signed 32-bit integer as two registers, high word first."""
-    raw = int(round(value)) & 0xFFFFFFFF
-    return [raw >> 16, raw & 0xFFFF]
-
-
-def registers_to_int32(high: int, low: int) -> int:
-    raw = (high << 16) | low
-    return raw - (1 << 32) if raw & 0x80000000 else raw
 
 
 class CraneServer:

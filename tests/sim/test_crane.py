@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from pymodbus.client import AsyncModbusTcpClient
 
-from services.sim import crane_server as regs
+from common import crane_registers as regs
 from services.sim.crane import (
     CONTROL_ENABLE,
     CONTROL_RESET,
@@ -20,6 +20,7 @@ from services.sim.crane import (
     CraneModel,
     CraneParams,
 )
+from services.sim.crane_server import CraneServer
 from tests.conftest import free_port
 
 
@@ -113,7 +114,7 @@ def test_modbus_client_drives_the_crane_over_tcp() -> None:
         return time.monotonic() - t0
 
     crane = CraneModel(CraneParams(watchdog_s=0.5, x_max_mm=3000.0))
-    server = regs.CraneServer(crane, clock, threading.Lock(), "127.0.0.1", port)
+    server = CraneServer(crane, clock, threading.Lock(), "127.0.0.1", port)
 
     async def main() -> dict:
         serving = asyncio.create_task(server.serve())
