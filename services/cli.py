@@ -31,6 +31,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _up(rest)
     if command == "config":
         return _config(rest)
+    if command == "experiment":
+        from services.gantry.experiment_cli import main as experiment_main
+
+        return experiment_main(rest)
     if command == "detect":
         from services.detect_cli import main as detect_main
 

@@ -28,6 +28,8 @@ SERVICES: dict[str, ServiceInfo] = {
                        "stb ptz aim: eq. 4", "services.ptz.settings:PtzSettings"),
     "calib": ServiceInfo("camera poses from passpoints (paper §2.2); stb calib solve | collect",
                          "services.calib.settings:CalibSettings"),
+    "gantry": ServiceInfo("the crane follows the robot from its tracking camera (paper §3)",
+                          "services.gantry.settings:GantrySettings"),
     "sim": ServiceInfo("the simulated lab: QTM RT mocap, VAPIX cameras, Modbus crane, frames",
                        "services.sim.settings:SimSettings"),
 }
@@ -38,6 +40,8 @@ TOOLS: dict[str, ServiceInfo] = {
     "monitor": ServiceInfo("live table of alive services and every key's latest value; --raw",
                            "services.monitor.settings:MonitorSettings"),
     "config": ServiceInfo("check a lab config file: stb config check --lab FILE", ""),
+    "experiment": ServiceInfo("the paper's gantry experiments on a simulated clock: "
+                              "stb experiment gantry --scenario locomotive --algorithm all", ""),
     "detect": ServiceInfo("find markers in image files (paper §2.1): stb detect IMAGE --json",
                           ""),
 }

@@ -1,0 +1,79 @@
+"""Tracking-camera frames: from the bus (the camera host publishes them — the sim in local
+runs) or from a camera on this host through OpenCV. Either way ``take()`` gives the newest
+frame not taken yet, with its capture time, or None."""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+
+import cv2
+import numpy as np
+
+from common import messages as m
+
+log = logging.getLogger(__name__)
+Frame = tuple[float, np.ndarray]  # (capture time, gray uint8 image)
+
+
+class FrameInbox:
+    """The newest frame, handed over once."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._frame: Frame | None = None
+
+    def put(self, frame: Frame) -> None:
+        with self._lock:
+            self._frame = frame
+
+    def take(self) -> Frame | None:
+        with self._lock:
+            frame, self._frame = self._frame, None
+        return frame
+
+
+def decode(msg: m.CameraFrame) -> Frame | None:
+    """A bus frame as an image; None (logged) if its bytes do not match its header."""
+    if msg.encoding == "mono8":
+        if len(msg.data) != msg.width_px * msg.height_px:
+            log.warning("frame %d: %d bytes for %d×%d mono8", msg.seq, len(msg.data),
+                        msg.width_px, msg.height_px)
+            return None
+        image = np.frombuffer(msg.data, np.uint8).reshape(msg.height_px, msg.width_px)
+    else:
+        image = cv2.imdecode(np.frombuffer(msg.data, np.uint8), cv2.IMREAD_GRAYSCALE)
+        if image is None:
+            log.warning("frame %d: JPEG does not decode", msg.seq)
+            return None
+    return msg.measured_s, image
+
+
+class OpenCvFrames(FrameInbox):
+    """A camera on this host (device number or stream URL), read on a thread of its own."""
+
+    def __init__(self, source: str, stop: threading.Event) -> None:
+        super().__init__()
+        self.source = int(source) if source.isdigit() else source
+        threading.Thread(target=self._read, args=(stop,), name="camera", daemon=True).start()
+
+    def _read(self, stop: threading.Event) -> None:
+        capture = None
+        while not stop.is_set():
+            if capture is None or not capture.isOpened():
+                capture = cv2.VideoCapture(self.source)
+                if not capture.isOpened():
+                    log.warning("camera %s cannot be opened; retrying", self.source)
+                    stop.wait(2.0)
+                    continue
+            ok, image = capture.read()
+            if not ok:
+                capture.release()
+                capture = None
+                continue
+            if image.ndim == 3:
+                image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+            self.put((time.time(), image))
+        if capture is not None:
+            capture.release()

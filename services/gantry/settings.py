@@ -1,0 +1,41 @@
+"""Gantry settings: the crane controller, the tracking camera, the algorithm, the limits."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import Field
+
+from common.settings import ServiceSettings
+from services.gantry.predict import AlgorithmName
+
+
+class GantrySettings(ServiceSettings):
+    section = "gantry"
+
+    crane_host: str = "127.0.0.1"
+    crane_port: int = Field(5020, ge=1, le=65535)
+    crane_timeout_s: float = Field(0.3, gt=0, le=5)
+    frames: str = Field("bus", description='"bus": stb/gantry/camera/frame; or '
+                        '"opencv:0" / "opencv:rtsp://..." for a camera on this host')
+    algorithm: AlgorithmName = "default"
+    control_hz: float = Field(4.0, gt=0, le=20, description="setpoints a second (crane: 4 Hz)")
+    heartbeat_hz: float = Field(10.0, gt=0, le=100, description="crane watchdog heartbeat")
+    stale_after_s: float = Field(0.6, gt=0, le=5, description="older estimate → hold")
+    reaction_s: float = Field(0.5, ge=0, le=3, description="crane's reaction time (predicted)")
+    max_horizon_s: float = Field(1.0, gt=0, le=3, description="never extrapolate further")
+    height_map: Path = Field(Path("run/sim/crater.npz"), description="laser scan (.npz)")
+    marker_height_mm: float = Field(80.0, ge=0, description="marker above the ground")
+    focal_mm: float = Field(8.0, gt=0, description="tracking camera, from its calibration")
+    pixel_mm: float = Field(0.0075, gt=0)
+    ref_u: float = Field(320.0, description="reference pixel: straight below the lens")
+    ref_v: float = 240.0
+    lens_height_mm: float = Field(3500.0, gt=0, description="lens above world z = 0")
+    x_min_mm: float = -3000.0
+    x_max_mm: float = 3000.0
+    y_min_mm: float = -3000.0
+    y_max_mm: float = 3000.0
+    workspace_margin_mm: float = Field(50.0, ge=0)
+    max_speed_mm_s: float = Field(450.0, gt=0, description="setpoint motion limit")
+    max_accel_mm_s2: float = Field(550.0, gt=0)
+    seed: int = 0

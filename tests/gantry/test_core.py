@@ -1,0 +1,103 @@
+"""Eq. 5–8, the predictors on simple paths, and the setpoint guard under fuzzed input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from common.heightmap import HeightMap
+from services.gantry.locate import TrackingOptics, locate, offset_mm
+from services.gantry.predict import ALGORITHMS, make_predictor
+from services.gantry.safety import SetpointGuard, Workspace
+from services.sim.render import TrackingCamera
+
+FLAT = HeightMap(np.full((3, 3), 100.0, dtype=np.float32), -5000.0, -5000.0, 5000.0)
+
+
+def test_eq_5_to_8_by_hand() -> None:
+    optics = TrackingOptics(focal_mm=8.0, pixel_mm=0.01, ref_u=320, ref_v=240,
+                            lens_height_mm=3500.0)
+    # marker 200 mm above ground at 100 mm → z = 3500 − 300 = 3200 mm below the lens;
+    # eq. 5: 1/b = 1/8 − 1/3200 → b = 8.02005 mm; eq. 6–7: 40 px · 0.01 mm · z/b = 159.6 mm
+    b = 1 / (1 / 8.0 - 1 / 3200.0)
+    assert offset_mm(360, 240, 3200.0, optics) == pytest.approx([40 * 0.01 * 3200 / b, 0.0])
+    assert offset_mm(320, 250, 3200.0, optics)[1] == pytest.approx(-10 * 0.01 * 3200 / b)
+    xyz = locate(360, 250, np.array([1000.0, -500.0]), optics, FLAT, 200.0)  # eq. 8
+    assert xyz == pytest.approx([1000 + 0.4 * 3200 / b, -500 - 0.1 * 3200 / b, 300.0])
+
+
+def test_locate_inverts_the_sims_camera_on_sloped_ground() -> None:
+    rows, cols = np.mgrid[0:101, 0:101]
+    slope = HeightMap((cols * 20.0 * 0.5).astype(np.float32), -1000.0, -1000.0, 20.0)
+    cam = TrackingCamera(focal_mm=8.0, pixel_mm=0.0075, height_mm=3500.0)
+    optics = TrackingOptics(8.0, 0.0075, cam.ref_u, cam.ref_v, 3500.0)
+    crane = np.array([-100.0, 50.0])
+    for x, y in [(0.0, 0.0), (250.0, -180.0), (-300.0, 200.0)]:
+        z = float(slope.height_at(x, y)) + 80.0
+        u, v, _ = cam.pixel_of(np.array([x, y, z]), *crane)
+        assert locate(u, v, crane, optics, slope, 80.0) == pytest.approx([x, y, z], abs=0.5)
+
+
+def _path(kind: str, t: np.ndarray) -> np.ndarray:
+    if kind == "straight":
+        return np.column_stack([-1000 + 200 * t, 300 + 50 * t])
+    if kind == "circle":
+        return 800 * np.column_stack([np.cos(0.3 * t), np.sin(0.3 * t)])
+    moving = (t % 10) < 5  # stop-and-go: 5 s at 150 mm/s, 5 s standing
+    x = np.cumsum(np.where(moving, 150.0 * 0.25, 0.0)) - 150.0 * 0.25
+    return np.column_stack([x, np.zeros_like(x)])
+
+
+@pytest.mark.parametrize("algorithm", ALGORITHMS)
+@pytest.mark.parametrize("kind", ["straight", "circle", "stop-and-go"])
+def test_predictors_lead_the_robot_on_simple_paths(algorithm: str, kind: str) -> None:
+    t = np.arange(0, 40, 0.25)
+    truth = _path(kind, t)
+    rng = np.random.default_rng(3)
+    predictor = make_predictor(algorithm, seed=1)  # type: ignore[arg-type]
+    errors = []
+    ahead = 3 if algorithm == "default" else 1  # reaction + one period, or one period
+    for i, (ti, xy) in enumerate(zip(t, truth, strict=True)):
+        estimate = predictor.update(ti, xy + rng.normal(0, 3.0, 2))
+        assert estimate is not None and np.all(np.isfinite(estimate.desired))
+        if i > 20 and i + ahead < len(t):  # where the robot will be then
+            errors.append(np.linalg.norm(estimate.desired - truth[i + ahead]))
+    limit = {"straight": 40.0, "circle": 60.0, "stop-and-go": 90.0}[kind]
+    assert np.median(errors) < limit, (algorithm, kind, np.median(errors))
+    if algorithm == "basic" and kind == "straight":
+        assert np.median(errors) < 15.0, "eq. 9–10 is exact on a straight line"
+
+
+def test_a_lost_marker_gives_no_estimate() -> None:
+    for algorithm in ALGORITHMS:
+        predictor = make_predictor(algorithm)
+        predictor.update(0.0, np.array([0.0, 0.0]))
+        assert predictor.update(0.25, None) is None
+
+
+WORKSPACE = Workspace(-3000, 3000, -2500, 2500, margin_mm=50)
+finite = st.floats(-1e7, 1e7, allow_nan=False)
+anything = st.one_of(st.floats(allow_nan=True, allow_infinity=True), finite)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(anything, anything, st.booleans(), st.floats(-2, 2)), min_size=1,
+                max_size=40),
+       st.tuples(finite, finite))
+def test_setpoints_never_leave_the_workspace_nor_jump(inputs: list, crane: tuple) -> None:
+    guard = SetpointGuard(WORKSPACE, max_speed_mm_s=450, max_accel_mm_s2=550,
+                          stale_after_s=0.6)
+    last = None
+    for k, (x, y, present, age) in enumerate(inputs):
+        now = 1000.0 + 0.25 * k
+        desired = np.array([x, y]) if present else None
+        decision = guard.decide(now, desired, now - age, np.array(crane))
+        sp = decision.setpoint
+        assert np.all(np.isfinite(sp)) and WORKSPACE.contains(sp)
+        if not present or abs(age) > 0.6 or not np.all(np.isfinite([x, y])):
+            assert decision.hold
+        if last is not None and not decision.hold and not last[1]:
+            assert np.hypot(*(sp - last[0])) <= 450 * 0.25 + 1e-6
+        last = (sp, decision.hold)

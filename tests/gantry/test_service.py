@@ -1,0 +1,138 @@
+"""The gantry service against the sim's Modbus crane controller, with tracking frames put on
+the bus by the test (rendered by the sim's camera model from a robot position it chooses)."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from common import keys
+from common import messages as m
+from common.bus import Bus
+from common.crane_registers import FAULT_WATCHDOG
+from common.heightmap import HeightMap
+from common.node import Node
+from services.gantry.service import run
+from services.gantry.settings import GantrySettings
+from services.sim.crane import CraneModel, CraneParams
+from services.sim.crane_server import CraneServer
+from services.sim.render import Blob, TrackingCamera, draw
+from tests.conftest import free_port, wait_for
+
+CAMERA = TrackingCamera(focal_mm=8.0, pixel_mm=0.0075, height_mm=3500.0)
+GROUND_MM, MARKER_MM = 100.0, 80.0
+
+
+class CraneRig:
+    """The sim's crane controller on a free port, on real time, in a thread of its own."""
+
+    def __init__(self) -> None:
+        self.port = free_port()
+        t0 = time.monotonic()
+        self.clock = lambda: time.monotonic() - t0
+        self.model = CraneModel(CraneParams(watchdog_s=0.5))
+        self.lock = threading.Lock()
+        self.server = CraneServer(self.model, self.clock, self.lock, "127.0.0.1", self.port)
+        self.loop = asyncio.new_event_loop()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+        time.sleep(0.3)
+
+    def _run(self) -> None:
+        asyncio.set_event_loop(self.loop)
+        self.loop.run_until_complete(self.server.serve())
+
+    def state(self) -> tuple[np.ndarray, np.ndarray, bool, int]:
+        with self.lock:
+            self.model.advance_to(self.clock())
+            return (self.model.position.copy(), self.model.velocity.copy(), self.model.enabled,
+                    self.model.faults)
+
+    def close(self) -> None:
+        asyncio.run_coroutine_threadsafe(self.server.close(), self.loop).result(5)
+        self.loop.call_soon_threadsafe(self.loop.stop)
+
+
+@pytest.fixture
+def rig(tmp_path: Path, make_bus: Callable[..., Bus]) -> Iterator[dict]:
+    heights = tmp_path / "flat.npz"
+    HeightMap(np.full((3, 3), GROUND_MM, np.float32), -5000, -5000, 5000).save(heights)
+    crane = CraneRig()
+    settings = GantrySettings(crane_port=crane.port, height_map=heights,
+                              marker_height_mm=MARKER_MM, stale_after_s=0.6)
+    node = Node("gantry", settings, make_bus())
+    world = make_bus()
+    setpoints: list[m.CraneSetpoint] = []
+    world.subscribe(keys.GANTRY_SETPOINT, setpoints.append, latest=False)
+    thread = threading.Thread(target=run, args=(node,), daemon=True)
+    thread.start()
+    yield {"crane": crane, "node": node, "world": world, "setpoints": setpoints,
+           "thread": thread}
+    node.stop.set()
+    thread.join(5)
+    crane.close()
+
+
+def _frame(world: Bus, robot_xy: np.ndarray | None, crane_xy: np.ndarray, seq: int,
+           rng: np.random.Generator) -> None:
+    blobs = []
+    if robot_xy is not None:
+        u, v, r = CAMERA.pixel_of(np.array([*robot_xy, GROUND_MM + MARKER_MM]), *crane_xy)
+        blobs.append(Blob(u, v, r, r))
+    image = draw(blobs, CAMERA.width_px, CAMERA.height_px, rng)
+    world.publish(keys.GANTRY_FRAME, m.CameraFrame(
+        measured_s=time.time(), camera="tracking", seq=seq, width_px=CAMERA.width_px,
+        height_px=CAMERA.height_px, encoding="mono8", data=image.tobytes()))
+
+
+def _feed(rig: dict, robot: Callable[[float], np.ndarray | None], seconds: float) -> None:
+    rng = np.random.default_rng(0)
+    start = time.monotonic()
+    seq = 0
+    while (elapsed := time.monotonic() - start) < seconds:
+        crane_xy, _, _, _ = rig["crane"].state()
+        _frame(rig["world"], robot(elapsed), crane_xy, seq, rng)
+        seq += 1
+        time.sleep(0.04)
+
+
+def test_follows_then_holds_when_frames_stop_or_the_marker_is_lost(rig: dict) -> None:
+    target = np.array([350.0, -250.0])
+    feeder = threading.Thread(target=_feed, args=(rig, lambda _t: target, 8.0))
+    feeder.start()
+    wait_for(lambda: np.linalg.norm(rig["crane"].state()[0] - target) < 20.0, timeout=8)
+    assert rig["crane"].state()[2] and not rig["setpoints"][-1].hold
+    feeder.join()
+
+    time.sleep(1.2)  # frames stop: the estimate goes stale
+    assert rig["setpoints"][-1].hold
+    held = rig["crane"].state()[0]
+    time.sleep(1.0)
+    position, velocity, _, _ = rig["crane"].state()
+    assert np.linalg.norm(position - held) < 5.0 and np.linalg.norm(velocity) < 1.0
+
+    _feed(rig, lambda t: target + [150.0 * t, 0.0] if t < 2 else None, 3.5)
+    assert rig["setpoints"][-1].hold, "marker out of sight → hold"
+    assert all(abs(s.x_mm) <= 2950 and abs(s.y_mm) <= 2950 for s in rig["setpoints"])
+
+
+def test_a_dead_gantry_service_leaves_a_stopped_crane(rig: dict) -> None:
+    target = np.array([900.0, 0.0])
+    feeder = threading.Thread(target=_feed, args=(rig, lambda _t: target, 3.0))
+    feeder.start()
+    wait_for(lambda: np.linalg.norm(rig["crane"].state()[1]) > 100.0, timeout=3)
+    rig["node"].stop.set()  # the service ends: no heartbeat, no setpoints
+    rig["thread"].join(5)
+    stopped_at = time.monotonic()
+    wait_for(lambda: rig["crane"].state()[3] & FAULT_WATCHDOG, timeout=2)
+    took = time.monotonic() - stopped_at
+    assert took < 0.8, f"watchdog after {took:.2f} s"
+    wait_for(lambda: np.linalg.norm(rig["crane"].state()[1]) < 1.0, timeout=3)
+    assert not rig["crane"].state()[2], "disabled"
+    feeder.join()
