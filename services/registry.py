@@ -46,7 +46,8 @@ TOOLS: dict[str, ServiceInfo] = {
                           ""),
 }
 
-DEFAULT_UP: tuple[str, ...] = ("router", "sim", "tracker", "calib", "ptz:ptz1", "ptz:ptz2")
+DEFAULT_UP: tuple[str, ...] = ("router", "sim", "tracker", "calib", "ptz:ptz1", "ptz:ptz2",
+                               "gantry")
 """What ``stb up`` starts when the lab file does not say: everything that exists so far."""
 
 

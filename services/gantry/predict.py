@@ -22,7 +22,6 @@ from typing import Literal, Protocol
 import numpy as np
 from filterpy.common import Q_discrete_white_noise
 from filterpy.kalman import KalmanFilter
-from filterpy.monte_carlo import systematic_resample
 from scipy.linalg import block_diag
 
 AlgorithmName = Literal["basic", "pf-position", "pf-position-gauss", "pf-velocity", "default"]
@@ -103,7 +102,7 @@ class ParticleFilter:
             return self.update(t_s, z)
         assert self._vel is not None
         v_filtered = weights @ self._vel
-        keep = systematic_resample(weights)
+        keep = systematic_resample(weights, self._rng)
         self._pos = self._pos[keep]
         current = self._pos.mean(axis=0)
         # eq. 11: move each particle with the measured velocity plus its own noise
@@ -169,6 +168,16 @@ class KalmanPredictor:
         kf.R = np.eye(2) * self.measurement_noise_mm ** 2
         kf.P = np.diag([self.measurement_noise_mm ** 2] * 2 + [300.0 ** 2] * 2)
         return kf
+
+
+def systematic_resample(weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Indices of the particles drawn: one random offset, then evenly spaced (filterpy's
+    algorithm, but on our seeded generator — filterpy draws from numpy's global one)."""
+    n = len(weights)
+    positions = (rng.random() + np.arange(n)) / n
+    cumulative = np.cumsum(weights)
+    cumulative[-1] = 1.0
+    return np.searchsorted(cumulative, positions)
 
 
 def make_predictor(name: AlgorithmName, *, seed: int = 0, horizon_s: float = 0.75

@@ -31,6 +31,9 @@ connect = ["{router_endpoint}"]
 qtm_port = {ports["mocap"]}
 [calib]
 data_dir = "{tmp_path / 'calib'}"
+[gantry]
+crane_port = {ports["crane"]}
+height_map = "{crater_file}"
 [ptz.cameras.ptz1]
 url = "http://127.0.0.1:{ports["ptz1"]}"
 [ptz.cameras.ptz2]
