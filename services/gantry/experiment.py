@@ -28,6 +28,8 @@ from services.sim.settings import SimSettings, TrackingCameraSettings
 CONTROL_PERIOD_S = 0.25
 ERROR_SAMPLE_S = 0.05
 NOISE_FRAMES = 8
+TICK_PHASE_S = 0.1
+"""The gantry's ticks are not in step with the crane controller's cycle (which starts at 0)."""
 
 
 @dataclass
@@ -79,7 +81,7 @@ def make_lab(scenario: str, seed: int, crater_file: Path) -> Lab:
 
 
 def run(lab: Lab, algorithm: AlgorithmName, *, marker_height_mm: float, seed: int = 0,
-        end_s: float | None = None, report_age_s: float = 0.25) -> Run:
+        end_s: float | None = None) -> Run:
     """One experiment; ``lab`` is used up (its crane moves)."""
     started = time.perf_counter()
     cam = lab.tracking
@@ -89,7 +91,7 @@ def run(lab: Lab, algorithm: AlgorithmName, *, marker_height_mm: float, seed: in
     guard = SetpointGuard(workspace, max_speed_mm_s=0.95 * c.max_speed_mm_s,
                           max_accel_mm_s2=0.95 * c.max_accel_mm_s2)
     predictor = make_predictor(algorithm, seed=seed,
-                               horizon_s=c.reaction_s + CONTROL_PERIOD_S)
+                               horizon_s=c.reaction_s + 2 * CONTROL_PERIOD_S)
     noise_rng = np.random.default_rng((seed, 1))
     noise = noise_rng.normal(0.0, 2.5, (NOISE_FRAMES, cam.height_px, cam.width_px))
     render_rng = np.random.default_rng((seed, 2))
@@ -101,19 +103,14 @@ def run(lab: Lab, algorithm: AlgorithmName, *, marker_height_mm: float, seed: in
     last_pixel: tuple[float, float] | None = None
     heartbeat = 0
     next_error = 0.0
-    history: list[tuple[float, np.ndarray]] = []
-    age_rng = np.random.default_rng((seed, 3))
     for tick in range(int(end / CONTROL_PERIOD_S) + 1):
-        t = tick * CONTROL_PERIOD_S
+        t = tick * CONTROL_PERIOD_S + TICK_PHASE_S
         while next_error < t:  # error samples between ticks
             samples_t.append(next_error)
-            crane_at = lab.crane_state(next_error)[0]
-            history.append((next_error, crane_at))
-            errors.append(crane_at - lab.robot(next_error)[:2])
+            errors.append(lab.crane_state(next_error)[0] - lab.robot(next_error)[:2])
             next_error += ERROR_SAMPLE_S
         lab.crane_state(t)
-        history.append((t, lab.crane_state(t)[0]))
-        crane_xy = _reported(history, t - float(age_rng.uniform(0.0, report_age_s)))
+        crane_xy = lab.crane.reported.copy()  # what its controller reports (≤ 1 cycle old)
         frame = lab.tracking_frame(t, render_rng).astype(np.float64) + noise[tick % NOISE_FRAMES]
         image = np.clip(np.rint(frame), 0, 255).astype(np.uint8)
         measured, last_pixel = _measure(image, last_pixel, crane_xy, optics, lab,
@@ -132,15 +129,6 @@ def run(lab: Lab, algorithm: AlgorithmName, *, marker_height_mm: float, seed: in
     result.t_s, result.error_mm = np.array(samples_t), np.array(errors).reshape(-1, 2)
     result.wall_s = time.perf_counter() - started
     return result
-
-
-def _reported(history: list[tuple[float, np.ndarray]], t: float) -> np.ndarray:
-    """The crane's position as its controller reports it: measured some time before it is
-    read (the paper: "the delay and exact time of measurement of the gantry crane is roughly
-    known")."""
-    times = np.array([h[0] for h in history[-20:]])
-    xy = np.array([h[1] for h in history[-20:]])
-    return np.array([np.interp(t, times, xy[:, 0]), np.interp(t, times, xy[:, 1])])
 
 
 def _measure(image: np.ndarray, last_pixel: tuple[float, float] | None, crane_xy: np.ndarray,

@@ -9,9 +9,9 @@ trustworthy to say (the safety layer then holds the crane).
   (eq. 12) or a Gaussian perceptual model and systematic resampling; the desired position is
   the mean of the believed particle positions.
 * ``pf-velocity`` — the same filter's weighted mean velocity in eq. 10.
-* ``default`` — ours: a constant-velocity Kalman filter (filterpy) whose prediction covers
-  the crane's reaction time plus one control period, bounded, with the velocity it uses
-  smoothed so that a robot's sway is not amplified.
+* ``default`` — ours: two constant-velocity Kalman filters (calm and agile) mixed by an
+  IMM, predicting over the crane's reaction time, its cycle and its tracking lag (bounded):
+  it neither chases a walker's sway nor lags in a locomotive's turns.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from typing import Literal, Protocol
 
 import numpy as np
 from filterpy.common import Q_discrete_white_noise
-from filterpy.kalman import KalmanFilter
+from filterpy.kalman import IMMEstimator, KalmanFilter
 from scipy.linalg import block_diag
 
 AlgorithmName = Literal["basic", "pf-position", "pf-position-gauss", "pf-velocity", "default"]
@@ -124,44 +124,48 @@ class ParticleFilter:
 
 @dataclass
 class KalmanPredictor:
-    """Constant-velocity Kalman filter; desired = position + velocity · horizon, where the
-    horizon is the crane's reaction time plus one control period (bounded)."""
+    """Two constant-velocity Kalman filters mixed by an IMM (filterpy): a calm one (small
+    acceleration noise: it does not chase a walking robot's sway) and an agile one (a
+    locomotive's turns); the mix follows whichever explains the measurements. The desired
+    position is the mixed position plus velocity · horizon, the horizon covering the crane's
+    reaction time, the wait for its next cycle and its own tracking lag (bounded)."""
 
     name: AlgorithmName = "default"
-    horizon_s: float = 0.75
+    horizon_s: float = 1.0
     max_horizon_s: float = 1.0
     measurement_noise_mm: float = 10.0
-    acceleration_noise_mm_s2: float = 150.0
-    velocity_smoothing: float = 0.5  # 0: the filter's velocity as is; →1: smoother
-    _kf: KalmanFilter | None = None
+    calm_accel_mm_s2: float = 5.0
+    agile_accel_mm_s2: float = 400.0
+    stay: float = 0.99  # chance a model stays in charge from one period to the next
+    _imm: IMMEstimator | None = None
     _t: float = 0.0
-    _v_smooth: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
     def update(self, t_s: float, measured: np.ndarray | None) -> Estimate | None:
         if measured is None:
-            self._kf = None
+            self._imm = None
             return None
         z = np.asarray(measured, dtype=float)
-        if self._kf is None or t_s <= self._t:
-            self._kf = self._new_filter(z)
+        if self._imm is None or t_s <= self._t:
+            filters = [self._new_filter(z, q) for q in (self.calm_accel_mm_s2,
+                                                        self.agile_accel_mm_s2)]
+            switch = np.array([[self.stay, 1 - self.stay], [1 - self.stay, self.stay]])
+            self._imm = IMMEstimator(filters, np.array([0.5, 0.5]), switch)
             self._t = t_s
-            self._v_smooth = np.zeros(2)
             return Estimate(z, np.zeros(2), z)
         dt = t_s - self._t
         self._t = t_s
-        kf = self._kf
-        kf.F = np.array([[1, 0, dt, 0], [0, 1, 0, dt], [0, 0, 1, 0], [0, 0, 0, 1]], float)
-        q = Q_discrete_white_noise(dim=2, dt=dt, var=self.acceleration_noise_mm_s2 ** 2)
-        kf.Q = block_diag(q, q)[[0, 2, 1, 3]][:, [0, 2, 1, 3]]  # order (x, y, vx, vy)
-        kf.predict()
-        kf.update(z)
-        position, velocity = kf.x[:2].copy(), kf.x[2:].copy()
-        a = self.velocity_smoothing
-        self._v_smooth = a * self._v_smooth + (1 - a) * velocity
+        for kf, accel in zip(self._imm.filters, (self.calm_accel_mm_s2,
+                                                 self.agile_accel_mm_s2), strict=True):
+            kf.F = np.array([[1, 0, dt, 0], [0, 1, 0, dt], [0, 0, 1, 0], [0, 0, 0, 1]], float)
+            q = Q_discrete_white_noise(dim=2, dt=dt, var=accel ** 2)
+            kf.Q = block_diag(q, q)[[0, 2, 1, 3]][:, [0, 2, 1, 3]]  # order (x, y, vx, vy)
+        self._imm.predict()
+        self._imm.update(z)
+        position, velocity = self._imm.x[:2].copy(), self._imm.x[2:].copy()
         horizon = min(self.horizon_s, self.max_horizon_s)
-        return Estimate(position, self._v_smooth.copy(), position + self._v_smooth * horizon)
+        return Estimate(position, velocity, position + velocity * horizon)
 
-    def _new_filter(self, z: np.ndarray) -> KalmanFilter:
+    def _new_filter(self, z: np.ndarray, accel: float) -> KalmanFilter:
         kf = KalmanFilter(dim_x=4, dim_z=2)
         kf.x = np.array([z[0], z[1], 0.0, 0.0])
         kf.H = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
@@ -180,7 +184,7 @@ def systematic_resample(weights: np.ndarray, rng: np.random.Generator) -> np.nda
     return np.searchsorted(cumulative, positions)
 
 
-def make_predictor(name: AlgorithmName, *, seed: int = 0, horizon_s: float = 0.75
+def make_predictor(name: AlgorithmName, *, seed: int = 0, horizon_s: float = 1.0
                    ) -> Predictor:
     if name == "basic":
         return Basic()

@@ -73,7 +73,7 @@ class Control:
         self.optics = TrackingOptics(s.focal_mm, s.pixel_mm, s.ref_u, s.ref_v,
                                      s.lens_height_mm)
         self.predictor = make_predictor(s.algorithm, seed=s.seed,
-                                        horizon_s=min(s.reaction_s + 1 / s.control_hz,
+                                        horizon_s=min(s.reaction_s + 2 / s.control_hz,
                                                       s.max_horizon_s))
         self.guard = SetpointGuard(
             Workspace(s.x_min_mm, s.x_max_mm, s.y_min_mm, s.y_max_mm, s.workspace_margin_mm),

@@ -63,6 +63,11 @@ class CraneModel:
     _pending: list[tuple[float, np.ndarray]] = field(default_factory=list)
     _step: int = 0
     _next_cycle: float = 0.0
+    reported: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    """Position as the controller reports it: measured once per cycle (4 Hz), like a PLC's
+    process image — up to one cycle old when read (the paper: the crane's time of
+    measurement is only roughly known)."""
+    reported_velocity: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
     @property
     def time(self) -> float:
@@ -112,6 +117,7 @@ class CraneModel:
             self.target = None  # brake to a stop
         if t >= self._next_cycle:
             self._next_cycle = t + p.cycle_s
+            self.reported, self.reported_velocity = self.position.copy(), self.velocity.copy()
             if self.enabled and self._written is not None:
                 x, y, clamped = p.clamp(*self._written)
                 self.faults = (self.faults | FAULT_CLAMPED) if clamped else (

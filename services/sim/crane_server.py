@@ -80,7 +80,8 @@ class CraneServer:
     def _input_registers(self) -> list[int]:
         m = self.model
         target = m.position if m.target is None else m.target
-        return (int32_to_registers(m.position[0]) + int32_to_registers(m.position[1])
-                + int32_to_registers(m.velocity[0]) + int32_to_registers(m.velocity[1])
+        return (int32_to_registers(m.reported[0]) + int32_to_registers(m.reported[1])
+                + int32_to_registers(m.reported_velocity[0])
+                + int32_to_registers(m.reported_velocity[1])
                 + [m.status(), m.faults, m.heartbeat & 0xFFFF, m.setpoints_taken & 0xFFFF]
                 + int32_to_registers(target[0]) + int32_to_registers(target[1]))

@@ -58,13 +58,15 @@ def test_predictors_lead_the_robot_on_simple_paths(algorithm: str, kind: str) ->
     rng = np.random.default_rng(3)
     predictor = make_predictor(algorithm, seed=1)  # type: ignore[arg-type]
     errors = []
-    ahead = 3 if algorithm == "default" else 1  # reaction + one period, or one period
+    ahead = 4 if algorithm == "default" else 1  # its 1 s horizon, or one period
     for i, (ti, xy) in enumerate(zip(t, truth, strict=True)):
         estimate = predictor.update(ti, xy + rng.normal(0, 3.0, 2))
         assert estimate is not None and np.all(np.isfinite(estimate.desired))
         if i > 20 and i + ahead < len(t):  # where the robot will be then
             errors.append(np.linalg.norm(estimate.desired - truth[i + ahead]))
-    limit = {"straight": 40.0, "circle": 60.0, "stop-and-go": 90.0}[kind]
+    # a straight-line prediction h seconds ahead on the circle misses it by r·(ω·h)²/2
+    limit = {"straight": 40.0, "circle": 60.0 + 800 * (0.3 * 0.25 * ahead) ** 2 / 2,
+             "stop-and-go": 90.0}[kind]
     assert np.median(errors) < limit, (algorithm, kind, np.median(errors))
     if algorithm == "basic" and kind == "straight":
         assert np.median(errors) < 15.0, "eq. 9–10 is exact on a straight line"
