@@ -105,6 +105,8 @@ GANTRY_ESTIMATE = Topic("gantry/estimate", m.RobotEstimate, "filtered robot posi
 GANTRY_SETPOINT = Topic("gantry/setpoint", m.CraneSetpoint,
                         "crane setpoints, 4 Hz; only the gantry service may put them")
 GANTRY_STATE = Topic("gantry/state", m.CraneState, "crane position and the gantry's status")
+GANTRY_OFFLOAD = Topic("gantry/offload", m.GravityOffload,
+                       "gravity offload: vertical force lost and sideways pull of the cable")
 TRUTH_ROBOT = Topic("sim/truth/robot/{robot}", m.RobotTruth, "sim only: true robot marker")
 TRUTH_CRANE = Topic("sim/truth/crane", m.CraneTruth, "sim only: true crane position")
 TRUTH_PTZ = Topic("sim/truth/ptz/{camera}", m.PtzTruth, "sim only: true camera pan/tilt/zoom")
@@ -113,9 +115,8 @@ HEALTH = Topic("health/{service}/{instance}", m.ServiceHealth,
 
 ALL_TOPICS: tuple[Topic, ...] = (
     TRACKER_MARKERS, TRACKER_ROBOT, PTZ_STATE, PTZ_DETECTIONS, PTZ_CALIBRATION, PTZ_SNAPSHOT,
-    CALIB_COLLECT, CALIB_PROGRESS, CALIB_POSE, GANTRY_FRAME,
-    GANTRY_DETECTIONS, GANTRY_ESTIMATE, GANTRY_SETPOINT, GANTRY_STATE, TRUTH_ROBOT, TRUTH_CRANE,
-    TRUTH_PTZ, HEALTH,
+    CALIB_COLLECT, CALIB_PROGRESS, CALIB_POSE, GANTRY_FRAME, GANTRY_DETECTIONS, GANTRY_ESTIMATE,
+    GANTRY_SETPOINT, GANTRY_STATE, GANTRY_OFFLOAD, TRUTH_ROBOT, TRUTH_CRANE, TRUTH_PTZ, HEALTH,
 )
 
 ALIVE = "alive/{service}/{instance}"

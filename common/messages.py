@@ -221,6 +221,16 @@ class CraneState(Message):
     fault_bits: int = Field(ge=0, le=0xFFFF, description="controller fault register")
 
 
+class GravityOffload(Message):
+    """How the crane-to-robot error tilts the offload cable (paper §4)."""
+
+    horizontal_error_mm: float = Field(ge=0)
+    cable_length_mm: float = Field(gt=0)
+    vertical_loss_pct: float = Field(ge=0, le=100, description="vertical pull lost, 1 − cos θ")
+    horizontal_share_pct: float = Field(ge=0, le=100, description="sideways pull, sin θ")
+    warning: bool = Field(description="horizontal share above the configured limit")
+
+
 # --- simulation ground truth (tests and evaluation only) ----------------------------------------
 
 

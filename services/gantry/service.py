@@ -2,7 +2,8 @@
 
 Reads:      tracking-camera frames (stb/gantry/camera/frame, or a camera via OpenCV)
             the crane controller over Modbus/TCP (position, status)
-Publishes:  stb/gantry/detections, stb/gantry/estimate, stb/gantry/setpoint, stb/gantry/state
+Publishes:  stb/gantry/detections, stb/gantry/estimate, stb/gantry/setpoint, stb/gantry/state,
+            stb/gantry/offload (gravity offload: the cable's tilt from the horizontal error)
 Drives:     the crane controller: a setpoint every control period (4 Hz), a heartbeat for its
             watchdog (10 Hz); holds when the estimate is stale or the marker is lost
 """
@@ -24,6 +25,7 @@ from common.node import Node, StartupError
 from services.gantry.crane import CraneError, CraneReading, ModbusCrane
 from services.gantry.frames import FrameInbox, OpenCvFrames, decode
 from services.gantry.locate import TrackingOptics, locate
+from services.gantry.offload import offload
 from services.gantry.predict import Estimate, make_predictor
 from services.gantry.safety import SetpointGuard, Workspace
 from services.gantry.settings import GantrySettings
@@ -83,6 +85,7 @@ class Control:
         self.last_pixel: tuple[float, float] | None = None
         self.seq = 0
         self.reachable = True
+        self.offload_warned = False
 
     def heartbeat(self) -> None:
         with contextlib.suppress(CraneError):  # the control loop reports it
@@ -118,6 +121,19 @@ class Control:
             y_mm=float(decision.setpoint[1]), hold=decision.hold))
         self.node.set_status("degraded" if decision.hold else "ok", decision.reason)
         self._state(now, "holding" if decision.hold else "tracking", reading)
+        if self.estimate is not None and not decision.hold:
+            self._offload(now, float(np.hypot(*(self.estimate.position - crane_xy))))
+
+    def _offload(self, now: float, error_mm: float) -> None:
+        o = offload(error_mm, self.s.cable_length_mm, self.s.offload_warn_pct)
+        if o.warning and not self.offload_warned:
+            log.warning("crane %.0f mm off the robot: the offload cable pulls %.1f %% sideways",
+                        error_mm, o.horizontal_share_pct)
+        self.offload_warned = o.warning
+        self.node.bus.publish(keys.GANTRY_OFFLOAD, m.GravityOffload(
+            measured_s=now, horizontal_error_mm=o.horizontal_error_mm,
+            cable_length_mm=self.s.cable_length_mm, vertical_loss_pct=o.vertical_loss_pct,
+            horizontal_share_pct=o.horizontal_share_pct, warning=o.warning))
 
     def _measure(self, frame: tuple[float, np.ndarray], crane_xy: np.ndarray) -> None:
         captured, image = frame

@@ -39,3 +39,6 @@ class GantrySettings(ServiceSettings):
     max_speed_mm_s: float = Field(450.0, gt=0, description="setpoint motion limit")
     max_accel_mm_s2: float = Field(550.0, gt=0)
     seed: int = 0
+    cable_length_mm: float = Field(2000.0, gt=0, description="gravity-offload cable")
+    offload_warn_pct: float = Field(5.0, gt=0, le=100, description="warn above this sideways "
+                                    "share of the cable's pull")
