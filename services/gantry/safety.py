@@ -1,11 +1,12 @@
 """What keeps the crane safe, whatever the predictor says (DESIGN §5; pure).
 
 Every control period the guard turns a desired position into the setpoint actually sent:
-non-finite or missing input, or an estimate older than ``stale_after_s``, → hold (the crane
-is told to stay where it is now); otherwise the desired position is clamped to the workspace
-(with a margin) and the setpoint's own motion is limited in speed and acceleration, so a
-jump in the estimate never becomes a jump of the crane. The crane controller's watchdog
-(heartbeat) covers a dead or cut-off gantry service.
+non-finite or missing input, or an estimate older than ``stale_after_s``, → hold: the setpoint
+freezes at the last one sent (where the crane is already going, so it stops there without
+turning back; the crane's position if nothing was sent yet); otherwise the desired position
+is clamped to the workspace (with a margin) and the setpoint's own motion is limited in speed
+and acceleration, so a jump in the estimate never becomes a jump of the crane. The crane
+controller's watchdog (heartbeat) covers a dead or cut-off gantry service.
 """
 
 from __future__ import annotations
@@ -48,15 +49,19 @@ class SetpointGuard:
     _last: np.ndarray | None = None
     _step_velocity: np.ndarray = field(default_factory=lambda: np.zeros(2))
     _last_t: float | None = None
+    _hold_at: np.ndarray | None = None
 
     def decide(self, now_s: float, desired: np.ndarray | None, measured_s: float | None,
                crane_xy: np.ndarray) -> Decision:
         crane = self.workspace.clamp(np.nan_to_num(np.asarray(crane_xy, dtype=float)))
         reason = self._why_hold(now_s, desired, measured_s)
         if reason:
-            self._last, self._last_t = crane, now_s
+            if self._hold_at is None:  # freeze where the crane is already going: no reversal
+                self._hold_at = crane if self._last is None else self._last
+            self._last, self._last_t = self._hold_at, now_s
             self._step_velocity = np.zeros(2)
-            return Decision(crane, True, reason)
+            return Decision(self._hold_at.copy(), True, reason)
+        self._hold_at = None
         assert desired is not None
         target = self.workspace.clamp(np.asarray(desired, dtype=float))
         last = crane if self._last is None else self._last

@@ -136,3 +136,73 @@ def test_a_dead_gantry_service_leaves_a_stopped_crane(rig: dict) -> None:
     wait_for(lambda: np.linalg.norm(rig["crane"].state()[1]) < 1.0, timeout=3)
     assert not rig["crane"].state()[2], "disabled"
     feeder.join()
+
+
+def test_offload_figures_follow_the_error(rig: dict) -> None:
+    offloads: list[m.GravityOffload] = []
+    rig["world"].subscribe(keys.GANTRY_OFFLOAD, offloads.append, latest=False)
+    target = np.array([-600.0, 400.0])
+    feeder = threading.Thread(target=_feed, args=(rig, lambda _t: target, 6.0))
+    feeder.start()
+    wait_for(lambda: offloads and offloads[-1].horizontal_error_mm > 200.0, timeout=3)
+    assert offloads[-1].warning, "far off at the start: more than 5 % sideways"
+    wait_for(lambda: np.linalg.norm(rig["crane"].state()[0] - target) < 20.0, timeout=8)
+    wait_for(lambda: offloads[-1].horizontal_error_mm < 30.0, timeout=2)
+    assert not offloads[-1].warning and offloads[-1].vertical_loss_pct < 0.1
+    feeder.join()
+
+
+def test_the_crane_holds_while_the_router_is_down_and_tracks_again_after(
+        tmp_path: Path) -> None:
+    import signal
+
+    from tests.conftest import client_settings, stb_process
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = stb_process("router", "--listen", endpoint)
+    heights = tmp_path / "flat.npz"
+    HeightMap(np.full((3, 3), GROUND_MM, np.float32), -5000, -5000, 5000).save(heights)
+    crane = CraneRig()
+    sessions = []
+    try:
+        def bus() -> Bus:
+            settings = client_settings(endpoint)
+            session = wait_for(lambda: _try_open(settings), timeout=15, period=0.2)
+            sessions.append(session)
+            return Bus(session, settings)
+
+        node = Node("gantry", GantrySettings(crane_port=crane.port, height_map=heights,
+                                             marker_height_mm=MARKER_MM), bus())
+        thread = threading.Thread(target=run, args=(node,), daemon=True)
+        thread.start()
+        rig = {"crane": crane, "world": bus()}
+        target = np.array([500.0, 500.0])
+        feeder = threading.Thread(target=_feed, args=(rig, lambda t: target + [60.0 * t, 0.0],
+                                                      30.0), daemon=True)
+        feeder.start()
+        wait_for(lambda: np.linalg.norm(crane.state()[1]) > 30.0, timeout=10)
+        router.send_signal(signal.SIGKILL)
+        router.wait(5)
+        time.sleep(2.0)  # frames cannot arrive: the estimate goes stale, the crane holds
+        held = crane.state()
+        assert held[2] and not held[3], "still enabled, no watchdog fault: it holds"
+        assert np.linalg.norm(held[1]) < 1.0, "and stands still"
+        router = stb_process("router", "--listen", endpoint)
+        wait_for(lambda: np.linalg.norm(crane.state()[1]) > 30.0, timeout=15)
+        node.stop.set()
+        thread.join(5)
+    finally:
+        for session in sessions:
+            session.close()
+        router.kill()
+        router.wait(5)
+        crane.close()
+
+
+def _try_open(settings):  # type: ignore[no-untyped-def]
+    from common.bus import BusUnreachable, open_session
+
+    try:
+        return open_session(settings.zenoh)
+    except BusUnreachable:
+        return None
