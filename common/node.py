@@ -128,3 +128,17 @@ def stop_on_signals(stop: threading.Event) -> Callable[[], None]:
             signal.signal(signum, old)
 
     return restore
+
+
+def run_every(period_s: float, stop: threading.Event, action: Callable[[], None],
+              what: str = "periodic task") -> None:
+    """Call ``action`` every ``period_s`` (no drift) until ``stop``; an exception is logged
+    and the next tick comes anyway — one bad tick must not end a stream or a control loop."""
+    next_at = time.monotonic()
+    while not stop.is_set():
+        try:
+            action()
+        except Exception:  # noqa: BLE001
+            log.exception("%s failed", what)
+        next_at += period_s
+        stop.wait(max(0.0, next_at - time.monotonic()))

@@ -21,7 +21,7 @@ from common import keys
 from common import messages as m
 from common.heightmap import HeightMap
 from common.markers import closest, detect, to_message
-from common.node import Node, StartupError
+from common.node import Node, StartupError, run_every
 from services.gantry.crane import CraneError, CraneReading, ModbusCrane
 from services.gantry.frames import FrameInbox, OpenCvFrames, decode
 from services.gantry.locate import TrackingOptics, locate
@@ -46,10 +46,10 @@ def run(node: Node, crane: ModbusCrane | None = None) -> None:
     else:
         inbox = OpenCvFrames(s.frames.removeprefix("opencv:"), node.stop)
     control = Control(node, s, crane, heights, inbox)
-    threading.Thread(target=_every, args=(1 / s.heartbeat_hz, node.stop, control.heartbeat),
-                     name="heartbeat", daemon=True).start()
+    threading.Thread(target=run_every, args=(1 / s.heartbeat_hz, node.stop, control.heartbeat,
+                                             "heartbeat"), name="heartbeat", daemon=True).start()
     try:
-        _every(1 / s.control_hz, node.stop, control.tick)
+        run_every(1 / s.control_hz, node.stop, control.tick, "control tick")
     finally:
         crane.close()
 
@@ -58,14 +58,6 @@ def _put(inbox: FrameInbox, msg: m.CameraFrame) -> None:
     frame = decode(msg)
     if frame is not None:
         inbox.put(frame)
-
-
-def _every(period_s: float, stop: threading.Event, action) -> None:  # type: ignore[no-untyped-def]
-    next_at = time.monotonic()
-    while not stop.is_set():
-        action()
-        next_at += period_s
-        stop.wait(max(0.0, next_at - time.monotonic()))
 
 
 class Control:
@@ -86,8 +78,13 @@ class Control:
         self.seq = 0
         self.reachable = True
         self.offload_warned = False
+        self.last_tick = time.monotonic()
 
     def heartbeat(self) -> None:
+        """Only while the control loop is alive: a stuck or failing loop stops the heartbeat,
+        and the crane's watchdog stops the crane."""
+        if time.monotonic() - self.last_tick > 2.5 / self.s.control_hz:
+            return
         with contextlib.suppress(CraneError):  # the control loop reports it
             self.crane.heartbeat()
 
@@ -116,6 +113,7 @@ class Control:
             self._unreachable(now, err)
             return
         self.seq += 1
+        self.last_tick = time.monotonic()
         self.node.bus.publish(keys.GANTRY_SETPOINT, m.CraneSetpoint(
             measured_s=now, seq=self.seq, x_mm=float(decision.setpoint[0]),
             y_mm=float(decision.setpoint[1]), hold=decision.hold))

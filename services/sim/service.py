@@ -21,7 +21,7 @@ import numpy as np
 
 from common import keys
 from common import messages as m
-from common.node import Node, StartupError
+from common.node import Node, StartupError, run_every
 from services.sim.camera_server import CameraServer, SimCamera
 from services.sim.crane_server import CraneServer
 from services.sim.lab import Lab
@@ -173,17 +173,8 @@ class DeviceLoop:
 
 def _every(period_s: float, stop: threading.Event, action: Callable[[], None]
            ) -> threading.Thread:
-    def loop() -> None:
-        next_at = time.monotonic()
-        while not stop.is_set():
-            try:
-                action()
-            except Exception:  # noqa: BLE001 - one bad tick must not end the stream
-                log.exception("periodic publisher failed")
-            next_at += period_s
-            stop.wait(max(0.0, next_at - time.monotonic()))
-
-    thread = threading.Thread(target=loop, daemon=True)
+    thread = threading.Thread(target=run_every, args=(period_s, stop, action, "publisher"),
+                              daemon=True)
     thread.start()
     return thread
 
