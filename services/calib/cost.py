@@ -62,9 +62,7 @@ class Fitness:
     def __call__(self, candidates: np.ndarray) -> np.ndarray:
         values = residuals_px(candidates, self.world_mm, self.pixels, self.intr).mean(axis=1)
         self.evaluations += len(values)
-        best = float(values.min())
-        if best < self._best or not self.history:
-            self._best = min(best, self._best)
+        self._best = min(self._best, float(values.min()))
         self.history.append((self.evaluations, self._best))
         return values
 

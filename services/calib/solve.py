@@ -90,9 +90,7 @@ def solve(points: Passpoints, options: Options = Options()) -> Solution:
     intr = Intrinsics(options.focal_mm)
     if options.fit_focal and options.method == "auto":
         intr = _focal_seed(points, options)
-    if options.track is not None:
-        assert points.times_s is not None
-        points = points.with_world(options.track.at(points.times_s))
+    points = _at_offset(points, options.track, 0.0)
     if options.method == "auto":
         pose, inliers, evaluations, curve = _auto(points, intr, options)
     else:
@@ -102,9 +100,7 @@ def solve(points: Passpoints, options: Options = Options()) -> Solution:
         pose, intr, offset, inliers, more = _joint(pose, points, inliers, intr, options)
         evaluations += more
     pose = Pose.from_matrix(pose.rotation, pose.position)  # angles in (-180°, 180°]
-    if options.track is not None:
-        assert points.times_s is not None
-        points = points.with_world(options.track.at(points.times_s + (offset or 0.0)))
+    points = _at_offset(points, options.track, offset)
     residuals = reprojection_px(pose, points.world_mm, points.pixels, intr)
     position_std, orientation_std = (pose_std(pose, points.world_mm[inliers],
                                               points.pixels[inliers], intr)
@@ -217,11 +213,17 @@ def _joint(pose: Pose, points: Passpoints, inliers: np.ndarray, intr: Intrinsics
     return pose, intr, offset, inliers, evaluations
 
 
+def _at_offset(points: Passpoints, track: Track | None, offset: float | None) -> Passpoints:
+    """With a track, the passpoints' marker positions are the track at image time + offset."""
+    if track is None:
+        return points
+    assert points.times_s is not None
+    return points.with_world(track.at(points.times_s + (offset or 0.0)))
+
+
 def _residuals(pose: Pose, points: Passpoints, intr: Intrinsics, track: Track | None,
                offset: float | None) -> np.ndarray:
-    if track is not None:
-        assert points.times_s is not None
-        points = points.with_world(track.at(points.times_s + (offset or 0.0)))
+    points = _at_offset(points, track, offset)
     return reprojection_px(pose, points.world_mm, points.pixels, intr)
 
 

@@ -158,6 +158,7 @@ def test_the_crane_holds_while_the_router_is_down_and_tracks_again_after(
     import signal
 
     from tests.conftest import client_settings, stb_process
+    from tests.services.test_processes import _open_when_up
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     router = stb_process("router", "--listen", endpoint)
@@ -167,10 +168,9 @@ def test_the_crane_holds_while_the_router_is_down_and_tracks_again_after(
     sessions = []
     try:
         def bus() -> Bus:
-            settings = client_settings(endpoint)
-            session = wait_for(lambda: _try_open(settings), timeout=15, period=0.2)
+            session = _open_when_up(endpoint)
             sessions.append(session)
-            return Bus(session, settings)
+            return Bus(session, client_settings(endpoint))
 
         node = Node("gantry", GantrySettings(crane_port=crane.port, height_map=heights,
                                              marker_height_mm=MARKER_MM), bus())
@@ -205,11 +205,3 @@ def test_the_crane_holds_while_the_router_is_down_and_tracks_again_after(
         router.wait(5)
         crane.close()
 
-
-def _try_open(settings):  # type: ignore[no-untyped-def]
-    from common.bus import BusUnreachable, open_session
-
-    try:
-        return open_session(settings.zenoh)
-    except BusUnreachable:
-        return None
