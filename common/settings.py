@@ -15,7 +15,15 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, ClassVar, Literal, TypeVar
 
-from pydantic import BaseModel, ConfigDict, Field, SecretStr, ValidationError, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    SecretStr,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from common.keys import DEFAULT_PREFIX, check_prefix
@@ -49,6 +57,8 @@ class ZenohSettings(_Strict):
     multicast_scouting: bool = False
     user: str | None = None
     password: SecretStr | None = None
+    password_file: Path | None = Field(
+        None, description="read the password from this file (a Docker secret), not the config")
     users_file: Path | None = Field(None, description="router only: 'user:password' lines")
     tls: TlsSettings = TlsSettings()
     config_file: Path | None = Field(
@@ -69,6 +79,21 @@ class ZenohSettings(_Strict):
             if not sep or not proto or not addr:
                 raise ValueError(f"endpoint {endpoint!r} is not '<proto>/<address>:<port>'")
         return endpoints
+
+    @model_validator(mode="after")
+    def _password_from_file(self) -> ZenohSettings:
+        if self.password_file is None:
+            return self
+        if self.password is not None:
+            raise ValueError("give password or password_file, not both")
+        try:
+            secret = self.password_file.read_text().strip()
+        except OSError as err:
+            raise ValueError(f"password_file {self.password_file}: {err.strerror}") from err
+        if not secret:
+            raise ValueError(f"password_file {self.password_file} is empty")
+        object.__setattr__(self, "password", SecretStr(secret))
+        return self
 
 
 class BusSettings(_Strict):

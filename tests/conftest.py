@@ -74,5 +74,6 @@ def make_bus(router_endpoint: str) -> Iterator[Callable[..., Bus]]:
 def stb_process(*args: str, **popen: object) -> subprocess.Popen:
     """Start ``python -m services.cli ARGS`` with the project on the path."""
     env = {**os.environ, "PYTHONUNBUFFERED": "1", **popen.pop("env", {})}  # type: ignore[dict-item]
-    return subprocess.Popen([sys.executable, "-m", "services.cli", *args], cwd=ROOT, env=env,
+    cwd = popen.pop("cwd", ROOT)
+    return subprocess.Popen([sys.executable, "-m", "services.cli", *args], cwd=cwd, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen)

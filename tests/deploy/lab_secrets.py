@@ -1,0 +1,38 @@
+"""The lab's secured router (deploy/zenoh) for tests: secrets made by the real script."""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+from common.settings import TlsSettings, ZenohSettings
+
+ROOT = Path(__file__).resolve().parents[2]
+ROUTER_CONFIG = ROOT / "deploy" / "zenoh" / "router.json5"
+MAKE_SECRETS = ROOT / "deploy" / "zenoh" / "make-secrets"
+
+
+def make_secrets(workdir: Path, *hosts: str) -> Path:
+    """Run make-secrets so that ``workdir`` can be the router's working directory (the config
+    names its files relative to it); returns the secrets folder."""
+    secrets = workdir / "deploy" / "zenoh" / "secrets"
+    args = [str(MAKE_SECRETS), "--out", str(secrets)]
+    for host in hosts:
+        args += ["--host", host]
+    subprocess.run(args, check=True, capture_output=True, text=True, timeout=60)
+    return secrets
+
+
+def identity(secrets: Path, user: str, endpoint: str, **changes: object) -> ZenohSettings:
+    """Client settings of one lab identity (its password from its file, the lab's CA)."""
+    values: dict = {"connect": [endpoint], "user": user,
+                    "password_file": secrets / f"{user}.password",
+                    "tls": TlsSettings(root_ca_certificate=secrets / "ca.pem"), **changes}
+    return ZenohSettings(**values)
+
+
+def identity_env(secrets: Path, user: str, endpoint: str) -> dict[str, str]:
+    """The same as environment variables, as docker-compose.yml gives them to a service."""
+    return {"STB_BUS__ZENOH__CONNECT": f'["{endpoint}"]', "STB_BUS__ZENOH__USER": user,
+            "STB_BUS__ZENOH__PASSWORD_FILE": str(secrets / f"{user}.password"),
+            "STB_BUS__ZENOH__TLS__ROOT_CA_CERTIFICATE": str(secrets / "ca.pem")}

@@ -1,0 +1,136 @@
+"""The lab's router config (deploy/zenoh/router.json5) with secrets from make-secrets: TLS,
+user/password and default-deny access control, enforced by a real `stb router` on loopback."""
+
+from __future__ import annotations
+
+import subprocess
+import time
+from collections.abc import Iterator
+
+import pytest
+import zenoh
+
+from common.bus import BusUnreachable, open_session
+from tests.conftest import stb_process, wait_for
+from tests.deploy.lab_secrets import ROUTER_CONFIG, identity, identity_env, make_secrets
+from tests.ports import free_port
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
+    workdir = tmp_path_factory.mktemp("lab")
+    secrets = make_secrets(workdir)
+    endpoint = f"tls/localhost:{free_port()}"
+    router = stb_process("router", "--config", str(ROUTER_CONFIG), "--listen",
+                         endpoint.replace("localhost", "127.0.0.1"), cwd=workdir)
+    sessions: list[zenoh.Session] = []
+
+    def session(user: str) -> zenoh.Session:
+        def attempt() -> zenoh.Session | None:
+            try:
+                return open_session(identity(secrets, user, endpoint))
+            except BusUnreachable:
+                return None
+
+        opened = wait_for(attempt, timeout=15, period=0.2)
+        sessions.append(opened)  # type: ignore[arg-type]
+        return opened  # type: ignore[return-value]
+
+    try:
+        yield {"secrets": secrets, "endpoint": endpoint, "session": session}
+    finally:
+        for s in sessions:
+            s.close()
+        router.terminate()
+        router.wait(timeout=10)
+
+
+def _monitor(env: dict[str, str]) -> subprocess.CompletedProcess:
+    env = {**env, "STB_BUS__ZENOH__CONNECT_TIMEOUT_MS": "2000"}
+    proc = stb_process("monitor", "--raw", "stb/**", "--duration", "0.5", env=env)
+    out, err = proc.communicate(timeout=60)
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+
+
+def test_no_credentials_or_a_wrong_password_is_refused(lab: dict) -> None:
+    lab["session"]("monitor")  # the router is up
+    good = identity_env(lab["secrets"], "monitor", lab["endpoint"])
+    assert _monitor(good).returncode == 0, "the right password must get in"
+    nobody = {k: v for k, v in good.items() if "USER" not in k and "PASSWORD" not in k}
+    wrong = lab["secrets"].parent / "wrong.password"
+    wrong.write_text("not-the-password\n")
+    for env in (nobody, {**good, "STB_BUS__ZENOH__PASSWORD_FILE": str(wrong)},
+                {**good, "STB_BUS__ZENOH__USER": "intruder"}):
+        refused = _monitor(env)
+        assert refused.returncode != 0
+        assert "cannot open a Zenoh client session" in refused.stderr, refused.stderr
+
+
+def test_plain_tcp_is_not_accepted(lab: dict) -> None:
+    lab["session"]("monitor")
+    env = identity_env(lab["secrets"], "monitor", lab["endpoint"].replace("tls/", "tcp/"))
+    refused = _monitor(env)
+    assert refused.returncode != 0 and "cannot open" in refused.stderr
+
+
+def _collect(session: zenoh.Session, key_expr: str) -> tuple[list, object]:
+    got: list[tuple[str, bytes]] = []
+    sub = session.declare_subscriber(
+        key_expr, lambda s: got.append((str(s.key_expr), s.payload.to_bytes())))
+    return got, sub
+
+
+def test_only_the_gantry_puts_setpoints_and_only_a_ptz_its_own_camera(lab: dict) -> None:
+    gantry, monitor, calib = (lab["session"](u) for u in ("gantry", "monitor", "calib"))
+    ptz1, ptz2 = lab["session"]("ptz1"), lab["session"]("ptz2")
+    watcher = lab["session"]("tracker")  # any account may read
+    got, _sub = _collect(watcher, "stb/**")
+    time.sleep(0.5)
+    for _ in range(3):
+        gantry.put("stb/gantry/setpoint", b"from gantry")
+        monitor.put("stb/gantry/setpoint", b"from monitor")
+        calib.put("stb/gantry/setpoint", b"from calib")
+        ptz1.put("stb/ptz/ptz1/state", b"ptz1 about itself")
+        ptz1.put("stb/ptz/ptz2/state", b"ptz1 about ptz2")
+        ptz2.put("stb/ptz/ptz2/state", b"ptz2 about itself")
+        monitor.put("stb/ptz/ptz1/calibration", b"monitor commands a camera")
+        calib.put("stb/ptz/ptz1/calibration", b"calib commands a camera")
+        monitor.put("stb/health/monitor/main", b"monitor writes")
+        time.sleep(0.05)
+    wait_for(lambda: {p for _, p in got} >= {b"from gantry", b"ptz1 about itself",
+                                              b"ptz2 about itself", b"calib commands a camera"})
+    time.sleep(0.5)  # what is denied would have arrived by now
+    payloads = {p for _, p in got}
+    for denied in (b"from monitor", b"from calib", b"ptz1 about ptz2",
+                   b"monitor commands a camera", b"monitor writes"):
+        assert denied not in payloads, denied
+
+
+def test_liveliness_and_queries_work_under_default_deny(lab: dict) -> None:
+    gantry, monitor, calib, ptz1 = (lab["session"](u) for u in ("gantry", "monitor", "calib",
+                                                                "ptz1"))
+    seen: list[str] = []
+    _alive = monitor.liveliness().declare_subscriber(
+        "stb/alive/**", lambda s: seen.append(f"{str(s.kind).split('.')[-1]} {s.key_expr}"),
+        history=True)
+    token = gantry.liveliness().declare_token("stb/alive/gantry/main")
+    _forged = monitor.liveliness().declare_token("stb/alive/gantry/forged")
+    calib_seen: list[str] = []
+    _calib_alive = calib.liveliness().declare_subscriber(
+        "stb/alive/**", lambda s: calib_seen.append(str(s.key_expr)), history=True)
+    wait_for(lambda: "PUT stb/alive/gantry/main" in seen)
+    wait_for(lambda: "stb/alive/gantry/main" in calib_seen)
+    replies = monitor.liveliness().get("stb/alive/**", timeout=2)
+    assert "stb/alive/gantry/main" in {str(r.ok.key_expr) for r in replies if r.ok}
+    token.undeclare()
+    wait_for(lambda: "DELETE stb/alive/gantry/main" in seen)
+    assert "stb/alive/gantry/forged" not in calib_seen, "the monitor declares no tokens"
+
+    _pose = calib.declare_queryable("stb/calib/ptz1/pose",
+                                    lambda q: q.reply("stb/calib/ptz1/pose", b"pose"))
+    _fake = ptz1.declare_queryable("stb/calib/ptz2/pose",
+                                   lambda q: q.reply("stb/calib/ptz2/pose", b"fake pose"))
+    time.sleep(0.5)
+    answers = [r.ok.payload.to_bytes() for r in monitor.get("stb/calib/*/pose", timeout=2)
+               if r.ok]
+    assert answers == [b"pose"], "only calib answers pose queries"
