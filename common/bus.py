@@ -58,8 +58,9 @@ def zenoh_config(z: ZenohSettings) -> zenoh.Config:
     usrpwd: dict[str, str] = {}
     if z.user is not None:
         usrpwd["user"] = z.user
-    if z.password is not None:
-        usrpwd["password"] = z.password.get_secret_value()
+    secret = z.secret()
+    if secret is not None:
+        usrpwd["password"] = secret
     if z.users_file is not None:
         usrpwd["dictionary_file"] = str(z.users_file)
     if usrpwd:

@@ -81,19 +81,26 @@ class ZenohSettings(_Strict):
         return endpoints
 
     @model_validator(mode="after")
-    def _password_from_file(self) -> ZenohSettings:
-        if self.password_file is None:
-            return self
+    def _password_file_is_readable(self) -> ZenohSettings:
+        if self.password_file is not None:
+            if self.password is not None:
+                raise ValueError("give password or password_file, not both")
+            self.secret()
+        return self
+
+    def secret(self) -> str | None:
+        """The password, from the settings or from ``password_file``."""
         if self.password is not None:
-            raise ValueError("give password or password_file, not both")
+            return self.password.get_secret_value()
+        if self.password_file is None:
+            return None
         try:
             secret = self.password_file.read_text().strip()
         except OSError as err:
             raise ValueError(f"password_file {self.password_file}: {err.strerror}") from err
         if not secret:
             raise ValueError(f"password_file {self.password_file} is empty")
-        object.__setattr__(self, "password", SecretStr(secret))
-        return self
+        return secret
 
 
 class BusSettings(_Strict):

@@ -6,6 +6,9 @@ is a ``CraneUnreachable`` (transport) or ``CraneRejected`` (a Modbus exception r
 
 from __future__ import annotations
 
+import contextlib
+import socket
+import struct
 import threading
 from dataclasses import dataclass
 
@@ -97,12 +100,18 @@ class ModbusCrane:
             if not self._client.connected and not self._client.connect():
                 raise CraneUnreachable(f"crane controller {self.host}:{self.port} not reachable")
             reply = request()
-        except ModbusException as err:
-            self._client.close()
-            raise CraneUnreachable(f"crane controller {self.host}:{self.port}: {err}") from err
-        except OSError as err:
-            self._client.close()
+        except (ModbusException, OSError) as err:
+            self._abort()
             raise CraneUnreachable(f"crane controller {self.host}:{self.port}: {err}") from err
         if reply.isError():
             raise CraneRejected(f"crane controller refused the request: {reply}")
         return reply
+
+    def _abort(self) -> None:
+        """Close with a reset, dropping whatever is still unsent: a write that timed out must
+        never reach the controller later, when the link is back (it would be stale)."""
+        sock = getattr(self._client, "socket", None)
+        if sock is not None:
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+        self._client.close()

@@ -51,6 +51,12 @@ class SetpointGuard:
     _last_t: float | None = None
     _hold_at: np.ndarray | None = None
 
+    def reset(self) -> None:
+        """Forget every earlier setpoint: after the crane stopped on its own (watchdog, link
+        loss) the next setpoint starts from where it stands, never from where it was going."""
+        self._last, self._last_t, self._hold_at = None, None, None
+        self._step_velocity = np.zeros(2)
+
     def decide(self, now_s: float, desired: np.ndarray | None, measured_s: float | None,
                crane_xy: np.ndarray) -> Decision:
         crane = self.workspace.clamp(np.nan_to_num(np.asarray(crane_xy, dtype=float)))

@@ -94,6 +94,7 @@ class Control:
             reading = self.crane.read()
             if not reading.enabled:
                 log.info("crane not enabled (faults %#x): enabling", reading.faults)
+                self.guard.reset()
                 self.crane.enable()
         except CraneError as err:
             self._unreachable(now, err)
@@ -160,6 +161,7 @@ class Control:
             vy_mm_s=float(e.velocity[1]) if e else 0.0))
 
     def _unreachable(self, now: float, err: CraneError) -> None:
+        self.guard.reset()  # the crane may have stopped meanwhile: start afresh when it is back
         if self.reachable:
             log.warning("%s", err)
         self.reachable = False

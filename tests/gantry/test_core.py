@@ -114,3 +114,17 @@ def test_particle_filters_are_reproducible_from_their_seed() -> None:
             predictor = make_predictor(algorithm, seed=7)  # type: ignore[arg-type]
             runs.append([predictor.update(0.25 * i, xy).desired for i, xy in enumerate(path)])
         assert np.array_equal(np.array(runs[0]), np.array(runs[1])), algorithm
+
+
+def test_after_a_reset_the_guard_starts_from_the_crane_not_from_its_last_setpoint() -> None:
+    guard = SetpointGuard(Workspace(), stale_after_s=0.6)
+    crane = np.array([0.0, 0.0])
+    for k in range(8):  # ramp towards a far target
+        guard.decide(k * 0.25, np.array([2000.0, 0.0]), k * 0.25, crane)
+    held = guard.decide(5.0, None, None, np.array([300.0, 0.0]))
+    assert held.hold and held.setpoint[0] > 300.0, "hold keeps the last setpoint (no reversal)"
+    guard.reset()  # the watchdog stopped the crane at 300 mm meanwhile
+    again = guard.decide(6.0, None, None, np.array([300.0, 0.0]))
+    assert again.hold and np.allclose(again.setpoint, [300.0, 0.0])
+    resumed = guard.decide(6.25, np.array([2000.0, 0.0]), 6.25, np.array([300.0, 0.0]))
+    assert 300.0 < resumed.setpoint[0] < 300.0 + 450.0 * 0.25 + 1e-6
