@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import zenoh
 
-from common.bus import Bus, open_session
+from common.bus import Bus, BusUnreachable, open_session
 from common.settings import BusSettings, ZenohSettings
 from tests.ports import free_port
 from tests.simlab import crater, crater_file, lab  # noqa: F401 - shared fixtures
@@ -34,6 +34,17 @@ def wait_for(predicate: Callable[[], object], timeout: float = 5.0, period: floa
             return value
         time.sleep(period)
     pytest.fail(f"condition not met within {timeout} s: {predicate}")
+
+
+def open_when_up(settings: ZenohSettings, timeout: float = 15.0) -> zenoh.Session:
+    """A session as soon as the router accepts it (it may still be starting)."""
+    def attempt() -> zenoh.Session | None:
+        try:
+            return open_session(settings)
+        except BusUnreachable:
+            return None
+
+    return wait_for(attempt, timeout=timeout, period=0.2)  # type: ignore[return-value]
 
 
 @pytest.fixture

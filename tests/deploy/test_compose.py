@@ -52,8 +52,9 @@ def test_every_service_is_a_tls_client_with_its_own_identity_known_to_the_router
     acl = json.loads(zenoh.Config.from_file(str(ROOT / "deploy/zenoh/router.json5"))
                      .get_json("access_control"))
     users = {u for subject in acl["subjects"] for u in subject.get("usernames", [])}
+    services = _services()
     seen = set()
-    for name, service in _services().items():
+    for name, service in services.items():
         if name == "router":
             continue
         env = service["environment"]
@@ -64,8 +65,8 @@ def test_every_service_is_a_tls_client_with_its_own_identity_known_to_the_router
         assert {s["target"] for s in service["secrets"]} == {
             env["STB_BUS__ZENOH__PASSWORD_FILE"], env["STB_BUS__ZENOH__TLS__ROOT_CA_CERTIFICATE"]}
         seen.add(env["STB_BUS__ZENOH__USER"])
-    assert len(seen) == len(_services()) - 1, "one identity per service"
-    assert any(v["target"] == "/data/calib" for v in _services()["calib"]["volumes"])
+    assert len(seen) == len(services) - 1, "one identity per service"
+    assert any(v["target"] == "/data/calib" for v in services["calib"]["volumes"])
 
 
 def test_validator_catches_a_broken_file(tmp_path: Path) -> None:

@@ -17,11 +17,11 @@ import pytest
 
 from common import keys
 from common import messages as m
-from common.bus import Bus, BusUnreachable, open_session
+from common.bus import Bus
 from common.settings import BusSettings
 from services.gantry.crane import CraneError, ModbusCrane
 from services.sim.settings import SimSettings
-from tests.conftest import ROOT, wait_for
+from tests.conftest import ROOT, open_when_up, wait_for
 from tests.deploy import netns
 from tests.deploy.lab_secrets import ROUTER_CONFIG, identity, identity_env, make_secrets
 
@@ -111,15 +111,9 @@ def lab(tmp_path: Path, crater_file: Path) -> Iterator[dict]:
         service("ptz", "ptz1", "ptz", "--instance", "ptz1")
 
         def bus(user: str) -> Bus:
-            def attempt() -> Bus | None:
-                try:
-                    session = open_session(identity(secrets, user, endpoint))
-                except BusUnreachable:
-                    return None
-                sessions.append(session)
-                return Bus(session, BusSettings(zenoh=identity(secrets, user, endpoint)))
-
-            return wait_for(attempt, timeout=20, period=0.3)  # type: ignore[return-value]
+            settings = identity(secrets, user, endpoint)
+            sessions.append(open_when_up(settings, timeout=20))
+            return Bus(sessions[-1], BusSettings(zenoh=settings))
 
         yield {"lan": lan, "hosts": hosts, "bus": bus, "start_router": start_router,
                "crane": ModbusCrane(hosts["sim"].address, 5020, timeout_s=0.2),

@@ -10,8 +10,7 @@ from collections.abc import Iterator
 import pytest
 import zenoh
 
-from common.bus import BusUnreachable, open_session
-from tests.conftest import stb_process, wait_for
+from tests.conftest import open_when_up, stb_process, wait_for
 from tests.deploy.lab_secrets import ROUTER_CONFIG, identity, identity_env, make_secrets
 from tests.ports import free_port
 
@@ -26,15 +25,8 @@ def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
     sessions: list[zenoh.Session] = []
 
     def session(user: str) -> zenoh.Session:
-        def attempt() -> zenoh.Session | None:
-            try:
-                return open_session(identity(secrets, user, endpoint))
-            except BusUnreachable:
-                return None
-
-        opened = wait_for(attempt, timeout=15, period=0.2)
-        sessions.append(opened)  # type: ignore[arg-type]
-        return opened  # type: ignore[return-value]
+        sessions.append(open_when_up(identity(secrets, user, endpoint)))
+        return sessions[-1]
 
     try:
         yield {"secrets": secrets, "endpoint": endpoint, "session": session}

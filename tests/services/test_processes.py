@@ -16,10 +16,10 @@ import zenoh
 
 from common import keys
 from common import messages as m
-from common.bus import Bus, BusUnreachable, open_session
+from common.bus import Bus, open_session
 from common.wiredoc import EXAMPLES
 from services.registry import DEFAULT_UP
-from tests.conftest import client_settings, free_port, stb_process, wait_for
+from tests.conftest import client_settings, free_port, open_when_up, stb_process, wait_for
 
 
 class AliveWatcher:
@@ -187,13 +187,7 @@ log_dir = "{tmp_path / 'logs'}"
 
 
 def _open_when_up(endpoint: str) -> zenoh.Session:
-    def attempt() -> zenoh.Session | None:
-        try:
-            return open_session(client_settings(endpoint).zenoh)
-        except BusUnreachable:
-            return None
-
-    return wait_for(attempt, timeout=15, period=0.2)  # type: ignore[return-value]
+    return open_when_up(client_settings(endpoint).zenoh)
 
 
 def test_up_restarts_a_killed_service_within_two_seconds(tmp_path: Path) -> None:
