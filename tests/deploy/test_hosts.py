@@ -65,7 +65,7 @@ def _lab_file(path: Path, router: str, sim: str, crater: Path) -> Path:
 connect = ["tls/{router}:7447"]
 lease_ms = 1000
 [sim]
-scenario = "locomotive"
+scenario = "walker"  # slow: still in the tracking camera's view when the cable is back
 crater_file = "{crater}"
 bind = "0.0.0.0"
 [tracker]
@@ -77,6 +77,7 @@ password = "pass"
 [gantry]
 crane_host = "{sim}"
 height_map = "{crater}"
+marker_height_mm = 350.0
 stale_after_s = {STALE_AFTER_S}
 """)
     return path
