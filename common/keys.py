@@ -91,6 +91,9 @@ PTZ_CALIBRATION = Topic("ptz/{camera}/calibration", m.CalibrationMode,
                         stream=False)
 PTZ_SNAPSHOT = Topic("ptz/{camera}/snapshot", m.CameraFrame,
                      "JPEG snapshots of a camera in calibration mode", max_payload_bytes=2 * MIB)
+PTZ_PREVIEW = Topic("ptz/{camera}/preview", m.PtzPreview,
+                    "a low-rate JPEG of a following camera, with the robot marker's pixel",
+                    max_payload_bytes=2 * MIB)
 CALIB_COLLECT = Topic("calib/{camera}/collect", m.CollectRequest,
                       "starts or cancels a passpoint collection", stream=False)
 CALIB_PROGRESS = Topic("calib/{camera}/progress", m.CollectProgress,
@@ -115,6 +118,7 @@ HEALTH = Topic("health/{service}/{instance}", m.ServiceHealth,
 
 ALL_TOPICS: tuple[Topic, ...] = (
     TRACKER_MARKERS, TRACKER_ROBOT, PTZ_STATE, PTZ_DETECTIONS, PTZ_CALIBRATION, PTZ_SNAPSHOT,
+    PTZ_PREVIEW,
     CALIB_COLLECT, CALIB_PROGRESS, CALIB_POSE, GANTRY_FRAME, GANTRY_DETECTIONS, GANTRY_ESTIMATE,
     GANTRY_SETPOINT, GANTRY_STATE, GANTRY_OFFLOAD, TRUTH_ROBOT, TRUTH_CRANE, TRUTH_PTZ, HEALTH,
 )

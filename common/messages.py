@@ -167,6 +167,25 @@ class CollectProgress(Message):
     mean_error_px: float | None = Field(None, ge=0, description="of the solved pose (done)")
 
 
+class PtzPreview(Message):
+    """A low-rate JPEG of what a following camera sees, for people to look at
+    (``measured_s`` = capture time). ``markers``: bright round spots the detector found (few
+    without the IR emitter); ``robot_px``: where the tracked robot marker should appear, from
+    the camera's pose, its pan/tilt at capture and the robot's position then."""
+
+    camera: Name
+    seq: int = Field(ge=0)
+    width_px: int = Field(gt=0, le=8192)
+    height_px: int = Field(gt=0, le=8192)
+    jpeg: bytes
+    pan_deg: float = Field(ge=-180, le=180)
+    tilt_deg: float = Field(ge=-90, le=90)
+    markers: list[DetectedMarker] = Field(max_length=256)
+    robot_px: list[float] | None = Field(
+        None, min_length=2, max_length=2,
+        description="[u, v] of the robot marker; None without a pose or a robot")
+
+
 # --- gantry -------------------------------------------------------------------------------------
 
 

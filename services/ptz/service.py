@@ -5,6 +5,7 @@ Subscribes: stb/tracker/robot (RobotPosition), stb/calib/{camera}/pose (CameraPo
             stb/ptz/{camera}/calibration (CalibrationMode: hold still and detect, with a lease)
 Publishes:  stb/ptz/{camera}/state (PtzState: pan, tilt, zoom, status, aim error), state_hz
             in calibration mode: stb/ptz/{camera}/detections and .../snapshot per snapshot
+            otherwise stb/ptz/{camera}/preview (PtzPreview), preview_hz, for people to look at
 Drives:     the camera over VAPIX (pan/tilt/zoom), at most command_hz, with a dead band
 """
 
@@ -24,6 +25,7 @@ from services.ptz.aim import Limits, aim_error_deg
 from services.ptz.calibration import CalibrationMode
 from services.ptz.camera import AxisPtzCamera, PtzCamera, PtzError, http_client
 from services.ptz.follow import Follower
+from services.ptz.preview import PreviewLoop
 from services.ptz.settings import PtzSettings
 
 log = logging.getLogger(__name__)
@@ -46,7 +48,19 @@ def run(node: Node, camera: PtzCamera | None = None) -> None:
         loop.on_pose(pose)
     node.bus.subscribe(keys.TRACKER_ROBOT, loop.on_robot)
     node.bus.subscribe(keys.PTZ_CALIBRATION, loop.on_calibration, latest=False, camera=name)
-    loop.run()
+    preview = None
+    if settings.preview_hz > 0:
+        preview = PreviewLoop(
+            make_camera(settings), 1 / settings.preview_hz,  # its own client: never in the way
+            lambda msg: node.bus.publish(keys.PTZ_PREVIEW, msg, camera=name),
+            mount=lambda: _pose(loop.pose), robot=lambda: loop.robot,
+            paused=lambda: loop.calibration.active(time.time()), stop=node.stop)
+        preview.start()
+    try:
+        loop.run()
+    finally:
+        if preview is not None:
+            preview.join(timeout=2 * settings.timeout_s)
 
 
 class _Loop:

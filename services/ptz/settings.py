@@ -42,6 +42,8 @@ class PtzSettings(ServiceSettings):
         None, gt=0, description="if set: zoom so that this size fills image_fraction")
     image_fraction: float = Field(0.3, gt=0, le=1)
     speed: int = Field(100, ge=1, le=100, description="VAPIX pan/tilt speed")
+    preview_hz: float = Field(1.0, ge=0, le=5, description="preview snapshots a second while "
+                              "following (stb/ptz/{camera}/preview); 0 = none")
     calibration_snapshot_hz: float = Field(10.0, gt=0, le=30,
                                            description="snapshots a second in calibration mode")
     calibration_max_markers: int = Field(8, ge=1, le=256, description="more bright round "

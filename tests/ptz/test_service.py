@@ -7,6 +7,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 
+import cv2
 import numpy as np
 import pytest
 
@@ -87,6 +88,30 @@ def test_waits_for_a_pose_then_follows_the_robot(service: dict) -> None:
     last = states[-1]
     assert aim_error_deg(TARGET, MOUNT, last.pan_deg, last.tilt_deg) < 0.5
     assert last.zoom == 1 and last.focal_mm == 3.8
+
+
+def test_previews_show_the_robot_near_the_image_centre_once_on_target(service: dict) -> None:
+    service["node"].settings = service["node"].settings.model_copy(update={"preview_hz": 5.0})
+    service["servers"].append(_camera_server(service["port"]))
+    previews: list[m.PtzPreview] = []
+    service["world"].subscribe(keys.PTZ_PREVIEW, previews.append, latest=False, camera="ptz1")
+    service["thread"].start()
+    wait_for(lambda: previews, timeout=5)
+    assert previews[-1].robot_px is None, "no pose yet: no robot pixel"
+    _publish_pose(service["world"])
+
+    def centred() -> bool:
+        _publish_robot(service["world"], TARGET)
+        last = previews[-1]
+        return last.robot_px is not None and last.robot_px[0] == pytest.approx(
+            last.width_px / 2, abs=10) and last.robot_px[1] == pytest.approx(
+            last.height_px / 2, abs=10)
+
+    wait_for(centred, timeout=8, period=0.1)
+    last = previews[-1]
+    image = cv2.imdecode(np.frombuffer(last.jpeg, np.uint8), cv2.IMREAD_GRAYSCALE)
+    assert image.shape == (last.height_px, last.width_px)
+    assert [p.seq for p in previews] == sorted(p.seq for p in previews)
 
 
 def test_late_start_gets_the_pose_by_query(service: dict, make_bus: Callable[..., Bus]) -> None:

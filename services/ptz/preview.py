@@ -1,0 +1,92 @@
+"""Preview snapshots of a following camera, for the operator's page and recordings.
+
+A thread of its own with its own HTTP client, so that a slow snapshot never delays a move
+command. Each preview carries the markers the detector finds and the pixel where the tracked
+robot marker should be (the robot's position projected through the camera's calibrated pose
+at the pan and tilt it reports right after the snapshot).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from common import messages as m
+from common.camera import Intrinsics, Pose, focal_mm_for_zoom, head_pose, project
+from common.markers import detect, to_message
+from services.ptz.camera import PtzCamera, PtzError, decode_jpeg
+
+log = logging.getLogger(__name__)
+
+
+def robot_pixel(mount: Pose | None, robot: m.RobotPosition | None, pan_deg: float,
+                tilt_deg: float, focal_mm: float, width_px: int, height_px: int,
+                at_s: float) -> list[float] | None:
+    """Where the robot marker appears in an image taken at ``at_s`` (pure); None without a
+    pose or a robot, or when it is behind the camera."""
+    if mount is None or robot is None:
+        return None
+    ahead = min(max(at_s - robot.measured_s, 0.0), 1.0)
+    xyz = np.array([robot.x_mm + robot.vx_mm_s * ahead, robot.y_mm + robot.vy_mm_s * ahead,
+                    robot.z_mm + robot.vz_mm_s * ahead])
+    intr = Intrinsics(focal_mm, width_px=width_px, height_px=height_px)
+    u, v = project(xyz[None, :], head_pose(mount, pan_deg, tilt_deg), intr)[0]
+    if not (np.isfinite(u) and np.isfinite(v)):
+        return None
+    return [round(float(u), 1), round(float(v), 1)]
+
+
+class PreviewLoop:
+    """Takes a preview every ``period_s`` unless ``paused()`` (calibration mode owns the
+    camera then); camera errors are logged once per outage and retried next period."""
+
+    def __init__(self, camera: PtzCamera, period_s: float, publish: Callable[[m.PtzPreview], None],
+                 mount: Callable[[], Pose | None], robot: Callable[[], m.RobotPosition | None],
+                 paused: Callable[[], bool], stop: threading.Event) -> None:
+        self.camera, self.period_s, self.publish = camera, period_s, publish
+        self.mount, self.robot, self.paused, self.stop = mount, robot, paused, stop
+        self._seq = 0
+        self._failing = False
+        self._thread = threading.Thread(target=self._run, name="ptz-preview", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def join(self, timeout: float) -> None:
+        if self._thread.is_alive():
+            self._thread.join(timeout)
+
+    def _run(self) -> None:
+        while not self.stop.wait(self.period_s):
+            if self.paused():
+                continue
+            try:
+                self.publish(self.take())
+                if self._failing:
+                    log.info("%s: previews again", self.camera.name)
+                self._failing = False
+            except PtzError as err:
+                if not self._failing:
+                    log.warning("%s: no preview: %s", self.camera.name, err)
+                self._failing = True
+
+    def take(self) -> m.PtzPreview:
+        captured = time.time()
+        jpeg = self.camera.snapshot_jpeg()
+        position = self.camera.position()
+        image = decode_jpeg(jpeg, self.camera.name)
+        height, width = image.shape
+        found = to_message(detect(image, max_markers=8), self.camera.name, captured, width,
+                           height)
+        self._seq += 1
+        return m.PtzPreview(
+            measured_s=captured, camera=self.camera.name, seq=self._seq, width_px=width,
+            height_px=height, jpeg=jpeg, pan_deg=min(max(position.pan_deg, -180.0), 180.0),
+            tilt_deg=min(max(position.tilt_deg, -90.0), 90.0), markers=found.markers,
+            robot_px=robot_pixel(self.mount(), self.robot(), position.pan_deg,
+                                 position.tilt_deg, focal_mm_for_zoom(position.zoom), width,
+                                 height, captured))
