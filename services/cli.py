@@ -23,22 +23,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     command, rest = argv[0], argv[1:]
     if command in SERVICES:
         return importlib.import_module(f"services.{command}.__main__").main(rest)
-    if command == "monitor":
-        from services.monitor.__main__ import main as monitor_main
-
-        return monitor_main(rest)
+    if command in TOOLS and TOOLS[command].main:
+        return importlib.import_module(TOOLS[command].main).main(rest)
     if command == "up":
         return _up(rest)
     if command == "config":
         return _config(rest)
-    if command == "experiment":
-        from services.gantry.experiment_cli import main as experiment_main
-
-        return experiment_main(rest)
-    if command == "detect":
-        from services.detect_cli import main as detect_main
-
-        return detect_main(rest)
     print(f"stb: unknown command {command!r}\n\n{_usage()}", file=sys.stderr)
     return 2
 

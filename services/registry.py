@@ -17,6 +17,7 @@ from common.settings import ServiceSettings
 class ServiceInfo:
     description: str
     settings: str  # "module:Class"
+    main: str = ""  # tools: the module whose main(argv) runs them
 
 
 SERVICES: dict[str, ServiceInfo] = {
@@ -38,12 +39,22 @@ TOOLS: dict[str, ServiceInfo] = {
     "up": ServiceInfo("run the router and every service as supervised processes",
                       "services.supervisor:UpSettings"),
     "monitor": ServiceInfo("live table of alive services and every key's latest value; --raw",
-                           "services.monitor.settings:MonitorSettings"),
+                           "services.monitor.settings:MonitorSettings",
+                           "services.monitor.__main__"),
+    "record": ServiceInfo("record the bus to MCAP (+ a JSON copy for Foxglove): "
+                          "stb record OUT.mcap [KEYEXPR...]",
+                          "services.recording.record:RecordSettings", "services.recording.record"),
+    "replay": ServiceInfo("put a recording back on the bus with its timing: "
+                          "stb replay IN.mcap [--speed X]",
+                          "services.recording.replay:ReplaySettings", "services.recording.replay"),
+    "report": ServiceInfo("plots and a one-page HTML summary of a recording: "
+                          "stb report IN.mcap --out DIR", "", "services.report.cli"),
     "config": ServiceInfo("check a lab config file: stb config check --lab FILE", ""),
     "experiment": ServiceInfo("the paper's gantry experiments on a simulated clock: "
-                              "stb experiment gantry --scenario locomotive --algorithm all", ""),
+                              "stb experiment gantry --scenario locomotive --algorithm all", "",
+                              "services.gantry.experiment_cli"),
     "detect": ServiceInfo("find markers in image files (paper §2.1): stb detect IMAGE --json",
-                          ""),
+                          "", "services.detect_cli"),
 }
 
 DEFAULT_UP: tuple[str, ...] = ("router", "sim", "tracker", "calib", "ptz:ptz1", "ptz:ptz2",

@@ -1,0 +1,209 @@
+"""``stb record OUT.mcap [KEYEXPR ...]``: every sample of the chosen keys into an MCAP file.
+
+Default key expression: everything under the bus prefix (``stb/**``). Each sample is written
+as it crossed the bus (msgpack) with its receive and measurement times, plus a JSON copy that
+Foxglove shows (camera images as ``foxglove.CompressedImage``); see
+``services.recording.mcap_file`` for the layout. Invalid payloads are recorded too (as bytes,
+without a JSON copy) and counted. Ctrl-C, SIGTERM or ``--duration`` end the recording cleanly.
+
+The tracking camera's raw frames (``stb/gantry/camera/frame``) are about 8 MB/s before
+compression; leave them out with ``--exclude stb/gantry/camera/frame`` when they are not needed.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import sys
+import threading
+import time
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO
+
+import zenoh
+from pydantic import Field
+
+from common import codec, keys
+from common import messages as m
+from common.bus import BusUnreachable, open_session
+from common.node import EXIT_UNREACHABLE, configure_logging, stop_on_signals
+from common.settings import ConfigError, LogLevel, ServiceSettings, load_settings
+from services.entry import EXIT_CONFIG, base_parser, overrides_from
+from services.recording.foxglove import json_copy
+from services.recording.mcap_file import RecordWriter
+
+log = logging.getLogger(__name__)
+
+
+class RecordSettings(ServiceSettings):
+    section = "record"
+
+    log_level: LogLevel = "WARNING"
+    progress_s: float = Field(5.0, gt=0, description="a progress line this often (stderr)")
+    json_copy: bool = Field(True, description="also write the JSON copy Foxglove can show")
+
+
+@dataclass
+class Stats:
+    samples: Counter = field(default_factory=Counter)
+    invalid: Counter = field(default_factory=Counter)
+    payload_bytes: int = 0
+
+
+class Recorder:
+    """Subscribes to key expressions and writes what arrives from a thread of its own; the
+    Zenoh callback only queues (key, payload, encoding, receive time)."""
+
+    def __init__(self, session: zenoh.Session, prefix: str, key_exprs: Sequence[str],
+                 out: IO[bytes], *, exclude: Sequence[str] = (), with_json: bool = True,
+                 metadata: dict[str, str] | None = None) -> None:
+        self.prefix, self.with_json = prefix, with_json
+        self.stats = Stats()
+        self._writer = RecordWriter(out, metadata)
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._exprs = [zenoh.KeyExpr(k) for k in key_exprs]
+        self._exclude = [zenoh.KeyExpr(k) for k in exclude]
+        self._thread = threading.Thread(target=self._run, name="record-writer", daemon=True)
+        self._thread.start()
+        self._subs = [session.declare_subscriber(
+            expr, zenoh.handlers.Callback(lambda s, i=i: self._on_sample(i, s), indirect=False))
+            for i, expr in enumerate(self._exprs)]
+
+    def _on_sample(self, index: int, sample: zenoh.Sample) -> None:
+        received = time.time()
+        key = sample.key_expr
+        if sample.kind != zenoh.SampleKind.PUT or any(x.includes(key) for x in self._exclude):
+            return
+        if any(e.includes(key) for e in self._exprs[:index]):  # an earlier expression has it
+            return
+        self._queue.put((str(key), sample.payload.to_bytes(), str(sample.encoding), received))
+
+    def _run(self) -> None:
+        while (item := self._queue.get()) is not None:
+            try:
+                self._write(*item)
+            except Exception:  # noqa: BLE001 - one bad sample must not end the recording
+                log.exception("cannot record a sample of %s", item[0])
+
+    def _write(self, key: str, payload: bytes, encoding: str, received: float) -> None:
+        msg, model = self._decode(key, payload)
+        measured = (msg.measured_s if isinstance(msg, m.Message)
+                    else _float_or_none(msg.get("measured_s")) if isinstance(msg, dict) else None)
+        sequence = self._writer.write(key, payload, encoding=encoding, model=model,
+                                      received_s=received, measured_s=measured)
+        self.stats.samples[key] += 1
+        self.stats.payload_bytes += len(payload)
+        if self.with_json and msg is not None:
+            data, schema = json_copy(msg)
+            self._writer.write_json(key, data, schema=schema, received_s=received,
+                                    measured_s=measured, sequence=sequence)
+
+    def _decode(self, key: str, payload: bytes) -> tuple[m.Message | dict | None, str]:
+        topic = keys.topic_for(self.prefix, key)
+        try:
+            if topic is not None:
+                return (codec.decode(topic.model, payload, max_bytes=topic.max_payload_bytes),
+                        topic.model.__name__)
+            return codec.unpack(payload, max_bytes=codec.DEFAULT_MAX_BYTES), ""
+        except codec.DecodeError as err:
+            self.stats.invalid[f"{key}: {err.reason}"] += 1
+            return None, topic.model.__name__ if topic is not None else ""
+
+    def close(self) -> None:
+        """Stop listening, write what is queued, and finish the file (its summary)."""
+        for sub in self._subs:
+            sub.undeclare()
+        self._queue.put(None)
+        self._thread.join()
+        self._writer.finish()
+
+
+def _float_or_none(value: object) -> float | None:
+    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = base_parser("stb record", __doc__ or "")
+    parser.add_argument("out", type=Path, metavar="OUT.mcap")
+    parser.add_argument("key_exprs", nargs="*", metavar="KEYEXPR",
+                        help="what to record (default: <prefix>/**)")
+    parser.add_argument("--exclude", action="append", default=[], metavar="KEYEXPR",
+                        help="leave these keys out (repeatable)")
+    parser.add_argument("--duration", type=float, help="stop after this many seconds")
+    args = parser.parse_args(argv)
+    try:
+        settings = load_settings(RecordSettings, args.lab, overrides_from(args))
+        exprs = args.key_exprs or [f"{settings.bus.prefix}/**"]
+        for expr in exprs + args.exclude:
+            zenoh.KeyExpr(expr)
+    except ConfigError as err:
+        print(f"stb record: {err}", file=sys.stderr)
+        return EXIT_CONFIG
+    except zenoh.ZError as err:
+        print(f"stb record: bad key expression: {err}", file=sys.stderr)
+        return EXIT_CONFIG
+    configure_logging(settings.log_level)
+    try:
+        out = open(args.out, "wb")  # noqa: SIM115 - closed below, after the writer finished
+    except OSError as err:
+        print(f"stb record: cannot write {args.out}: {err}", file=sys.stderr)
+        return EXIT_CONFIG
+    try:
+        session = open_session(settings.zenoh_settings())
+    except BusUnreachable as err:
+        out.close()
+        args.out.unlink(missing_ok=True)
+        print(f"stb record: {err}", file=sys.stderr)
+        return EXIT_UNREACHABLE
+    stop = threading.Event()
+    restore = stop_on_signals(stop)
+    metadata = {"prefix": settings.bus.prefix, "key_exprs": " ".join(exprs),
+                "exclude": " ".join(args.exclude), "started_s": f"{time.time():.6f}"}
+    recorder = Recorder(session, settings.bus.prefix, exprs, out, exclude=args.exclude,
+                        with_json=settings.json_copy, metadata=metadata)
+    print(f"stb record: recording {' '.join(exprs)} to {args.out} (Ctrl-C ends)",
+          file=sys.stderr)
+    try:
+        _wait(recorder, stop, args.duration, settings.progress_s)
+    finally:
+        recorder.close()
+        out.close()
+        session.close()
+        restore()
+    _summary(recorder.stats, args.out)
+    return 0
+
+
+def _wait(recorder: Recorder, stop: threading.Event, duration: float | None,
+          progress_s: float) -> None:
+    started = time.monotonic()
+    deadline = None if duration is None else started + duration
+    before = 0
+    while not stop.wait(progress_s if deadline is None
+                        else max(0.0, min(progress_s, deadline - time.monotonic()))):
+        if deadline is not None and time.monotonic() >= deadline:
+            return
+        total = sum(recorder.stats.samples.values())
+        print(f"stb record: {total} samples on {len(recorder.stats.samples)} keys, "
+              f"{recorder.stats.payload_bytes / 1e6:.1f} MB, "
+              f"{(total - before) / progress_s:.0f}/s, {time.monotonic() - started:.0f} s",
+              file=sys.stderr, flush=True)
+        before = total
+
+
+def _summary(stats: Stats, out: Path) -> None:
+    total = sum(stats.samples.values())
+    size = out.stat().st_size / 1e6 if out.exists() else 0.0
+    print(f"stb record: wrote {total} samples on {len(stats.samples)} keys to {out} "
+          f"({size:.1f} MB)", file=sys.stderr)
+    for key, count in sorted(stats.samples.items()):
+        print(f"  {key}: {count}", file=sys.stderr)
+    for what, count in sorted(stats.invalid.items()):
+        print(f"  invalid (recorded as bytes only) {what}: {count}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,158 @@
+"""``stb replay IN.mcap [--speed X]``: put a recording back on the bus with its timing.
+
+Samples go out in the order they were received, spaced as they were (divided by ``--speed``).
+By default every message's clock fields (``measured_s``, ``sent_s``, ``started_s``) are moved
+to the replay's own time, so that services which drop stale samples take them as live: the
+first sample is "now", later ones keep their offsets (scaled by the speed). ``--as-recorded``
+sends the recorded bytes unchanged instead. ``--keys`` and ``--exclude`` choose what goes out;
+replaying onto a lab bus whose services publish the same keys mixes two sources, so replay onto
+a bus of its own (``stb router``) or leave those keys out.
+
+On a lab router with access control, replay needs an identity allowed to put the keys.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from pathlib import Path
+
+import msgpack
+import zenoh
+
+from common import codec
+from common.bus import BusUnreachable, open_session
+from common.node import EXIT_UNREACHABLE, configure_logging, stop_on_signals
+from common.settings import ConfigError, LogLevel, ServiceSettings, load_settings
+from services.entry import EXIT_CONFIG, base_parser, overrides_from
+from services.recording.mcap_file import RecordingError, Sample, read_samples, recorded_keys
+
+CLOCK_FIELDS = ("measured_s", "sent_s", "started_s")
+
+
+class ReplaySettings(ServiceSettings):
+    section = "replay"
+
+    log_level: LogLevel = "WARNING"
+
+
+def retimed(payload: bytes, *, origin_s: float, start_s: float, speed: float,
+            sent_s: float) -> bytes:
+    """The payload with its clock fields moved to replay time (pure).
+
+    A recorded time ``t`` becomes ``start_s + (t - origin_s) / speed``: the recording's first
+    receive time ``origin_s`` maps to when the replay started. ``sent_s`` is when this copy
+    goes out. Payloads that are not msgpack maps go out unchanged.
+    """
+    try:
+        data = codec.unpack(payload, max_bytes=len(payload))
+    except codec.DecodeError:
+        return payload
+    for name in CLOCK_FIELDS:
+        value = data.get(name)
+        if isinstance(value, float):
+            data[name] = start_s + (value - origin_s) / speed
+    if isinstance(data.get("sent_s"), float):
+        data["sent_s"] = sent_s
+    return msgpack.packb(data, use_bin_type=True)
+
+
+def pace(samples: Iterable[Sample], speed: float, stop: threading.Event,
+         clock: Callable[[], float] = time.time) -> Iterator[tuple[Sample, float, float]]:
+    """Each sample when its time has come, as (sample, origin_s, start_s): the first sample's
+    receive time and when the replay started. Ends early when ``stop`` is set."""
+    start = origin = None
+    for sample in samples:
+        if start is None or origin is None:
+            start, origin = clock(), sample.received_s
+        due = start + (sample.received_s - origin) / speed
+        if stop.wait(max(0.0, due - clock())):
+            return
+        yield sample, origin, start
+
+
+def replay(session: zenoh.Session, path: Path, *, speed: float = 1.0, keys: Sequence[str] = (),
+           exclude: Sequence[str] = (), as_recorded: bool = False,
+           stop: threading.Event | None = None) -> Counter:
+    """Put the recording on the bus; returns how many samples went out per key."""
+    stop = stop or threading.Event()
+    wanted = [zenoh.KeyExpr(k) for k in keys]
+    unwanted = [zenoh.KeyExpr(k) for k in exclude]
+    chosen = [k for k in recorded_keys(path)
+              if (not wanted or any(w.includes(zenoh.KeyExpr(k)) for w in wanted))
+              and not any(u.includes(zenoh.KeyExpr(k)) for u in unwanted)]
+    publishers: dict[str, zenoh.Publisher] = {}
+    sent: Counter = Counter()
+    try:
+        for sample, origin, start in pace(read_samples(path, chosen), speed, stop):
+            publisher = publishers.get(sample.key)
+            if publisher is None:
+                publisher = session.declare_publisher(
+                    sample.key, encoding=zenoh.Encoding(sample.encoding or codec.CONTENT_TYPE))
+                publishers[sample.key] = publisher
+            payload = sample.payload if as_recorded else retimed(
+                sample.payload, origin_s=origin, start_s=start, speed=speed,
+                sent_s=time.time())
+            publisher.put(payload)
+            sent[sample.key] += 1
+    finally:
+        for publisher in publishers.values():
+            publisher.undeclare()
+    return sent
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = base_parser("stb replay", __doc__ or "")
+    parser.add_argument("recording", type=Path, metavar="IN.mcap")
+    parser.add_argument("--speed", type=float, default=1.0, help="1 = as recorded, 2 = twice "
+                        "as fast (default 1)")
+    parser.add_argument("--keys", action="append", default=[], metavar="KEYEXPR",
+                        help="replay only these keys (repeatable; default: all)")
+    parser.add_argument("--exclude", action="append", default=[], metavar="KEYEXPR",
+                        help="leave these keys out (repeatable)")
+    parser.add_argument("--as-recorded", action="store_true",
+                        help="send the recorded bytes unchanged (old time stamps)")
+    args = parser.parse_args(argv)
+    if not args.speed > 0:
+        print("stb replay: --speed must be > 0", file=sys.stderr)
+        return EXIT_CONFIG
+    try:
+        settings = load_settings(ReplaySettings, args.lab, overrides_from(args))
+        counts = recorded_keys(args.recording)
+        for expr in args.keys + args.exclude:
+            zenoh.KeyExpr(expr)
+    except (ConfigError, RecordingError, OSError) as err:
+        print(f"stb replay: {err}", file=sys.stderr)
+        return EXIT_CONFIG
+    except zenoh.ZError as err:
+        print(f"stb replay: bad key expression: {err}", file=sys.stderr)
+        return EXIT_CONFIG
+    configure_logging(settings.log_level)
+    try:
+        session = open_session(settings.zenoh_settings())
+    except BusUnreachable as err:
+        print(f"stb replay: {err}", file=sys.stderr)
+        return EXIT_UNREACHABLE
+    stop = threading.Event()
+    restore = stop_on_signals(stop)
+    print(f"stb replay: {sum(counts.values())} samples on {len(counts)} keys from "
+          f"{args.recording} at speed {args.speed:g}", file=sys.stderr, flush=True)
+    try:
+        sent = replay(session, args.recording, speed=args.speed, keys=args.keys,
+                      exclude=args.exclude, as_recorded=args.as_recorded, stop=stop)
+    except RecordingError as err:
+        print(f"stb replay: {err}", file=sys.stderr)
+        return EXIT_CONFIG
+    finally:
+        session.close()
+        restore()
+    print(f"stb replay: sent {sum(sent.values())} samples on {len(sent)} keys"
+          f"{' (stopped early)' if stop.is_set() else ''}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,176 @@
+"""Recording and replay over a real loopback bus: what goes in comes back, in order."""
+
+from __future__ import annotations
+
+import io
+import json
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zenoh
+from mcap.reader import make_reader
+
+from common import codec, keys
+from common import messages as m
+from common.bus import Bus
+from services.recording.mcap_file import RecordingError, read_samples, recorded_keys
+from services.recording.record import Recorder
+from services.recording.replay import pace, replay, retimed
+from tests.conftest import wait_for
+
+
+def _robot(i: int, t: float) -> m.RobotPosition:
+    return m.RobotPosition(measured_s=t, label="robot", x_mm=float(i), y_mm=2.0 * i, z_mm=0.0,
+                           vx_mm_s=1.0, vy_mm_s=0.0, vz_mm_s=0.0)
+
+
+def _frame(t: float) -> m.CameraFrame:
+    pixels = np.random.default_rng(0).integers(0, 255, (48, 64), dtype=np.uint8)
+    return m.CameraFrame(measured_s=t, camera="tracking", seq=1, width_px=64, height_px=48,
+                         encoding="mono8", data=pixels.tobytes())
+
+
+def _record(bus: Bus, path: Path, publish: Callable[[], object], expect: int,
+            **kw: object) -> Recorder:
+    with open(path, "wb") as out:
+        recorder = Recorder(bus.session, "stb", ["stb/**"], out, **kw)  # type: ignore[arg-type]
+        time.sleep(0.3)  # the subscription reaches the router
+        publish()
+        wait_for(lambda: sum(recorder.stats.samples.values()) >= expect, timeout=5)
+        recorder.close()
+    return recorder
+
+
+def test_every_sample_is_recorded_in_order_with_its_times_and_a_json_copy(
+        make_bus: Callable[..., Bus], tmp_path: Path) -> None:
+    publisher, recorder_bus = make_bus(), make_bus()
+    path = tmp_path / "run.mcap"
+    t0 = time.time()
+
+    def publish() -> None:
+        for i in range(50):
+            publisher.publish(keys.TRACKER_ROBOT, _robot(i, t0 + i * 0.01))
+        publisher.publish(keys.GANTRY_FRAME, _frame(t0))
+        publisher.session.put("stb/tracker/robot", b"\xc1 not msgpack")
+
+    recorder = _record(recorder_bus, path, publish, expect=52)
+    assert recorder.stats.invalid == {"stb/tracker/robot: not_msgpack": 1}
+    assert recorded_keys(path) == {"stb/tracker/robot": 51, "stb/gantry/camera/frame": 1}
+    robot = list(read_samples(path, ["stb/tracker/robot"]))
+    assert [s.sequence for s in robot] == list(range(1, 52))
+    decoded = [codec.decode(m.RobotPosition, s.payload) for s in robot[:50]]
+    assert [d.x_mm for d in decoded] == [float(i) for i in range(50)]
+    assert robot[-1].payload == b"\xc1 not msgpack", "invalid payloads are kept as bytes"
+    assert all(s.measured_s == pytest.approx(d.measured_s, abs=1e-6)
+               for s, d in zip(robot, decoded, strict=False))
+    assert all(a.received_s <= b.received_s for a, b in zip(robot, robot[1:], strict=False))
+    assert all(s.encoding.startswith(codec.CONTENT_TYPE) for s in robot)
+
+    with open(path, "rb") as f:
+        copies = {c.topic: (c, s) for s, c, _ in make_reader(f).iter_messages()}
+    channel, schema = copies["json/stb/gantry/camera/frame"]
+    assert channel.message_encoding == "json" and schema.name == "foxglove.CompressedImage"
+    with open(path, "rb") as f:
+        image = next(json.loads(msg.data) for _, c, msg in make_reader(f).iter_messages(
+            topics=["json/stb/gantry/camera/frame"]))
+    assert image["format"] == "jpeg" and image["frame_id"] == "tracking"
+    with open(path, "rb") as f:
+        first = next(json.loads(msg.data) for _, c, msg in make_reader(f).iter_messages(
+            topics=["json/stb/tracker/robot"]))
+    assert first["x_mm"] == 0.0 and first["label"] == "robot"
+
+
+def test_replay_puts_the_same_messages_back_in_order_and_on_time(
+        make_bus: Callable[..., Bus], tmp_path: Path) -> None:
+    publisher, recorder_bus, listener = make_bus(), make_bus(), make_bus()
+    path = tmp_path / "run.mcap"
+    t0 = time.time()
+
+    def publish() -> None:
+        for i in range(20):
+            publisher.publish(keys.TRACKER_ROBOT, _robot(i, t0 + i * 0.05))
+            time.sleep(0.05)
+
+    _record(recorder_bus, path, publish, expect=20, with_json=False)
+    got: list[tuple[float, m.RobotPosition]] = []
+    listener.subscribe(keys.TRACKER_ROBOT, lambda r: got.append((time.time(), r)),
+                       latest=False)
+    time.sleep(0.3)
+    started = time.time()
+    sent = replay(listener.session, path, speed=2.0)
+    wait_for(lambda: len(got) == 20, timeout=5)
+    assert sent == {"stb/tracker/robot": 20}
+    assert [r.x_mm for _, r in got] == [float(i) for i in range(20)]
+    took = got[-1][0] - got[0][0]
+    assert 0.35 < took < 0.8, f"19 gaps of 50 ms at speed 2 took {took:.2f} s"
+    measured = [r.measured_s for _, r in got]
+    assert measured[0] == pytest.approx(started, abs=0.2), "retimed to the replay's clock"
+    assert np.diff(measured) == pytest.approx([0.025] * 19, abs=2e-3), "offsets / speed"
+
+
+def test_replay_as_recorded_sends_the_exact_bytes(make_bus: Callable[..., Bus],
+                                                  tmp_path: Path) -> None:
+    publisher, recorder_bus, listener = make_bus(), make_bus(), make_bus()
+    path = tmp_path / "run.mcap"
+    t0 = time.time()
+    _record(recorder_bus, path, lambda: [publisher.publish(keys.TRACKER_ROBOT, _robot(i, t0))
+                                         for i in range(5)], expect=5)
+    raw: list[bytes] = []
+    sub = listener.session.declare_subscriber("stb/**", lambda s: raw.append(
+        s.payload.to_bytes()))
+    time.sleep(0.3)
+    replay(listener.session, path, speed=10.0, as_recorded=True)
+    wait_for(lambda: len(raw) == 5, timeout=5)
+    sub.undeclare()
+    assert raw == [s.payload for s in read_samples(path)]
+
+
+def test_retimed_moves_clock_fields_only() -> None:
+    msg = _robot(3, 1000.5)
+    payload = codec.encode(msg, sent_s=1000.6)
+    out = codec.decode(m.RobotPosition, retimed(payload, origin_s=1000.0, start_s=5000.0,
+                                                speed=2.0, sent_s=5000.9))
+    assert out.measured_s == pytest.approx(5000.25)
+    assert out.sent_s == 5000.9
+    assert out.model_dump(exclude={"measured_s", "sent_s"}) == msg.model_dump(
+        exclude={"measured_s", "sent_s"})
+    assert retimed(b"\xc1", origin_s=0, start_s=1, speed=1, sent_s=1) == b"\xc1"
+
+
+def test_pace_stops_when_asked() -> None:
+    import threading
+
+    from services.recording.mcap_file import Sample
+
+    samples = [Sample("k", b"", "", 100.0 + i, 100.0 + i, i + 1) for i in range(3)]
+    stop = threading.Event()
+    stop.set()
+    assert [s for s, *_ in pace(samples, 1.0, stop)] == []
+
+
+def test_a_file_that_is_not_a_recording_is_a_clear_error(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"not an mcap file at all")
+    with pytest.raises(RecordingError, match="not a readable MCAP"):
+        recorded_keys(bad)
+    with pytest.raises(RecordingError):
+        list(read_samples(bad))
+
+
+def test_recorder_skips_keys_it_excludes(make_bus: Callable[..., Bus], tmp_path: Path) -> None:
+    publisher, recorder_bus = make_bus(), make_bus()
+    out = io.BytesIO()
+    recorder = Recorder(recorder_bus.session, "stb", ["stb/**", "stb/tracker/**"], out,
+                        exclude=["stb/gantry/**"])
+    time.sleep(0.3)
+    publisher.publish(keys.GANTRY_FRAME, _frame(time.time()))
+    publisher.publish(keys.TRACKER_ROBOT, _robot(1, time.time()))
+    wait_for(lambda: recorder.stats.samples, timeout=5)
+    time.sleep(0.2)
+    recorder.close()
+    assert dict(recorder.stats.samples) == {"stb/tracker/robot": 1}, \
+        "excluded keys left out, overlapping expressions recorded once"
+    assert zenoh.KeyExpr("stb/**").includes(zenoh.KeyExpr("stb/tracker/robot"))
