@@ -31,6 +31,8 @@ SERVICES: dict[str, ServiceInfo] = {
                          "services.calib.settings:CalibSettings"),
     "gantry": ServiceInfo("the crane follows the robot from its tracking camera (paper §3)",
                           "services.gantry.settings:GantrySettings"),
+    "web": ServiceInfo("the operator's live page: crater, robot, crane, cameras, health "
+                       "(http://127.0.0.1:8080)", "services.web.settings:WebSettings"),
     "sim": ServiceInfo("the simulated lab: QTM RT mocap, VAPIX cameras, Modbus crane, frames",
                        "services.sim.settings:SimSettings"),
 }
@@ -58,7 +60,7 @@ TOOLS: dict[str, ServiceInfo] = {
 }
 
 DEFAULT_UP: tuple[str, ...] = ("router", "sim", "tracker", "calib", "ptz:ptz1", "ptz:ptz2",
-                               "gantry")
+                               "gantry", "web")
 """What ``stb up`` starts when the lab file does not say: everything that exists so far."""
 
 

@@ -1,8 +1,9 @@
 """``stb record OUT.mcap [KEYEXPR ...]``: every sample of the chosen keys into an MCAP file.
 
-Default key expression: everything under the bus prefix (``stb/**``). Each sample is written
-as it crossed the bus (msgpack) with its receive and measurement times, plus a JSON copy that
-Foxglove shows (camera images as ``foxglove.CompressedImage``); see
+Default key expression: everything under the bus prefix (``stb/**``); what queryables hold
+for those keys at the start (the camera poses) is asked for once and recorded too. Each sample
+is written as it crossed the bus (msgpack) with its receive and measurement times, plus a JSON
+copy that Foxglove shows (camera images as ``foxglove.CompressedImage``); see
 ``services.recording.mcap_file`` for the layout. Invalid payloads are recorded too (as bytes,
 without a JSON copy) and counted. Ctrl-C, SIGTERM or ``--duration`` end the recording cleanly.
 
@@ -60,7 +61,7 @@ class Recorder:
     def __init__(self, session: zenoh.Session, prefix: str, key_exprs: Sequence[str],
                  out: IO[bytes], *, exclude: Sequence[str] = (), with_json: bool = True,
                  metadata: dict[str, str] | None = None) -> None:
-        self.prefix, self.with_json = prefix, with_json
+        self.prefix, self.with_json, self._session = prefix, with_json, session
         self.stats = Stats()
         self._writer = RecordWriter(out, metadata)
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
@@ -71,6 +72,18 @@ class Recorder:
         self._subs = [session.declare_subscriber(
             expr, zenoh.handlers.Callback(lambda s, i=i: self._on_sample(i, s), indirect=False))
             for i, expr in enumerate(self._exprs)]
+
+    def ask_latest(self, timeout_s: float = 1.0) -> int:
+        """Query the recorded key expressions once, so that values published before the
+        recording started and kept by a queryable (camera poses) are in it too. Returns how
+        many replies were queued."""
+        replies = 0
+        for index, expr in enumerate(self._exprs):
+            for reply in self._session.get(expr, timeout=timeout_s):
+                if reply.ok is not None:
+                    self._on_sample(index, reply.ok)
+                    replies += 1
+        return replies
 
     def _on_sample(self, index: int, sample: zenoh.Sample) -> None:
         received = time.time()
@@ -166,6 +179,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         with_json=settings.json_copy, metadata=metadata)
     print(f"stb record: recording {' '.join(exprs)} to {args.out} (Ctrl-C ends)",
           file=sys.stderr)
+    recorder.ask_latest()
     try:
         _wait(recorder, stop, args.duration, settings.progress_s)
     finally:

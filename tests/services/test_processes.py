@@ -182,6 +182,8 @@ def _lab_for_up(tmp_path: Path) -> tuple[Path, str]:
 listen = ["{endpoint}"]
 [up]
 log_dir = "{tmp_path / 'logs'}"
+[web]
+port = {free_port()}
 """)
     return lab, endpoint
 

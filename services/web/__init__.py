@@ -1,0 +1,1 @@
+"""The operator's live web page (stb web)."""

@@ -1,0 +1,125 @@
+"""The page's HTTP side (standard library only): static files, the height map as an image, the
+live state as JSON and as a Server-Sent Events stream, and each camera's latest preview.
+
+    GET /                 the page            GET /events       text/event-stream of the state
+    GET /state.json       the state once      GET /map.json     height map extent (mm)
+    GET /map.png          the height map      GET /preview/CAMERA.jpg   latest preview
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import re
+import threading
+import time
+from collections.abc import Callable
+from http import HTTPStatus
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from importlib import resources
+from typing import Any
+
+import cv2
+import numpy as np
+from matplotlib import colormaps
+
+from common.heightmap import HeightMap
+
+log = logging.getLogger(__name__)
+STATIC = {"/": ("index.html", "text/html; charset=utf-8"),
+          "/app.js": ("app.js", "text/javascript; charset=utf-8")}
+PREVIEW_PATH = re.compile(r"^/preview/([A-Za-z0-9_.-]{1,64})\.jpg$")
+
+
+def map_png(height_map: HeightMap) -> bytes:
+    """The height map as a colour PNG, row 0 at the top = the largest y (north up)."""
+    h = height_map.heights_mm.astype(float)
+    span = float(h.max() - h.min()) or 1.0
+    rgba = colormaps["terrain"]((h - h.min()) / span)
+    bgr = (rgba[::-1, :, 2::-1] * 255).astype(np.uint8)
+    ok, png = cv2.imencode(".png", np.ascontiguousarray(bgr))
+    if not ok:
+        raise ValueError("height map does not encode as PNG")
+    return png.tobytes()
+
+
+class WebServer:
+    """Serves ``view()`` (the state dict) and ``preview(camera)`` (JPEG bytes or None)."""
+
+    def __init__(self, host: str, port: int, view: Callable[[], dict[str, Any]],
+                 preview: Callable[[str], bytes | None], height_map: HeightMap | None,
+                 push_period_s: float, stop: threading.Event) -> None:
+        self.view, self.preview, self.stop = view, preview, stop
+        self.push_period_s = push_period_s
+        extent = (height_map.extent_mm if height_map is not None
+                  else (-3000.0, 3000.0, -3000.0, 3000.0))
+        self.map_info = json.dumps({"extent_mm": extent, "image": height_map is not None})
+        self.map_png = map_png(height_map) if height_map is not None else None
+        self.httpd = ThreadingHTTPServer((host, port), self._handler())
+        self.httpd.daemon_threads = True
+        self._thread = threading.Thread(target=self.httpd.serve_forever, name="web-http",
+                                        daemon=True)
+
+    @property
+    def port(self) -> int:
+        return self.httpd.server_address[1]
+
+    def start(self) -> WebServer:
+        self._thread.start()
+        return self
+
+    def close(self) -> None:
+        self.httpd.shutdown()
+        self.httpd.server_close()
+
+    def _handler(self) -> type[BaseHTTPRequestHandler]:
+        server = self
+
+        class Handler(BaseHTTPRequestHandler):
+            def log_message(self, fmt: str, *args: object) -> None:
+                log.debug("%s %s", self.address_string(), fmt % args)
+
+            def do_GET(self) -> None:  # noqa: N802 - the http.server API
+                path = self.path.split("?", 1)[0]
+                try:
+                    if path in STATIC:
+                        name, kind = STATIC[path]
+                        self._send(resources.files("services.web").joinpath(
+                            "static", name).read_bytes(), kind)
+                    elif path == "/state.json":
+                        self._send(json.dumps(server.view()).encode(), "application/json")
+                    elif path == "/map.json":
+                        self._send(server.map_info.encode(), "application/json")
+                    elif path == "/map.png" and server.map_png is not None:
+                        self._send(server.map_png, "image/png", cache=True)
+                    elif path == "/events":
+                        self._events()
+                    elif (found := PREVIEW_PATH.match(path)) and (
+                            jpeg := server.preview(found.group(1))) is not None:
+                        self._send(jpeg, "image/jpeg")
+                    else:
+                        self.send_error(HTTPStatus.NOT_FOUND)
+                except (BrokenPipeError, ConnectionResetError):
+                    pass  # the browser went away
+
+            def _send(self, body: bytes, kind: str, cache: bool = False) -> None:
+                self.send_response(HTTPStatus.OK)
+                self.send_header("Content-Type", kind)
+                self.send_header("Content-Length", str(len(body)))
+                self.send_header("Cache-Control", "max-age=3600" if cache else "no-store")
+                self.end_headers()
+                self.wfile.write(body)
+
+            def _events(self) -> None:
+                self.send_response(HTTPStatus.OK)
+                self.send_header("Content-Type", "text/event-stream")
+                self.send_header("Cache-Control", "no-store")
+                self.end_headers()
+                while not server.stop.is_set():
+                    started = time.monotonic()
+                    self.wfile.write(b"data: " + json.dumps(server.view()).encode() + b"\n\n")
+                    self.wfile.flush()
+                    server.stop.wait(max(0.0, server.push_period_s
+                                         - (time.monotonic() - started)))
+
+        return Handler

@@ -1,0 +1,148 @@
+"""What the operator's page shows, as a pure function of what arrived on the bus (no I/O, no
+clock of its own): ``LiveState.view(now)`` is the JSON the page draws from."""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from common import messages as m
+from common.camera import Pose, head_pose
+
+TRACK_MIN_STEP_S = 0.1
+GROUND_Z_MM = 0.0
+LOOK_MAX_MM = 8000.0
+
+
+def looking_at(pose: m.CameraPose, pan_deg: float, tilt_deg: float) -> list[float] | None:
+    """Where a camera's optical axis meets the ground (x, y), or a point ``LOOK_MAX_MM`` along
+    it when it looks up or far away; None without a usable pose."""
+    mount = Pose(pose.x_mm, pose.y_mm, pose.z_mm, pose.rx_deg, pose.ry_deg, pose.rz_deg)
+    head = head_pose(mount, pan_deg, tilt_deg)
+    axis = head.rotation @ np.array([1.0, 0.0, 0.0])
+    origin = head.position
+    reach = LOOK_MAX_MM
+    if axis[2] < -1e-6:
+        reach = min(reach, (GROUND_Z_MM - origin[2]) / axis[2])
+    point = origin + axis * reach
+    if not np.all(np.isfinite(point)):
+        return None
+    return [round(float(point[0]), 1), round(float(point[1]), 1)]
+
+
+@dataclass
+class LiveState:
+    """The latest of everything the page shows; ``track_s`` of robot track is kept."""
+
+    track_s: float = 60.0
+    alive: set[tuple[str, str]] = field(default_factory=set)
+    health: dict[tuple[str, str], m.ServiceHealth] = field(default_factory=dict)
+    robot: m.RobotPosition | None = None
+    truth: dict[str, m.RobotTruth] = field(default_factory=dict)
+    track: deque[tuple[float, float, float]] = field(default_factory=deque)
+    crane: m.CraneState | None = None
+    estimate: m.RobotEstimate | None = None
+    offload: m.GravityOffload | None = None
+    ptz: dict[str, m.PtzState] = field(default_factory=dict)
+    poses: dict[str, m.CameraPose] = field(default_factory=dict)
+    previews: dict[str, m.PtzPreview] = field(default_factory=dict)
+
+    def on_alive(self, service: str, instance: str, alive: bool) -> None:
+        (self.alive.add if alive else self.alive.discard)((service, instance))
+
+    def on_message(self, msg: m.Message) -> None:  # noqa: C901 - one branch per message kind
+        if isinstance(msg, m.RobotPosition):
+            self.robot = msg
+            if not self.track or msg.measured_s - self.track[-1][0] >= TRACK_MIN_STEP_S:
+                self.track.append((msg.measured_s, msg.x_mm, msg.y_mm))
+            while self.track and msg.measured_s - self.track[0][0] > self.track_s:
+                self.track.popleft()
+        elif isinstance(msg, m.CraneState):
+            self.crane = msg
+        elif isinstance(msg, m.RobotEstimate):
+            self.estimate = msg
+        elif isinstance(msg, m.GravityOffload):
+            self.offload = msg
+        elif isinstance(msg, m.PtzState):
+            self.ptz[msg.camera] = msg
+        elif isinstance(msg, m.CameraPose):
+            old = self.poses.get(msg.camera)
+            if old is None or msg.measured_s >= old.measured_s:
+                self.poses[msg.camera] = msg
+        elif isinstance(msg, m.PtzPreview):
+            self.previews[msg.camera] = msg
+        elif isinstance(msg, m.ServiceHealth):
+            self.health[(msg.service, msg.instance)] = msg
+        elif isinstance(msg, m.RobotTruth):
+            self.truth[msg.robot] = msg
+
+    def view(self, now_s: float) -> dict[str, Any]:
+        """Everything the page draws, JSON-ready (images only by sequence number)."""
+        return {
+            "now_s": now_s,
+            "services": self._services(now_s),
+            "robot": None if self.robot is None else {
+                "x_mm": self.robot.x_mm, "y_mm": self.robot.y_mm, "z_mm": self.robot.z_mm,
+                "speed_mm_s": math.hypot(self.robot.vx_mm_s, self.robot.vy_mm_s),
+                "age_s": now_s - self.robot.measured_s},
+            "track": [[round(x, 1), round(y, 1)] for _, x, y in self.track],
+            "truth": {name: [t.x_mm, t.y_mm] for name, t in self.truth.items()},
+            "crane": None if self.crane is None else {
+                "x_mm": self.crane.x_mm, "y_mm": self.crane.y_mm, "status": self.crane.status,
+                "target_x_mm": self.crane.target_x_mm, "target_y_mm": self.crane.target_y_mm,
+                "enabled": self.crane.enabled, "age_s": now_s - self.crane.measured_s},
+            "estimate": None if self.estimate is None else {
+                "x_mm": self.estimate.x_mm, "y_mm": self.estimate.y_mm,
+                "valid": self.estimate.valid, "algorithm": self.estimate.algorithm},
+            "offload": None if self.offload is None else {
+                "horizontal_error_mm": self.offload.horizontal_error_mm,
+                "cable_length_mm": self.offload.cable_length_mm,
+                "vertical_loss_pct": self.offload.vertical_loss_pct,
+                "horizontal_share_pct": self.offload.horizontal_share_pct,
+                "warning": self.offload.warning},
+            "cameras": self._cameras(),
+        }
+
+    def _services(self, now_s: float) -> list[dict[str, Any]]:
+        names = sorted(self.alive | set(self.health))
+        out = []
+        for service, instance in names:
+            health = self.health.get((service, instance))
+            out.append({"service": service, "instance": instance,
+                        "alive": (service, instance) in self.alive,
+                        "status": health.status if health else "",
+                        "detail": health.detail if health else "",
+                        "health_age_s": None if health is None else now_s - health.measured_s})
+        return out
+
+    def _cameras(self) -> dict[str, dict[str, Any]]:
+        out: dict[str, dict[str, Any]] = {}
+        for camera in sorted(set(self.ptz) | set(self.poses) | set(self.previews)):
+            state, pose, preview = (self.ptz.get(camera), self.poses.get(camera),
+                                    self.previews.get(camera))
+            entry: dict[str, Any] = {"status": state.status if state else "",
+                                     "pan_deg": state.pan_deg if state else None,
+                                     "tilt_deg": state.tilt_deg if state else None,
+                                     "aim_error_deg": state.aim_error_deg if state else None,
+                                     "position": None, "looking_at": None, "preview": None}
+            if pose is not None:
+                entry["position"] = [pose.x_mm, pose.y_mm, pose.z_mm]
+                entry["pose_error_px"] = pose.mean_error_px
+                if state is not None and state.status != "camera_unreachable":
+                    entry["looking_at"] = looking_at(pose, state.pan_deg, state.tilt_deg)
+            if preview is not None:
+                entry["preview"] = {
+                    "seq": preview.seq, "width_px": preview.width_px,
+                    "height_px": preview.height_px, "robot_px": preview.robot_px,
+                    "markers": [[d.u_px, d.v_px, d.radius_long_px] for d in preview.markers],
+                    "measured_s": preview.measured_s}
+            out[camera] = entry
+        return out
+
+    def preview_jpeg(self, camera: str) -> bytes | None:
+        preview = self.previews.get(camera)
+        return None if preview is None else preview.jpeg

@@ -1,0 +1,113 @@
+"""A recording of a short sim run: every key, in order, decodable; replayed, the same
+messages come back; the report renders from it."""
+
+from __future__ import annotations
+
+import json
+import signal
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import pytest
+
+from common import codec, keys
+from common import messages as m
+from common.bus import Bus
+from services.recording.mcap_file import read_samples, recorded_keys
+from tests.conftest import client_settings, open_when_up, stb_process, wait_for
+from tests.operator.conftest import LiveLab
+from tests.ports import free_port
+from tests.services.test_processes import _stop
+
+EXPECTED = ["stb/tracker/markers", "stb/tracker/robot", "stb/gantry/state",
+            "stb/gantry/setpoint", "stb/gantry/estimate", "stb/gantry/detections",
+            "stb/gantry/offload", "stb/gantry/camera/frame", "stb/ptz/ptz1/state",
+            "stb/ptz/ptz2/state", "stb/ptz/ptz1/preview", "stb/ptz/ptz2/preview",
+            "stb/sim/truth/crane", "stb/sim/truth/robot/locomotive", "stb/health/gantry/main",
+            "stb/health/tracker/main", "stb/health/sim/main", "stb/health/web/main"]
+RECORD_S = 8.0
+
+
+@pytest.fixture(scope="module")
+def recording(live_lab: LiveLab, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("rec") / "run.mcap"
+    proc = stb_process("record", str(out), "--lab", str(live_lab.lab), "--duration",
+                       str(RECORD_S), "--set", "progress_s=2")
+    assert proc.wait(timeout=RECORD_S + 30) == 0, proc.stderr.read()
+    log = proc.stderr.read()
+    assert "wrote" in log and "samples" in log
+    print(log)
+    return out
+
+
+def test_the_recording_has_every_key_in_order_and_decodable(recording: Path) -> None:
+    counts = recorded_keys(recording)
+    missing = [k for k in EXPECTED if not counts.get(k)]
+    assert not missing, f"not recorded: {missing} (recorded: {sorted(counts)})"
+    assert counts["stb/tracker/markers"] > 50 * RECORD_S, "the mocap runs at 100 Hz"
+    last: dict[str, tuple[float, int]] = {}
+    received = []
+    for sample in read_samples(recording):
+        received.append(sample.received_s)
+        topic = keys.topic_for("stb", sample.key)
+        assert topic is not None, sample.key
+        msg = codec.decode(topic.model, sample.payload, max_bytes=topic.max_payload_bytes)
+        assert sample.measured_s == pytest.approx(msg.measured_s, abs=1e-6)
+        previous = last.get(sample.key)
+        if previous is not None:
+            assert sample.sequence == previous[1] + 1, f"{sample.key}: a sample is missing"
+        last[sample.key] = (sample.received_s, sample.sequence)
+    assert received == sorted(received), "in the order they were received"
+    assert received[-1] - received[0] > RECORD_S - 1.5
+
+
+def test_replaying_the_recording_gives_the_same_messages(recording: Path) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = stb_process("router", "--listen", endpoint, "--set", "bus.zenoh.connect=[]")
+    session = None
+    try:
+        settings = client_settings(endpoint)
+        session = open_when_up(settings.zenoh)
+        bus = Bus(session, settings)
+        got: dict[str, list[m.Message]] = defaultdict(list)
+        chosen = ["stb/tracker/robot", "stb/gantry/state", "stb/ptz/ptz1/state"]
+        for key in chosen:
+            bus.subscribe_any(key, lambda item: got[item[0]].append(item[1]))
+        time.sleep(0.5)
+        replay = stb_process("replay", str(recording), "--speed", "4", "--connect", endpoint,
+                             *[a for key in chosen for a in ("--keys", key)])
+        assert replay.wait(timeout=RECORD_S + 20) == 0, replay.stderr.read()
+        expected = {k: [codec.decode(keys.topic_for("stb", k).model, s.payload)
+                        for s in read_samples(recording, [k])] for k in chosen}
+        wait_for(lambda: all(len(got[k]) == len(expected[k]) for k in chosen), timeout=5)
+        for key in chosen:
+            clock = {"measured_s", "sent_s"}
+            assert [g.model_dump(exclude=clock) for g in got[key]] == [
+                e.model_dump(exclude=clock) for e in expected[key]], key
+            shifts = [g.measured_s - e.measured_s for g, e in zip(got[key], expected[key],
+                                                                   strict=True)]
+            assert max(shifts) - min(shifts) < RECORD_S, "one shift for the whole run (/4)"
+        bus.close()
+    finally:
+        if session is not None:
+            session.close()
+        _stop(router, signal.SIGINT)
+
+
+def test_the_report_renders_from_the_recording(recording: Path, live_lab: LiveLab,
+                                               tmp_path: Path) -> None:
+    out = tmp_path / "report"
+    proc = stb_process("report", str(recording), "--out", str(out), "--height-map",
+                       str(live_lab.crater_file))
+    assert proc.wait(timeout=120) == 0, proc.stderr.read()
+    for name in ("errors.png", "tracks.png", "velocity.png", "calibration.png", "aim.png"):
+        data = (out / name).read_bytes()
+        assert data.startswith(b"\x89PNG") and len(data) > 10_000, name
+    page = (out / "index.html").read_text()
+    assert all(f'src="{n}"' in page for n in ("errors.png", "tracks.png", "velocity.png"))
+    figures = json.loads((out / "summary.json").read_text())
+    assert figures["gantry_algorithm"] == "default"
+    assert 0 < figures["crane_error_mean_mm"] < 500, figures
+    assert figures["ptz1_pose_passpoints"] == 100
+    assert figures["ptz1_aim_error_median_deg"] < 5
