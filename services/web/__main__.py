@@ -21,10 +21,9 @@ from collections.abc import Sequence
 import zenoh
 
 from common import keys
-from common.heightmap import HeightMap
 from common.node import Node, StartupError
 from services.entry import service_main
-from services.web.server import WebServer
+from services.web.server import CraterImage, WebServer
 from services.web.settings import WebSettings
 from services.web.state import LiveState
 
@@ -56,7 +55,6 @@ def run(node: Node) -> None:
         with lock:
             return state.preview_jpeg(camera)
 
-    height_map = _height_map(settings)
     for topic in TOPICS:
         node.bus.subscribe(topic, on_message)
     node.bus.subscribe(keys.HEALTH, on_message, latest=True)
@@ -66,8 +64,8 @@ def run(node: Node) -> None:
     tokens = node.bus.session.liveliness().declare_subscriber(
         keys.alive_pattern(node.bus.prefix), on_alive, history=True)
     try:
-        server = WebServer(settings.host, settings.port, view, preview, height_map,
-                           1 / settings.push_hz, node.stop)
+        server = WebServer(settings.host, settings.port, view, preview,
+                           CraterImage(settings.height_map), 1 / settings.push_hz, node.stop)
     except OSError as err:
         tokens.undeclare()
         raise StartupError(f"cannot listen on {settings.host}:{settings.port}: {err}") from err
@@ -78,16 +76,6 @@ def run(node: Node) -> None:
     finally:
         server.close()
         tokens.undeclare()
-
-
-def _height_map(settings: WebSettings) -> HeightMap | None:
-    if settings.height_map is None or not settings.height_map.exists():
-        log.warning("no height map at %s: the page draws a plain grid", settings.height_map)
-        return None
-    try:
-        return HeightMap.load(settings.height_map)
-    except ValueError as err:
-        raise StartupError(str(err)) from err
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -17,6 +17,7 @@ from collections.abc import Callable
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
+from pathlib import Path
 from typing import Any
 
 import cv2
@@ -28,6 +29,7 @@ from common.heightmap import HeightMap
 log = logging.getLogger(__name__)
 STATIC = {"/": ("index.html", "text/html; charset=utf-8"),
           "/app.js": ("app.js", "text/javascript; charset=utf-8")}
+DEFAULT_EXTENT_MM = (-3000.0, 3000.0, -3000.0, 3000.0)
 PREVIEW_PATH = re.compile(r"^/preview/([A-Za-z0-9_.-]{1,64})\.jpg$")
 
 
@@ -43,18 +45,48 @@ def map_png(height_map: HeightMap) -> bytes:
     return png.tobytes()
 
 
+class CraterImage:
+    """The height map as the page gets it, read when first asked for and again (at most every
+    ``retry_s``) while the file is missing: the sim may write it after the page started."""
+
+    def __init__(self, path: Path | None, retry_s: float = 2.0) -> None:
+        self.path, self.retry_s = path, retry_s
+        self._lock = threading.Lock()
+        self._tried_at = -float("inf")
+        self.info = json.dumps({"extent_mm": DEFAULT_EXTENT_MM, "image": False})
+        self.png: bytes | None = None
+
+    def get(self) -> tuple[str, bytes | None]:
+        with self._lock:
+            if self.png is None and self.path is not None and (
+                    time.monotonic() - self._tried_at >= self.retry_s):
+                self._tried_at = time.monotonic()
+                self._load(self.path)
+            return self.info, self.png
+
+    def _load(self, path: Path) -> None:
+        if not path.exists():
+            return
+        try:
+            height_map = HeightMap.load(path)
+            self.png = map_png(height_map)
+        except ValueError as err:
+            log.error("height map not shown: %s", err)
+            self.path = None  # a broken file stays broken: do not read it every request
+            return
+        self.info = json.dumps({"extent_mm": height_map.extent_mm, "image": True})
+        log.info("height map %s shown", path)
+
+
 class WebServer:
     """Serves ``view()`` (the state dict) and ``preview(camera)`` (JPEG bytes or None)."""
 
     def __init__(self, host: str, port: int, view: Callable[[], dict[str, Any]],
-                 preview: Callable[[str], bytes | None], height_map: HeightMap | None,
+                 preview: Callable[[str], bytes | None], crater: CraterImage,
                  push_period_s: float, stop: threading.Event) -> None:
         self.view, self.preview, self.stop = view, preview, stop
         self.push_period_s = push_period_s
-        extent = (height_map.extent_mm if height_map is not None
-                  else (-3000.0, 3000.0, -3000.0, 3000.0))
-        self.map_info = json.dumps({"extent_mm": extent, "image": height_map is not None})
-        self.map_png = map_png(height_map) if height_map is not None else None
+        self.crater = crater
         self.httpd = ThreadingHTTPServer((host, port), self._handler())
         self.httpd.daemon_threads = True
         self._thread = threading.Thread(target=self.httpd.serve_forever, name="web-http",
@@ -89,9 +121,9 @@ class WebServer:
                     elif path == "/state.json":
                         self._send(json.dumps(server.view()).encode(), "application/json")
                     elif path == "/map.json":
-                        self._send(server.map_info.encode(), "application/json")
-                    elif path == "/map.png" and server.map_png is not None:
-                        self._send(server.map_png, "image/png", cache=True)
+                        self._send(server.crater.get()[0].encode(), "application/json")
+                    elif path == "/map.png" and (png := server.crater.get()[1]) is not None:
+                        self._send(png, "image/png")
                     elif path == "/events":
                         self._events()
                     elif (found := PREVIEW_PATH.match(path)) and (

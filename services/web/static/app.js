@@ -5,24 +5,42 @@
 const map = document.getElementById("map");
 const ctx = map.getContext("2d");
 const mapImage = new Image();
-let extent = [-3000, 3000, -3000, 3000];  // x_min, x_max, y_min, y_max (mm)
+let mapExtent = [-3000, 3000, -3000, 3000];  // the height map's x_min, x_max, y_min, y_max (mm)
+let view = mapExtent;  // what the canvas shows: the map and every camera, square
 let mapReady = false;
 
-fetch("map.json").then((r) => r.json()).then((info) => {
-  extent = info.extent_mm;
-  if (info.image) {
-    mapImage.onload = () => { mapReady = true; };
-    mapImage.src = "map.png";
+function loadMap() {
+  // The sim may write the height map after the page started: ask again until there is one.
+  fetch("map.json").then((r) => r.json()).then((info) => {
+    mapExtent = info.extent_mm;
+    if (info.image) {
+      mapImage.onload = () => { mapReady = true; };
+      mapImage.src = "map.png";
+    } else {
+      setTimeout(loadMap, 3000);
+    }
+  }).catch(() => setTimeout(loadMap, 3000));
+}
+loadMap();
+
+function fitView(state) {
+  let [x0, x1, y0, y1] = mapExtent;
+  for (const cam of Object.values(state.cameras)) {
+    if (!cam.position) continue;
+    x0 = Math.min(x0, cam.position[0] - 300); x1 = Math.max(x1, cam.position[0] + 300);
+    y0 = Math.min(y0, cam.position[1] - 300); y1 = Math.max(y1, cam.position[1] + 300);
   }
-});
+  const half = Math.max(x1 - x0, y1 - y0) / 2, cx = (x0 + x1) / 2, cy = (y0 + y1) / 2;
+  view = [cx - half, cx + half, cy - half, cy + half];
+}
 
 function toCanvas(x, y) {
-  const [x0, x1, y0, y1] = extent;
+  const [x0, x1, y0, y1] = view;
   return [(x - x0) / (x1 - x0) * map.width, (1 - (y - y0) / (y1 - y0)) * map.height];
 }
 
 function mmToPx(mm) {
-  return mm / (extent[1] - extent[0]) * map.width;
+  return mm / (view[1] - view[0]) * map.width;
 }
 
 function fmt(value, digits = 0, unit = "") {
@@ -30,10 +48,13 @@ function fmt(value, digits = 0, unit = "") {
 }
 
 function drawMap(state) {
+  fitView(state);
   ctx.clearRect(0, 0, map.width, map.height);
   if (mapReady) {
+    const [left, top] = toCanvas(mapExtent[0], mapExtent[3]);
+    const [right, bottom] = toCanvas(mapExtent[1], mapExtent[2]);
     ctx.globalAlpha = 0.85;
-    ctx.drawImage(mapImage, 0, 0, map.width, map.height);
+    ctx.drawImage(mapImage, left, top, right - left, bottom - top);
     ctx.globalAlpha = 1;
   } else {
     ctx.strokeStyle = "#444";

@@ -1,0 +1,93 @@
+"""The operator's page in a real headless browser (Debian's chromium, driven by Playwright)
+against the live sim lab: it loads, shows every service alive, and the robot moves on it."""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+import urllib.request
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import wait_for
+from tests.operator.conftest import SERVICES, LiveLab
+
+CHROMIUM = os.environ.get("STB_CHROMIUM", "/usr/bin/chromium")
+FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+         "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+"""As root on this machine; without the background-networking flags chromium keeps trying to
+reach Google's hosts through the closed network. Playwright adds --headless and a fresh
+profile directory of its own."""
+
+
+def _chromium_or_skip() -> str:
+    if Path(CHROMIUM).exists():
+        return CHROMIUM
+    if os.environ.get("STB_REQUIRE_BROWSER"):
+        pytest.fail(f"no chromium at {CHROMIUM} (STB_REQUIRE_BROWSER is set: .ci/run installs "
+                    "Debian's chromium)")
+    pytest.skip(f"no chromium at {CHROMIUM}: apt-get install chromium (.ci/run does)")
+
+
+@pytest.fixture(scope="module")
+def page(live_lab: LiveLab) -> Iterator[object]:
+    executable = _chromium_or_skip()
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=executable, args=FLAGS)
+        try:
+            tab = browser.new_page(viewport={"width": 1300, "height": 950})
+            tab.goto(live_lab.web_url, wait_until="load")
+            yield tab
+        finally:
+            browser.close()
+
+
+def _expected_services() -> set[str]:
+    out = set()
+    for spec in SERVICES:
+        service, _, instance = spec.partition(":")
+        out.add(f"{service}/{instance or 'main'}")
+    return out
+
+
+def test_the_page_shows_every_service_alive(page: object) -> None:
+    def alive() -> set[str]:
+        rows = page.locator("#services tr[data-alive='true']")  # type: ignore[attr-defined]
+        return {rows.nth(i).get_attribute("data-service") for i in range(rows.count())}
+
+    wait_for(lambda: _expected_services() <= alive(), timeout=15, period=0.3)
+    assert page.locator("#connection").inner_text() == "live"  # type: ignore[attr-defined]
+
+
+def test_the_robot_moves_on_the_page_while_the_sim_runs(page: object, live_lab: LiveLab,
+                                                         tmp_path: Path) -> None:
+    canvas = page.locator("#map")  # type: ignore[attr-defined]
+    first = wait_for(lambda: canvas.get_attribute("data-robot-px"), timeout=10)
+    time.sleep(1.5)
+    second = canvas.get_attribute("data-robot-px")
+    a, b = (tuple(map(float, p.split(","))) for p in (first, second))
+    moved = ((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2) ** 0.5
+    assert moved > 3, f"robot drawn at {first} then {second}"
+    text = page.locator("#robot-xy").inner_text()  # type: ignore[attr-defined]
+    assert text.startswith("robot: ") and "mm" in text
+    # The page draws what the server says: the robot's canvas position matches its state.
+    with urllib.request.urlopen(f"{live_lab.web_url}/state.json", timeout=5) as reply:
+        state = json.load(reply)
+    assert state["robot"] is not None and len(state["track"]) > 5
+    page.screenshot(path=str(tmp_path / "page.png"))  # type: ignore[attr-defined]
+    assert (tmp_path / "page.png").stat().st_size > 20_000
+
+
+def test_camera_previews_and_offload_figures_are_shown(page: object) -> None:
+    for camera in ("ptz1", "ptz2"):
+        preview = page.locator(f"#camera-{camera} canvas")  # type: ignore[attr-defined]
+        wait_for(lambda p=preview: p.get_attribute("data-seq"), timeout=10)
+        caption = page.locator(f"#camera-{camera} .caption").inner_text()  # type: ignore[attr-defined]
+        assert "tracking" in caption, caption
+    offload = page.locator("#offload").inner_text()  # type: ignore[attr-defined]
+    assert "sideways pull" in offload and "%" in offload
