@@ -35,7 +35,7 @@ def _services() -> dict:
 def test_compose_file_is_valid_and_every_service_restarts() -> None:
     services = _services()
     assert set(services) == {"router", "tracker", "ptz-1", "ptz-2", "calib", "gantry", "monitor",
-                             "sim"}
+                             "web", "sim"}
     assert services["sim"]["profiles"] == ["sim"], "the sim only with --profile sim"
     for name, service in services.items():
         assert service["restart"] == "unless-stopped", name

@@ -74,7 +74,7 @@ def _collect(session: zenoh.Session, key_expr: str) -> tuple[list, object]:
 
 def test_only_the_gantry_puts_setpoints_and_only_a_ptz_its_own_camera(lab: dict) -> None:
     gantry, monitor, calib = (lab["session"](u) for u in ("gantry", "monitor", "calib"))
-    ptz1, ptz2 = lab["session"]("ptz1"), lab["session"]("ptz2")
+    ptz1, ptz2, web = lab["session"]("ptz1"), lab["session"]("ptz2"), lab["session"]("web")
     watcher = lab["session"]("tracker")  # any account may read
     got, _sub = _collect(watcher, "stb/**")
     time.sleep(0.5)
@@ -88,13 +88,16 @@ def test_only_the_gantry_puts_setpoints_and_only_a_ptz_its_own_camera(lab: dict)
         monitor.put("stb/ptz/ptz1/calibration", b"monitor commands a camera")
         calib.put("stb/ptz/ptz1/calibration", b"calib commands a camera")
         monitor.put("stb/health/monitor/main", b"monitor writes")
+        web.put("stb/gantry/setpoint", b"from the web page")
+        web.put("stb/health/web/main", b"web health")
         time.sleep(0.05)
     wait_for(lambda: {p for _, p in got} >= {b"from gantry", b"ptz1 about itself",
-                                              b"ptz2 about itself", b"calib commands a camera"})
+                                              b"ptz2 about itself", b"calib commands a camera",
+                                              b"web health"})
     time.sleep(0.5)  # what is denied would have arrived by now
     payloads = {p for _, p in got}
     for denied in (b"from monitor", b"from calib", b"ptz1 about ptz2",
-                   b"monitor commands a camera", b"monitor writes"):
+                   b"monitor commands a camera", b"monitor writes", b"from the web page"):
         assert denied not in payloads, denied
 
 
