@@ -13,19 +13,28 @@
 from __future__ import annotations
 
 import json
+import logging
+import struct
+from collections import Counter
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
-from mcap.exceptions import McapError
+from mcap.exceptions import EndOfFile, McapError
 from mcap.reader import make_reader
+from mcap.records import Channel, Message
+from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
+log = logging.getLogger(__name__)
 JSON_PREFIX = "json/"
+MCAP0_MAGIC = b"\x89MCAP0\r\n"
 PROFILE = ""
 LIBRARY = "stb-supervisor record"
 NS = 1_000_000_000
+READ_ERRORS = (McapError, EOFError, ValueError, KeyError, struct.error, OSError)
+"""What the mcap reader raises for a missing, truncated or foreign file."""
 
 
 class RecordingError(ValueError):
@@ -97,36 +106,79 @@ class RecordWriter:
 
 def read_samples(path: Path, keys: Iterable[str] | None = None) -> Iterator[Sample]:
     """The recorded bus samples (not the JSON copies) in receive order; ``keys`` limits them
-    to those concrete keys. Raises RecordingError for a file that is not a recording."""
+    to those concrete keys. A recording that was never finished (the recorder was killed) is
+    read in file order up to where it breaks off. Raises RecordingError for a file that is not
+    a recording."""
     wanted = None if keys is None else set(keys)
+    if not _finished(path):
+        yield from _salvage(path, wanted)
+        return
     try:
         with open(path, "rb") as f:
-            reader = make_reader(f)
-            for _, channel, message in reader.iter_messages(log_time_order=True):
-                if channel.message_encoding != "msgpack" or channel.topic.startswith(JSON_PREFIX):
-                    continue
-                if wanted is not None and channel.topic not in wanted:
-                    continue
-                yield Sample(key=channel.topic, payload=message.data,
-                             encoding=channel.metadata.get("zenoh_encoding", ""),
-                             received_s=message.log_time / NS,
-                             measured_s=message.publish_time / NS, sequence=message.sequence)
-    except (McapError, EOFError, ValueError, KeyError) as err:
+            for _, channel, message in make_reader(f).iter_messages(log_time_order=True):
+                if _is_bus(channel) and (wanted is None or channel.topic in wanted):
+                    yield _sample(channel, message)
+    except READ_ERRORS as err:
         raise RecordingError(f"{path}: not a readable MCAP recording ({err})") from err
 
 
 def recorded_keys(path: Path) -> dict[str, int]:
-    """Every recorded key and its number of samples (from the file's summary)."""
+    """Every recorded key and its number of samples."""
+    if not _finished(path):
+        return dict(Counter(s.key for s in _salvage(path, None)))
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics is not None  # checked by _finished
+    counts = summary.statistics.channel_message_counts
+    return {c.topic: counts.get(cid, 0) for cid, c in summary.channels.items() if _is_bus(c)}
+
+
+def _finished(path: Path) -> bool:
+    """True if the file has its summary; False if it breaks off. RecordingError if it is no
+    MCAP file at all."""
+    try:
+        with open(path, "rb") as f:
+            header = f.read(len(MCAP0_MAGIC))
+    except OSError as err:
+        raise RecordingError(f"{path}: cannot read it ({err})") from err
+    if header != MCAP0_MAGIC:
+        raise RecordingError(f"{path}: not a readable MCAP recording (no MCAP header)")
     try:
         with open(path, "rb") as f:
             summary = make_reader(f).get_summary()
-    except (McapError, EOFError, ValueError) as err:
-        raise RecordingError(f"{path}: not a readable MCAP recording ({err})") from err
-    if summary is None or summary.statistics is None:
-        raise RecordingError(f"{path}: no summary (was the recording stopped cleanly?)")
-    counts = summary.statistics.channel_message_counts
-    return {c.topic: counts.get(cid, 0) for cid, c in summary.channels.items()
-            if c.message_encoding == "msgpack" and not c.topic.startswith(JSON_PREFIX)}
+    except READ_ERRORS:
+        return False
+    return summary is not None and summary.statistics is not None
+
+
+def _salvage(path: Path, wanted: set[str] | None) -> Iterator[Sample]:
+    channels: dict[int, Channel] = {}
+    count = 0
+    try:
+        with open(path, "rb") as f:
+            for record in StreamReader(f).records:
+                if isinstance(record, Channel):
+                    channels[record.id] = record
+                elif isinstance(record, Message):
+                    channel = channels.get(record.channel_id)
+                    if channel and _is_bus(channel) and (wanted is None
+                                                         or channel.topic in wanted):
+                        count += 1
+                        yield _sample(channel, record)
+    except (*READ_ERRORS, EndOfFile) as err:
+        log.warning("%s was not finished: read %d samples up to where it breaks off (%s)",
+                    path, count, type(err).__name__)
+
+
+def _is_bus(channel: Channel) -> bool:
+    return channel.message_encoding == "msgpack" and not channel.topic.startswith(JSON_PREFIX)
+
+
+def _sample(channel: Channel, message: Message) -> Sample:
+    return Sample(key=channel.topic, payload=message.data,
+                  encoding=channel.metadata.get("zenoh_encoding", ""),
+                  received_s=message.log_time / NS, measured_s=message.publish_time / NS,
+                  sequence=message.sequence)
 
 
 def _ns(seconds: float) -> int:

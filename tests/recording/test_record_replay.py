@@ -154,7 +154,7 @@ def test_pace_stops_when_asked() -> None:
 def test_a_file_that_is_not_a_recording_is_a_clear_error(tmp_path: Path) -> None:
     bad = tmp_path / "bad.mcap"
     bad.write_bytes(b"not an mcap file at all")
-    with pytest.raises(RecordingError, match="not a readable MCAP"):
+    with pytest.raises(RecordingError, match="no MCAP header"):
         recorded_keys(bad)
     with pytest.raises(RecordingError):
         list(read_samples(bad))
@@ -174,3 +174,21 @@ def test_recorder_skips_keys_it_excludes(make_bus: Callable[..., Bus], tmp_path:
     assert dict(recorder.stats.samples) == {"stb/tracker/robot": 1}, \
         "excluded keys left out, overlapping expressions recorded once"
     assert zenoh.KeyExpr("stb/**").includes(zenoh.KeyExpr("stb/tracker/robot"))
+
+
+def test_a_recording_that_was_never_finished_is_read_up_to_where_it_breaks_off(
+        tmp_path: Path) -> None:
+    from services.recording.mcap_file import RecordWriter
+
+    out = io.BytesIO()
+    writer = RecordWriter(out)
+    payloads = [codec.encode(_robot(i, 1000.0 + i)) for i in range(3000)]
+    for i, payload in enumerate(payloads):
+        writer.write("stb/tracker/robot", payload, encoding=codec.CONTENT_TYPE,
+                     model="RobotPosition", received_s=1000.0 + i, measured_s=1000.0 + i)
+    path = tmp_path / "killed.mcap"
+    path.write_bytes(out.getvalue())  # no finish(): as if the recorder was killed -9
+    salvaged = list(read_samples(path))
+    assert 1000 < len(salvaged) < 3000, "the chunks written before the cut"
+    assert [s.payload for s in salvaged] == payloads[:len(salvaged)]
+    assert recorded_keys(path) == {"stb/tracker/robot": len(salvaged)}

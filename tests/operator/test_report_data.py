@@ -1,0 +1,80 @@
+"""The report's figures from known series (pure), and its command's errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from common import messages as m
+from common.camera import Pose
+from services.calib.synthetic import PAPER_POSE, moving_marker
+from services.report.data import Recording, calibration_residuals, crane_error, summary
+from tests.conftest import stb_process
+
+
+def _pose_msg(pose: Pose, camera: str = "ptz1") -> m.CameraPose:
+    return m.CameraPose(measured_s=0.0, camera=camera, x_mm=pose.x_mm, y_mm=pose.y_mm,
+                        z_mm=pose.z_mm, rx_deg=pose.rx_deg, ry_deg=pose.ry_deg,
+                        rz_deg=pose.rz_deg, focal_mm=3.8, mean_error_px=1.0, passpoints=80)
+
+
+def _calibration_run(pose_msg: m.CameraPose, rng: np.random.Generator) -> Recording:
+    points, track = moving_marker(PAPER_POSE, rng, count=60, offset_s=0.0, noise_px=1.0)
+    rec = Recording(path=None)  # type: ignore[arg-type]
+    rec.frames = [m.MarkerFrame(measured_s=float(t), frame=i, markers=[m.Marker(
+        label="wand", x_mm=float(x), y_mm=float(y), z_mm=float(z))])
+        for i, (t, (x, y, z)) in enumerate(zip(track.times_s, track.xyz_mm, strict=True))]
+    rec.detections["ptz1"] = [m.MarkerDetections(
+        measured_s=float(t), camera="ptz1", status="ok", threshold=230, width_px=704,
+        height_px=576, markers=[m.DetectedMarker(u_px=float(u), v_px=float(v),
+                                                 radius_long_px=3, radius_short_px=3,
+                                                 angle_deg=0, roundness=1, area_px=28)])
+        for t, (u, v) in zip(points.times_s, points.pixels, strict=True)]
+    rec.ptz_state["ptz1"].add(float(track.times_s[0]), 0.0, 0.0)
+    rec.poses["ptz1"] = pose_msg
+    return rec
+
+
+def test_calibration_residuals_come_from_the_recorded_passpoints(
+        rng: np.random.Generator) -> None:
+    right = calibration_residuals(_calibration_run(_pose_msg(PAPER_POSE), rng))["ptz1"]
+    assert len(right) >= 50, "the collector finds the passpoints again"
+    assert np.median(right) < 2.5, "1 px noise → residuals of about 1.25 px"
+    off = Pose(PAPER_POSE.x_mm + 200, PAPER_POSE.y_mm, PAPER_POSE.z_mm, PAPER_POSE.rx_deg,
+               PAPER_POSE.ry_deg, PAPER_POSE.rz_deg)
+    wrong = calibration_residuals(_calibration_run(_pose_msg(off), rng))["ptz1"]
+    assert np.median(wrong) > 5 * np.median(right), "a wrong pose shows in the residuals"
+
+
+def test_crane_error_compares_the_enabled_crane_with_the_robot_at_the_same_time() -> None:
+    rec = Recording(path=None)  # type: ignore[arg-type]
+    for i in range(101):  # robot along x at 100 mm/s, 100 Hz
+        t = 10.0 + i * 0.01
+        rec.robot.add(t, 100.0 * (t - 10.0), 0.0, 0.0, 100.0, 0.0)
+    rec.crane.add(10.2, 0.0, 5.0, 1.0)   # 20 mm behind, 5 mm aside
+    rec.crane.add(10.5, 40.0, 0.0, 1.0)  # 10 mm behind
+    rec.crane.add(10.6, 0.0, 0.0, 0.0)   # disabled: not counted
+    rec.crane.add(30.0, 0.0, 0.0, 1.0)   # no robot sample near: not counted
+    t, error = crane_error(rec)
+    assert t.tolist() == [10.2, 10.5]
+    assert error == pytest.approx(np.array([[-20.0, 5.0], [-10.0, 0.0]]))
+    rec.first_s, rec.last_s = 10.0, 11.0
+    figures = summary(rec)
+    assert figures["crane_error_max_mm"] == pytest.approx(np.hypot(20, 5), abs=0.1)
+    assert figures["crane_error_mean_mm"] == pytest.approx((np.hypot(20, 5) + 10) / 2, abs=0.1)
+
+
+def test_an_empty_recording_gives_figures_of_none() -> None:
+    figures = summary(Recording(path=None))  # type: ignore[arg-type]
+    assert figures["crane_error_mean_mm"] is None and figures["samples"] == 0
+
+
+def test_report_of_a_file_that_is_no_recording_is_a_clear_error(tmp_path) -> None:  # noqa: ANN001
+    bad = tmp_path / "bad.mcap"
+    bad.write_text("hello")
+    proc = stb_process("report", str(bad), "--out", str(tmp_path / "out"))
+    assert proc.wait(timeout=60) == 2
+    assert "not a readable MCAP recording" in proc.stderr.read()
+    proc = stb_process("replay", str(tmp_path / "missing.mcap"))
+    assert proc.wait(timeout=60) == 2
+    assert "missing.mcap" in proc.stderr.read()
