@@ -40,6 +40,7 @@ class LiveState:
 
     track_s: float = 60.0
     alive: set[tuple[str, str]] = field(default_factory=set)
+    seen: set[tuple[str, str]] = field(default_factory=set)  # stays listed when it goes
     health: dict[tuple[str, str], m.ServiceHealth] = field(default_factory=dict)
     robot: m.RobotPosition | None = None
     truth: dict[str, m.RobotTruth] = field(default_factory=dict)
@@ -53,6 +54,7 @@ class LiveState:
 
     def on_alive(self, service: str, instance: str, alive: bool) -> None:
         (self.alive.add if alive else self.alive.discard)((service, instance))
+        self.seen.add((service, instance))
 
     def on_message(self, msg: m.Message) -> None:  # noqa: C901 - one branch per message kind
         if isinstance(msg, m.RobotPosition):
@@ -108,7 +110,7 @@ class LiveState:
         }
 
     def _services(self, now_s: float) -> list[dict[str, Any]]:
-        names = sorted(self.alive | set(self.health))
+        names = sorted(self.seen | set(self.health))
         out = []
         for service, instance in names:
             health = self.health.get((service, instance))

@@ -1,0 +1,131 @@
+"""The page's state (pure) and its HTTP side without a bus."""
+
+from __future__ import annotations
+
+import json
+import threading
+import urllib.error
+import urllib.request
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from common import messages as m
+from common.heightmap import HeightMap
+from services.ptz.aim import aim_at
+from services.web.server import CraterImage, WebServer
+from services.web.state import LiveState, looking_at
+from tests.calib.test_demo_calibration import MOUNTS
+
+
+def _pose(camera: str = "ptz1") -> m.CameraPose:
+    mount = MOUNTS[camera]
+    return m.CameraPose(measured_s=1.0, camera=camera, x_mm=mount.x_mm, y_mm=mount.y_mm,
+                        z_mm=mount.z_mm, rx_deg=mount.rx_deg, ry_deg=mount.ry_deg,
+                        rz_deg=mount.rz_deg, focal_mm=3.8, mean_error_px=1.2, passpoints=90)
+
+
+def _robot(t: float, x: float) -> m.RobotPosition:
+    return m.RobotPosition(measured_s=t, label="robot", x_mm=x, y_mm=0.0, z_mm=0.0,
+                           vx_mm_s=100.0, vy_mm_s=0.0, vz_mm_s=0.0)
+
+
+@pytest.mark.parametrize("camera", ["ptz1", "ptz2"])
+def test_a_camera_aimed_at_a_ground_point_looks_at_it(camera: str) -> None:
+    target = np.array([500.0, -200.0, 0.0])
+    pan, tilt = aim_at(target, MOUNTS[camera])
+    assert looking_at(_pose(camera), pan, tilt) == pytest.approx([500.0, -200.0], abs=1.0)
+
+
+def test_the_track_is_thinned_and_kept_for_track_s() -> None:
+    state = LiveState(track_s=2.0)
+    for i in range(400):  # 100 Hz for 4 s
+        state.on_message(_robot(100.0 + i * 0.01, float(i)))
+    view = state.view(104.0)
+    assert 17 <= len(view["track"]) <= 21, "about 10 Hz over the last 2 s"
+    assert view["track"][-1][0] >= 390.0
+    assert view["robot"]["x_mm"] == 399.0 and view["robot"]["speed_mm_s"] == 100.0
+
+
+def test_services_alive_gone_and_degraded() -> None:
+    state = LiveState()
+    state.on_alive("gantry", "main", True)
+    state.on_alive("tracker", "main", True)
+    state.on_message(m.ServiceHealth(measured_s=9.0, service="gantry", instance="main",
+                                     host="h", pid=1, started_s=0.0, status="degraded",
+                                     detail="crane unreachable", keys={}))
+    state.on_alive("tracker", "main", False)
+    rows = {(r["service"], r["alive"], r["status"]) for r in state.view(10.0)["services"]}
+    assert rows == {("gantry", True, "degraded"), ("tracker", False, "")}
+
+
+def test_cameras_show_pose_direction_and_preview_but_not_the_jpeg_in_the_json() -> None:
+    state = LiveState()
+    state.on_message(_pose())
+    older = _pose().model_copy(update={"measured_s": 0.5, "x_mm": 0.0})
+    state.on_message(older)
+    state.on_message(m.PtzState(measured_s=2.0, camera="ptz1", status="tracking", pan_deg=-10,
+                                tilt_deg=-8, zoom=1, focal_mm=3.8, aim_error_deg=0.3))
+    state.on_message(m.PtzPreview(measured_s=2.0, camera="ptz1", seq=7, width_px=704,
+                                  height_px=576, jpeg=b"\xff\xd8jpeg", pan_deg=-10, tilt_deg=-8,
+                                  markers=[], robot_px=[350.0, 290.0]))
+    camera = state.view(3.0)["cameras"]["ptz1"]
+    assert camera["position"][0] == MOUNTS["ptz1"].x_mm, "an older pose does not replace"
+    assert camera["looking_at"] is not None and camera["preview"]["seq"] == 7
+    assert "jpeg" not in json.dumps(state.view(3.0))
+    assert state.preview_jpeg("ptz1") == b"\xff\xd8jpeg" and state.preview_jpeg("ptz9") is None
+
+
+@pytest.fixture
+def server(tmp_path: Path) -> Iterator[tuple[WebServer, Path]]:
+    state = LiveState()
+    state.on_message(_robot(1.0, 5.0))
+    stop = threading.Event()
+    crater = CraterImage(tmp_path / "crater.npz", retry_s=0.0)
+    web = WebServer("127.0.0.1", 0, lambda: state.view(2.0), state.preview_jpeg, crater, 0.05,
+                    stop).start()
+    yield web, tmp_path / "crater.npz"
+    stop.set()
+    web.close()
+
+
+def _get(web: WebServer, path: str) -> tuple[int, bytes, str]:
+    try:
+        with urllib.request.urlopen(f"http://127.0.0.1:{web.port}{path}", timeout=5) as reply:
+            return reply.status, reply.read(), reply.headers["Content-Type"]
+    except urllib.error.HTTPError as err:
+        return err.code, b"", ""
+
+
+def test_the_server_serves_the_page_the_state_and_events(server: tuple) -> None:
+    web, _ = server
+    status, body, kind = _get(web, "/")
+    assert status == 200 and b"<canvas id=\"map\"" in body and kind.startswith("text/html")
+    assert _get(web, "/app.js")[0] == 200
+    assert json.loads(_get(web, "/state.json")[1])["robot"]["x_mm"] == 5.0
+    with urllib.request.urlopen(f"http://127.0.0.1:{web.port}/events", timeout=5) as reply:
+        assert reply.headers["Content-Type"] == "text/event-stream"
+        first = reply.readline()
+        assert first.startswith(b"data: ") and json.loads(first[6:])["robot"]["x_mm"] == 5.0
+
+
+def test_unknown_paths_and_cameras_are_404(server: tuple) -> None:
+    web, _ = server
+    for path in ("/nothing", "/preview/ptz1.jpg", "/preview/../etc/passwd.jpg",
+                 "/static/../settings.py"):
+        assert _get(web, path)[0] == 404, path
+
+
+def test_the_height_map_appears_once_the_sim_has_written_it(server: tuple) -> None:
+    web, crater_file = server
+    assert json.loads(_get(web, "/map.json")[1])["image"] is False
+    assert _get(web, "/map.png")[0] == 404
+    heights = np.zeros((30, 40), dtype=np.float32)
+    heights[10:20, 10:30] = -500.0
+    HeightMap(heights, -2000.0, -1500.0, 100.0).save(crater_file)
+    info = json.loads(_get(web, "/map.json")[1])
+    assert info == {"extent_mm": [-2000.0, 1900.0, -1500.0, 1400.0], "image": True}
+    status, png, kind = _get(web, "/map.png")
+    assert status == 200 and png.startswith(b"\x89PNG") and kind == "image/png"
