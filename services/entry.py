@@ -10,7 +10,10 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
-from common.node import Node, configure_logging, run_node
+import zenoh
+
+from common.bus import BusUnreachable, open_session
+from common.node import EXIT_UNREACHABLE, Node, configure_logging, run_node
 from common.settings import ConfigError, ServiceSettings, load_settings
 
 S = TypeVar("S", bound=ServiceSettings)
@@ -79,3 +82,50 @@ def service_main(name: str, settings_cls: type[S], body: Callable[[Node], None],
         return EXIT_CONFIG
     configure_logging(settings.log_level)
     return run_node(name, settings, body)
+
+
+# --- tools (monitor, record, replay): bus clients without a liveliness token of their own -------
+
+
+class ToolError(Exception):
+    """Ends a tool: ``tool_main`` prints the message and returns the exit code."""
+
+    def __init__(self, message: str, code: int = EXIT_CONFIG) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+def tool_main(name: str, body: Callable[[], int]) -> int:
+    """Run a tool's body; a ToolError becomes ``stb NAME: message`` and its exit code."""
+    try:
+        return body()
+    except ToolError as err:
+        print(f"stb {name}: {err}", file=sys.stderr)
+        return err.code
+
+
+def tool_settings(settings_cls: type[S], args: argparse.Namespace) -> S:
+    """The tool's settings from ``--lab`` and the common flags; logging configured."""
+    try:
+        settings = load_settings(settings_cls, args.lab, overrides_from(args))
+    except ConfigError as err:
+        raise ToolError(str(err)) from err
+    configure_logging(settings.log_level)
+    return settings
+
+
+def tool_session(settings: ServiceSettings) -> zenoh.Session:
+    try:
+        return open_session(settings.zenoh_settings())
+    except BusUnreachable as err:
+        raise ToolError(str(err), EXIT_UNREACHABLE) from err
+
+
+def checked_key_exprs(exprs: Sequence[str]) -> list[str]:
+    """The key expressions if Zenoh accepts every one, else a ToolError naming the bad one."""
+    for expr in exprs:
+        try:
+            zenoh.KeyExpr(expr)
+        except zenoh.ZError as err:
+            raise ToolError(f"bad key expression {expr!r}: {err}") from err
+    return list(exprs)

@@ -7,6 +7,7 @@ line. It joins the bus as a client (``--connect tcp/ROUTER:7447``) and never pub
 
 from __future__ import annotations
 
+import argparse
 import os
 import sys
 import threading
@@ -16,10 +17,9 @@ from collections.abc import Sequence
 import zenoh
 
 from common import keys
-from common.bus import Bus, BusUnreachable, open_session
-from common.node import EXIT_UNREACHABLE, configure_logging, stop_on_signals
-from common.settings import ConfigError, load_settings
-from services.entry import EXIT_CONFIG, base_parser, overrides_from
+from common.bus import Bus
+from common.node import stop_on_signals
+from services.entry import base_parser, checked_key_exprs, tool_main, tool_session, tool_settings
 from services.monitor.settings import MonitorSettings
 from services.monitor.view import LabView, json_line
 
@@ -29,17 +29,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--raw", metavar="KEYEXPR", help="print samples under KEYEXPR as JSON")
     parser.add_argument("--duration", type=float, help="stop after this many seconds")
     args = parser.parse_args(argv)
-    try:
-        settings = load_settings(MonitorSettings, args.lab, overrides_from(args))
-    except ConfigError as err:
-        print(f"stb monitor: {err}", file=sys.stderr)
-        return EXIT_CONFIG
-    configure_logging(settings.log_level)
-    try:
-        session = open_session(settings.zenoh_settings())
-    except BusUnreachable as err:
-        print(f"stb monitor: {err}", file=sys.stderr)
-        return EXIT_UNREACHABLE
+    return tool_main("monitor", lambda: _monitor(args))
+
+
+def _monitor(args: argparse.Namespace) -> int:
+    settings = tool_settings(MonitorSettings, args)
+    if args.raw:
+        checked_key_exprs([args.raw])
+    session = tool_session(settings)
     stop = threading.Event()
     restore = stop_on_signals(stop)
     bus = Bus(session, settings.bus)

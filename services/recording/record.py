@@ -13,6 +13,7 @@ compression; leave them out with ``--exclude stb/gantry/camera/frame`` when they
 
 from __future__ import annotations
 
+import argparse
 import logging
 import queue
 import sys
@@ -29,10 +30,16 @@ from pydantic import Field
 
 from common import codec, keys
 from common import messages as m
-from common.bus import BusUnreachable, open_session
-from common.node import EXIT_UNREACHABLE, configure_logging, stop_on_signals
-from common.settings import ConfigError, LogLevel, ServiceSettings, load_settings
-from services.entry import EXIT_CONFIG, base_parser, overrides_from
+from common.node import stop_on_signals
+from common.settings import LogLevel, ServiceSettings
+from services.entry import (
+    ToolError,
+    base_parser,
+    checked_key_exprs,
+    tool_main,
+    tool_session,
+    tool_settings,
+)
 from services.recording.foxglove import json_copy
 from services.recording.mcap_file import RecordWriter
 
@@ -147,35 +154,28 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="leave these keys out (repeatable)")
     parser.add_argument("--duration", type=float, help="stop after this many seconds")
     args = parser.parse_args(argv)
-    try:
-        settings = load_settings(RecordSettings, args.lab, overrides_from(args))
-        exprs = args.key_exprs or [f"{settings.bus.prefix}/**"]
-        for expr in exprs + args.exclude:
-            zenoh.KeyExpr(expr)
-    except ConfigError as err:
-        print(f"stb record: {err}", file=sys.stderr)
-        return EXIT_CONFIG
-    except zenoh.ZError as err:
-        print(f"stb record: bad key expression: {err}", file=sys.stderr)
-        return EXIT_CONFIG
-    configure_logging(settings.log_level)
+    return tool_main("record", lambda: _record(args))
+
+
+def _record(args: argparse.Namespace) -> int:
+    settings = tool_settings(RecordSettings, args)
+    exprs = checked_key_exprs(args.key_exprs or [f"{settings.bus.prefix}/**"])
+    exclude = checked_key_exprs(args.exclude)
     try:
         out = open(args.out, "wb")  # noqa: SIM115 - closed below, after the writer finished
     except OSError as err:
-        print(f"stb record: cannot write {args.out}: {err}", file=sys.stderr)
-        return EXIT_CONFIG
+        raise ToolError(f"cannot write {args.out}: {err}") from err
     try:
-        session = open_session(settings.zenoh_settings())
-    except BusUnreachable as err:
+        session = tool_session(settings)
+    except ToolError:
         out.close()
         args.out.unlink(missing_ok=True)
-        print(f"stb record: {err}", file=sys.stderr)
-        return EXIT_UNREACHABLE
+        raise
     stop = threading.Event()
     restore = stop_on_signals(stop)
     metadata = {"prefix": settings.bus.prefix, "key_exprs": " ".join(exprs),
-                "exclude": " ".join(args.exclude), "started_s": f"{time.time():.6f}"}
-    recorder = Recorder(session, settings.bus.prefix, exprs, out, exclude=args.exclude,
+                "exclude": " ".join(exclude), "started_s": f"{time.time():.6f}"}
+    recorder = Recorder(session, settings.bus.prefix, exprs, out, exclude=exclude,
                         with_json=settings.json_copy, metadata=metadata)
     print(f"stb record: recording {' '.join(exprs)} to {args.out} (Ctrl-C ends)",
           file=sys.stderr)

@@ -13,6 +13,7 @@ On a lab router with access control, replay needs an identity allowed to put the
 
 from __future__ import annotations
 
+import argparse
 import sys
 import threading
 import time
@@ -24,10 +25,16 @@ import msgpack
 import zenoh
 
 from common import codec
-from common.bus import BusUnreachable, open_session
-from common.node import EXIT_UNREACHABLE, configure_logging, stop_on_signals
-from common.settings import ConfigError, LogLevel, ServiceSettings, load_settings
-from services.entry import EXIT_CONFIG, base_parser, overrides_from
+from common.node import stop_on_signals
+from common.settings import LogLevel, ServiceSettings
+from services.entry import (
+    ToolError,
+    base_parser,
+    checked_key_exprs,
+    tool_main,
+    tool_session,
+    tool_settings,
+)
 from services.recording.mcap_file import RecordingError, Sample, read_samples, recorded_keys
 
 CLOCK_FIELDS = ("measured_s", "sent_s", "started_s")
@@ -116,36 +123,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--as-recorded", action="store_true",
                         help="send the recorded bytes unchanged (old time stamps)")
     args = parser.parse_args(argv)
+    return tool_main("replay", lambda: _replay(args))
+
+
+def _replay(args: argparse.Namespace) -> int:
     if not args.speed > 0:
-        print("stb replay: --speed must be > 0", file=sys.stderr)
-        return EXIT_CONFIG
+        raise ToolError("--speed must be > 0")
+    settings = tool_settings(ReplaySettings, args)
+    keys, exclude = checked_key_exprs(args.keys), checked_key_exprs(args.exclude)
     try:
-        settings = load_settings(ReplaySettings, args.lab, overrides_from(args))
         counts = recorded_keys(args.recording)
-        for expr in args.keys + args.exclude:
-            zenoh.KeyExpr(expr)
-    except (ConfigError, RecordingError, OSError) as err:
-        print(f"stb replay: {err}", file=sys.stderr)
-        return EXIT_CONFIG
-    except zenoh.ZError as err:
-        print(f"stb replay: bad key expression: {err}", file=sys.stderr)
-        return EXIT_CONFIG
-    configure_logging(settings.log_level)
-    try:
-        session = open_session(settings.zenoh_settings())
-    except BusUnreachable as err:
-        print(f"stb replay: {err}", file=sys.stderr)
-        return EXIT_UNREACHABLE
+    except RecordingError as err:
+        raise ToolError(str(err)) from err
+    session = tool_session(settings)
     stop = threading.Event()
     restore = stop_on_signals(stop)
     print(f"stb replay: {sum(counts.values())} samples on {len(counts)} keys from "
           f"{args.recording} at speed {args.speed:g}", file=sys.stderr, flush=True)
     try:
-        sent = replay(session, args.recording, speed=args.speed, keys=args.keys,
-                      exclude=args.exclude, as_recorded=args.as_recorded, stop=stop)
+        sent = replay(session, args.recording, speed=args.speed, keys=keys, exclude=exclude,
+                      as_recorded=args.as_recorded, stop=stop)
     except RecordingError as err:
-        print(f"stb replay: {err}", file=sys.stderr)
-        return EXIT_CONFIG
+        raise ToolError(str(err)) from err
     finally:
         session.close()
         restore()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -69,7 +71,7 @@ def test_an_empty_recording_gives_figures_of_none() -> None:
     assert figures["crane_error_mean_mm"] is None and figures["samples"] == 0
 
 
-def test_report_of_a_file_that_is_no_recording_is_a_clear_error(tmp_path) -> None:  # noqa: ANN001
+def test_bad_files_and_key_expressions_are_clear_errors(tmp_path: Path) -> None:
     bad = tmp_path / "bad.mcap"
     bad.write_text("hello")
     proc = stb_process("report", str(bad), "--out", str(tmp_path / "out"))
@@ -78,3 +80,7 @@ def test_report_of_a_file_that_is_no_recording_is_a_clear_error(tmp_path) -> Non
     proc = stb_process("replay", str(tmp_path / "missing.mcap"))
     assert proc.wait(timeout=60) == 2
     assert "missing.mcap" in proc.stderr.read()
+    proc = stb_process("record", str(tmp_path / "x.mcap"), "stb//tracker")
+    assert proc.wait(timeout=60) == 2
+    assert "bad key expression 'stb//tracker'" in proc.stderr.read()
+    assert not (tmp_path / "x.mcap").exists(), "nothing written before the arguments are good"
