@@ -8,13 +8,17 @@ This process plays the calibration service: it serves each camera's true mount p
 stb/calib/{camera}/pose (what a perfect calibration would find), so the figures isolate the
 PTZ chain. Zoom 1 (3.8 mm).
 
+Two phases of ``--seconds`` each:
+
+* latency (the chain alone): every PTZ command carries the time of the mocap frame it is
+  based on (the tracker's wall time of the frame's QTM stamp, which names the frame); the sim
+  logs when it wrote each frame to the tracker's socket and when each command's request line
+  reached the camera server: arrival − frame written, p50 and p99;
 * pointing error: 4 times a second each camera's snapshot (VAPIX image.cgi, IR cut filter
-  off) goes through the marker detector; the robot's marker (the detection nearest to where
-  the true robot projects) is measured from the image centre (352, 288) in pixels: median,
-  p95, and how many snapshots lost it;
-* latency: every PTZ command carries the measured time of the mocap frame it is based on
-  (the tracker maps QTM's stamp to the wall clock by the smallest observed delay: when the
-  frame left the sim); the camera server records when the command arrived: p50 and p99.
+  off) is searched for the robot's marker near where the true robot projects; its distance
+  from the image centre (352, 288) in pixels: median, p95, and how many snapshots lost it.
+  The latency during this phase is reported too: rendering and searching the snapshots loads
+  the same two cores (in the lab, the cameras render in their own hardware).
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import httpx
@@ -43,13 +48,15 @@ from services.sim.settings import CraneSettings, MocapSettings, PtzCameraSetting
 from tests.ports import free_port
 
 CENTRE = np.array([352.0, 288.0])
+SEARCH_PX = 40
 
 
 def _sim_process(settings_json: str, part: str, t0: float,
                  conn: mp.connection.Connection) -> None:
     """Part of the sim in a process of its own, on the shared sim time ``t0``: the QTM server
     and crane ("devices"), or the cameras, so that rendering snapshots cannot delay mocap
-    frames (a real QTM is not slowed down by a camera). Returns the cameras' command logs."""
+    frames (a real QTM is not slowed down by a camera). For each measuring phase it sends back
+    the cameras' command logs and when each mocap frame was written."""
     from services.sim.service import Clock, DeviceLoop, start_cameras
 
     settings = SimSettings.model_validate_json(settings_json)
@@ -62,11 +69,16 @@ def _sim_process(settings_json: str, part: str, t0: float,
     for server in cameras:
         server.camera.head.ir_cut_filter = "off"
     conn.send(clock.wall(0.0))
-    conn.recv()  # "start measuring"
-    for server in cameras:
-        server.camera.commands.clear()
-    conn.recv()  # "stop"
-    conn.send({s.camera.name: list(s.camera.commands) for s in cameras})
+    while conn.recv() == "start":  # a measuring phase: clear the logs, then send them
+        for server in cameras:
+            server.camera.commands.clear()
+        if devices is not None:
+            devices.mocap.sent.clear()
+        conn.recv()  # "stop"
+        log = {s.camera.name: list(s.camera.commands) for s in cameras}
+        if devices is not None:
+            log["mocap_sent"] = list(devices.mocap.sent)
+        conn.send(log)
     if devices is not None:
         devices.stop()
     for server in cameras:
@@ -106,14 +118,14 @@ def run_scenario(scenario: str, seconds: float, workdir: Path) -> dict:
         procs += [_stb("tracker", lab=lab_file)]
         procs += [_stb("ptz", "--instance", cam.name, lab=lab_file) for cam in settings.cameras]
         time.sleep(max(0.0, t0 - time.monotonic()) + 3.0)  # start-up and first aim
+        quiet = _phase(pipes, lambda: time.sleep(seconds))
+        errors: dict[str, list[float]] = {}
+        loaded = _phase(pipes, lambda: errors.update(
+            _pointing_errors(lab, settings, clients, t0_wall, seconds)))
         for pipe in pipes:
-            pipe.send("start")
-        errors = _pointing_errors(lab, settings, clients, t0_wall, seconds)
-        commands: dict = {}
-        for pipe in pipes:
-            pipe.send("stop")
-            commands.update(pipe.recv())
-        return _summary(scenario, seconds, errors, commands)
+            pipe.send("end")
+        return _summary(scenario, seconds, errors, quiet, loaded, t0_wall,
+                        settings.mocap.rate_hz)
     finally:
         for proc in procs[::-1]:
             proc.terminate()
@@ -125,6 +137,19 @@ def run_scenario(scenario: str, seconds: float, workdir: Path) -> dict:
         session.close()
         for sim in sims:
             sim.join(10)
+
+
+def _phase(pipes: list, body: Callable[[], object]) -> dict:
+    """Run ``body`` as one measuring phase; the sim's logs of it (commands per camera and
+    ``mocap_sent``)."""
+    for pipe in pipes:
+        pipe.send("start")
+    body()
+    logs: dict = {}
+    for pipe in pipes:
+        pipe.send("stop")
+        logs.update(pipe.recv())
+    return logs
 
 
 def _pointing_errors(lab: Lab, settings: SimSettings, clients: dict[str, httpx.Client],
@@ -144,16 +169,27 @@ def _pointing_errors(lab: Lab, settings: SimSettings, clients: dict[str, httpx.C
             robot = lab.robot(asked - t0_wall)
             predicted = project(robot[None, :], pose,
                                 Intrinsics(focal_mm_for_zoom(position.zoom)))[0]
-            marker = None
-            if np.all(np.isfinite(predicted)):
-                # The 19 mm marker is only ~1.3 px in radius at 5 m and 3.8 mm: accept
-                # single-pixel runs and tiny areas, as one would for this measurement.
-                found = detect(image, l_min=1, min_area=1, max_markers=50)
-                marker = closest(found.markers, *predicted, max_distance_px=40.0)
-            errors[name].append(float("inf") if marker is None else float(
-                np.hypot(marker.u - CENTRE[0], marker.v - CENTRE[1])))
+            found = _marker_near(image, predicted) if np.all(np.isfinite(predicted)) else None
+            errors[name].append(float("inf") if found is None else float(
+                np.hypot(found[0] - CENTRE[0], found[1] - CENTRE[1])))
         time.sleep(0.25)
     return errors
+
+
+def _marker_near(image: np.ndarray, predicted: np.ndarray) -> tuple[float, float] | None:
+    """The detected marker nearest to ``predicted`` within ``SEARCH_PX`` (image pixels), or
+    None. Only the window around the prediction is searched: a whole-image search costs 14 ms
+    a snapshot on this machine, load that would compete with the chain being measured. The
+    19 mm marker is only ~1.3 px in radius at 5 m and 3.8 mm: single-pixel runs and tiny areas
+    are accepted, as one would for this measurement."""
+    u0, v0 = (max(0, int(c) - SEARCH_PX - 5) for c in predicted)
+    window = image[v0:int(predicted[1]) + SEARCH_PX + 6, u0:int(predicted[0]) + SEARCH_PX + 6]
+    if window.size == 0:
+        return None
+    found = detect(np.ascontiguousarray(window), l_min=1, min_area=1, max_markers=50)
+    marker = closest(found.markers, predicted[0] - u0, predicted[1] - v0,
+                     max_distance_px=float(SEARCH_PX))
+    return None if marker is None else (marker.u + u0, marker.v + v0)
 
 
 def _decode(jpeg: bytes) -> np.ndarray:
@@ -162,14 +198,30 @@ def _decode(jpeg: bytes) -> np.ndarray:
     return cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_GRAYSCALE)
 
 
-def _summary(scenario: str, seconds: float, errors: dict[str, list[float]],
-             commands: dict[str, list[tuple[float, float]]]) -> dict:
+def frame_latencies_ms(commands: list[tuple[float, float]], sent: dict[int, float],
+                       t0_wall: float, rate_hz: float) -> np.ndarray:
+    """Per command: its arrival at the camera minus when the mocap frame it is based on was
+    written by the sim. The frame is found from the command's trace time (the tracker's wall
+    time of the frame's QTM stamp: frame number / rate after the sim's start, plus well under
+    half a frame period of transport floor)."""
+    out = []
+    for arrived, measured in commands:
+        number = round((measured - t0_wall) * rate_hz)
+        if number in sent:
+            out.append((arrived - sent[number]) * 1e3)
+    return np.array(out)
+
+
+def _summary(scenario: str, seconds: float, errors: dict[str, list[float]], quiet: dict,
+             loaded: dict, t0_wall: float, rate_hz: float) -> dict:
     out: dict = {"scenario": scenario, "seconds": seconds, "cameras": {}}
     for name, values in errors.items():
         values_a = np.array(values)
         seen = values_a[np.isfinite(values_a)]
-        latencies = np.array([(arrived - measured) * 1e3 for arrived, measured in
-                              commands.get(name, [])])
+        latencies = frame_latencies_ms(quiet.get(name, []), dict(quiet["mocap_sent"]),
+                                       t0_wall, rate_hz)
+        busy = frame_latencies_ms(loaded.get(name, []), dict(loaded["mocap_sent"]), t0_wall,
+                                  rate_hz)
         out["cameras"][name] = {
             "snapshots": len(values_a), "marker_lost": int((~np.isfinite(values_a)).sum()),
             "error_px_median": float(np.median(seen)) if len(seen) else None,
@@ -177,6 +229,11 @@ def _summary(scenario: str, seconds: float, errors: dict[str, list[float]],
             "commands": len(latencies),
             "latency_ms_p50": float(np.percentile(latencies, 50)) if len(latencies) else None,
             "latency_ms_p99": float(np.percentile(latencies, 99)) if len(latencies) else None,
+            "commands_while_measuring_pointing": len(busy),
+            "latency_while_measuring_pointing_ms_p50":
+                float(np.percentile(busy, 50)) if len(busy) else None,
+            "latency_while_measuring_pointing_ms_p99":
+                float(np.percentile(busy, 99)) if len(busy) else None,
         }
     return out
 
@@ -226,14 +283,16 @@ def main() -> None:
         print(json.dumps(results, indent=2))
         return
     print("| scenario | camera | snapshots (lost) | error px median | p95 | commands | "
-          "latency ms p50 | p99 |")
-    print("|---|---|---|---|---|---|---|---|")
+          "latency ms p50 | p99 | while pulling snapshots: p50 | p99 |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for r in results:
         for name, c in r["cameras"].items():
             print(f"| {r['scenario']} | {name} | {c['snapshots']} ({c['marker_lost']}) | "
                   f"{_fmt(c['error_px_median'])} | {_fmt(c['error_px_p95'])} | "
                   f"{c['commands']} | {_fmt(c['latency_ms_p50'])} | "
-                  f"{_fmt(c['latency_ms_p99'])} |")
+                  f"{_fmt(c['latency_ms_p99'])} | "
+                  f"{_fmt(c['latency_while_measuring_pointing_ms_p50'])} | "
+                  f"{_fmt(c['latency_while_measuring_pointing_ms_p99'])} |")
 
 
 def _fmt(value: float | None) -> str:

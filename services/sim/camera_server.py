@@ -146,6 +146,12 @@ class CameraServer:
         class Handler(BaseHTTPRequestHandler):
             server_version = "Boa/0.94.14rc21"  # what AXIS 2xx cameras announce
             protocol_version = "HTTP/1.1"
+            arrived = 0.0
+
+            def parse_request(self) -> bool:
+                # The request line has just been read: the command has reached the camera.
+                self.arrived = time.time()
+                return super().parse_request()
 
             def do_GET(self) -> None:  # noqa: N802 - http.server's naming
                 server._serve(self, "GET")
@@ -159,7 +165,7 @@ class CameraServer:
         return Handler
 
     def _serve(self, request: BaseHTTPRequestHandler, method: str) -> None:
-        arrived = time.time()
+        arrived = getattr(request, "arrived", 0.0) or time.time()
         url = urlsplit(request.path)
         args = dict(parse_qsl(url.query, keep_blank_values=True))
         if method == "POST":

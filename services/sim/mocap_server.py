@@ -11,6 +11,8 @@ from __future__ import annotations
 import asyncio
 import logging
 import struct
+import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum
@@ -149,6 +151,9 @@ class MocapServer:
         self._server: asyncio.base_events.Server | None = None
         self._clients: set[asyncio.StreamWriter] = set()
         self._master: asyncio.StreamWriter | None = None
+        self.sent: deque[tuple[int, float]] = deque(maxlen=100_000)
+        """(frame number, wall time it was written to a client): when frames left the sim,
+        for latency figures."""
 
     async def start(self) -> None:
         self._server = await asyncio.start_server(self._serve, self.host, self.port)
@@ -270,6 +275,7 @@ class MocapServer:
             first = newest if last is None else max(last + divisor, newest - burst * divisor)
             for number in range(first, newest + 1, divisor):
                 writer.write(data_packet(src.frame_at(number), components))
+                self.sent.append((number, time.time()))
             last = newest
             if writer.transport.get_write_buffer_size() > 4 * 1024 * 1024:
                 log.warning("QTM client is not reading; closing its connection")

@@ -88,6 +88,37 @@ def test_streamed_markers_equal_the_truth_within_the_noise(lab: Lab) -> None:
     assert missing < 0.05 * len(packets) * len(lab.labels)
 
 
+def test_the_server_logs_when_each_frame_left_it(lab: Lab) -> None:
+    servers: list[MocapServer] = []
+
+    async def client(port: int) -> tuple[list, float]:
+        started = time.time()
+        packets = await _stream(port, 0.5, ["3d"])
+        return packets, started
+
+    t0 = time.monotonic()
+    source = MocapSource(lab.labels, 100.0, lab.mocap_frame, lambda: time.monotonic() - t0)
+
+    async def main() -> tuple[list, float]:
+        server = MocapServer(source, "127.0.0.1", 0)
+        servers.append(server)
+        await server.start()
+        try:
+            return await client(server.port)
+        finally:
+            await server.close()
+
+    packets, started = asyncio.run(main())
+    sent = dict(servers[0].sent)
+    received = [p.framenumber for p in packets]
+    assert set(received) <= set(sent), "every frame the client got was logged"
+    times = [sent[n] for n in received]
+    assert times == sorted(times) and started <= times[0] <= time.time()
+    wall0 = time.time() - (time.monotonic() - t0)
+    late = [sent[n] - (wall0 + n / 100.0) for n in received]
+    assert min(late) > -0.002, "no frame leaves before its capture time"
+
+
 def test_dropouts_are_nan_markers(lab: Lab) -> None:
     frames = [lab.mocap_frame(n) for n in range(3000)]
     wand = lab.labels.index("wand")  # absent while the robot runs
