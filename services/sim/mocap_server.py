@@ -202,6 +202,10 @@ class MocapServer:
                 await writer.drain()
         except (asyncio.IncompleteReadError, ConnectionError):
             pass
+        except asyncio.CancelledError:
+            # The sim is stopping with a client connected. Ending the task normally keeps
+            # asyncio's stream callback (Python 3.11) from logging the cancellation as an error.
+            pass
         finally:
             _cancel(streamer)
             self._clients.discard(writer)
