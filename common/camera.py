@@ -71,6 +71,12 @@ class Pose:
         return np.array([self.x_mm, self.y_mm, self.z_mm])
 
     @classmethod
+    def of(cls, fields: object) -> Pose:
+        """The pose named by an object's ``x_mm … rz_deg`` fields (a CameraPose message)."""
+        f = fields
+        return cls(f.x_mm, f.y_mm, f.z_mm, f.rx_deg, f.ry_deg, f.rz_deg)  # type: ignore[attr-defined]
+
+    @classmethod
     def from_matrix(cls, rotation: np.ndarray, position: np.ndarray) -> Pose:
         rx, ry, rz = euler_xyz_deg(rotation)
         x, y, z = (float(v) for v in position)

@@ -188,7 +188,7 @@ class _Loop:
 def _pose(msg: m.CameraPose | None) -> Pose | None:
     if msg is None:
         return None
-    return Pose(msg.x_mm, msg.y_mm, msg.z_mm, msg.rx_deg, msg.ry_deg, msg.rz_deg)
+    return Pose.of(msg)
 
 
 def _xyz(robot: m.RobotPosition) -> np.ndarray:

@@ -164,8 +164,7 @@ def calibration_residuals(rec: Recording, marker_label: str = "wand") -> dict[st
             continue
         points = collector.passpoints()
         st, pan_tilt = states.arrays()
-        mount = Pose(pose_msg.x_mm, pose_msg.y_mm, pose_msg.z_mm, pose_msg.rx_deg,
-                     pose_msg.ry_deg, pose_msg.rz_deg)
+        mount = Pose.of(pose_msg)
         track = collector.track()
         world = track.at(points.times_s + pose_msg.time_offset_s) if track.covers(
             points.times_s + pose_msg.time_offset_s) else points.world_mm

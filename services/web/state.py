@@ -21,8 +21,7 @@ LOOK_MAX_MM = 8000.0
 def looking_at(pose: m.CameraPose, pan_deg: float, tilt_deg: float) -> list[float] | None:
     """Where a camera's optical axis meets the ground (x, y), or a point ``LOOK_MAX_MM`` along
     it when it looks up or far away; None without a usable pose."""
-    mount = Pose(pose.x_mm, pose.y_mm, pose.z_mm, pose.rx_deg, pose.ry_deg, pose.rz_deg)
-    head = head_pose(mount, pan_deg, tilt_deg)
+    head = head_pose(Pose.of(pose), pan_deg, tilt_deg)
     axis = head.rotation @ np.array([1.0, 0.0, 0.0])
     origin = head.position
     reach = LOOK_MAX_MM
