@@ -41,7 +41,10 @@ def make_camera(settings: PtzSettings) -> AxisPtzCamera:
 
 def run(node: Node, camera: PtzCamera | None = None) -> None:
     settings: PtzSettings = node.settings  # type: ignore[assignment]
-    loop = _Loop(node, settings, camera or make_camera(settings))
+    # Position queries have a client of their own, like previews: a query in flight never
+    # holds up a move command (that client is the injected camera's in tests).
+    loop = _Loop(node, settings, camera or make_camera(settings),
+                 queries=camera or make_camera(settings))
     name = settings.instance
     node.bus.subscribe(keys.CALIB_POSE, loop.on_pose, latest=False, camera=name)
     for pose in node.bus.query_latest(keys.CALIB_POSE, timeout_s=1.0, camera=name):
@@ -65,10 +68,12 @@ def run(node: Node, camera: PtzCamera | None = None) -> None:
 
 class _Loop:
     """Commands go out as robot samples arrive (no polling delay); camera state is queried
-    and published ``state_hz`` times a second. One lock serialises the camera."""
+    and published ``state_hz`` times a second. One lock serialises the commands and guards the
+    loop's state; it is not held while the state query waits for the camera."""
 
-    def __init__(self, node: Node, settings: PtzSettings, camera: PtzCamera) -> None:
-        self.node, self.settings, self.camera = node, settings, camera
+    def __init__(self, node: Node, settings: PtzSettings, camera: PtzCamera,
+                 queries: PtzCamera) -> None:
+        self.node, self.settings, self.camera, self.queries = node, settings, camera, queries
         self.follower = Follower(deadband_deg=settings.deadband_deg,
                                  latency_s=settings.latency_s,
                                  min_interval_s=1 / settings.command_hz, zoom=settings.zoom,
@@ -126,19 +131,22 @@ class _Loop:
         snapshot_period = 1 / self.settings.calibration_snapshot_hz
         period = state_period
         while not self.node.stop.wait(period):
+            now = time.time()
             with self.lock:
-                now = time.time()
                 if now < self.retry_at:
                     continue
-                try:
+            try:
+                with self.lock:
                     calibrating = self._calibration_step(now)
-                    if now >= self.state_due:
-                        self.state_due = now + state_period
-                        self._report(now)
+                if now >= self.state_due:
+                    self.state_due = now + state_period
+                    self._report(now)
+                with self.lock:
                     self.retry_s = 0.5
-                except PtzError as err:
+            except PtzError as err:
+                with self.lock:
                     self._unreachable(now, err)
-                    calibrating = False
+                calibrating = False
             period = snapshot_period if calibrating else min(state_period,
                                                              max(self.state_due - now, 0.0))
 
@@ -154,20 +162,24 @@ class _Loop:
         return True
 
     def _report(self, now: float) -> None:
+        """Query the camera (without the lock) and publish its state."""
         if self.limits is None:
-            self.limits = self.camera.limits()
-            self.follower.limits = self.limits
-            log.info("camera %s limits: %s", self.camera.name, self.limits)
-        pose = _pose(self.pose)
-        status = "waiting_for_pose" if pose is None else ("tracking" if self.robot else "idle")
-        if self.calibration.active(now):
+            limits = self.queries.limits()
+            with self.lock:
+                self.limits = self.follower.limits = limits
+            log.info("camera %s limits: %s", self.camera.name, limits)
+        position = self.queries.position()
+        with self.lock:
+            pose, robot = _pose(self.pose), self.robot
+            calibrating = self.calibration.active(now)
+        status = "waiting_for_pose" if pose is None else ("tracking" if robot else "idle")
+        if calibrating:
             status = "calibrating"
         self.node.set_status("ok" if pose else "degraded",
                              "" if pose else "waiting for a camera pose from calib")
-        position = self.camera.position()
         error = 0.0
-        if pose is not None and self.robot is not None:
-            error = aim_error_deg(_xyz(self.robot), pose, position.pan_deg, position.tilt_deg)
+        if pose is not None and robot is not None:
+            error = aim_error_deg(_xyz(robot), pose, position.pan_deg, position.tilt_deg)
         self._publish(status, position.pan_deg, position.tilt_deg, position.zoom, error, now)
 
     def _publish(self, status: str, pan: float, tilt: float, zoom: int, error: float,

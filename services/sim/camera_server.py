@@ -6,6 +6,7 @@ import base64
 import contextlib
 import hashlib
 import hmac
+import io
 import logging
 import secrets
 import threading
@@ -23,6 +24,7 @@ import numpy as np
 from common.camera import Intrinsics
 from services.ptz.vapix import TRACE_HEADER
 from services.sim import vapix
+from services.sim.arrival import StampedReader
 from services.sim.ptz import PtzHead
 from services.sim.render import Glint, draw, glint_blobs, marker_blobs
 
@@ -47,7 +49,8 @@ class SimCamera:
     auth: Literal["digest", "basic", "none"] = "digest"
     jpeg_quality: int = 90
     commands: deque[tuple[float, float]] = field(default_factory=lambda: deque(maxlen=100_000))
-    """(arrival wall time, X-STB-Measured) of every traced PTZ command: latency figures."""
+    """(arrival wall time, X-STB-Measured) of every traced PTZ command: latency figures. The
+    arrival is the kernel's receive time of the bytes carrying the request line."""
 
     def snapshot(self, width: int, height: int) -> np.ndarray:
         now = self.clock()
@@ -148,9 +151,16 @@ class CameraServer:
             protocol_version = "HTTP/1.1"
             arrived = 0.0
 
+            def setup(self) -> None:
+                super().setup()
+                self.rfile.close()  # the plain reader: its reference would keep the socket open
+                self._stamps = StampedReader(self.connection)
+                self.rfile = io.BufferedReader(self._stamps)
+
             def parse_request(self) -> bool:
-                # The request line has just been read: the command has reached the camera.
-                self.arrived = time.time()
+                # The request line has just been read: the command reached the camera when
+                # the kernel received the bytes that carried it.
+                self.arrived = self._stamps.arrived_s or time.time()
                 return super().parse_request()
 
             def do_GET(self) -> None:  # noqa: N802 - http.server's naming
