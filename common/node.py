@@ -19,7 +19,6 @@ from types import FrameType
 from common import keys
 from common.bus import Bus, BusUnreachable, open_session
 from common.messages import ServiceHealth
-from common.sched import request_slice
 from common.settings import ServiceSettings
 
 log = logging.getLogger(__name__)
@@ -73,11 +72,6 @@ def run_node(service: str, settings: ServiceSettings, body: Callable[[Node], Non
 
     ``body`` must return soon after ``node.stop`` is set. Returns the process exit code.
     """
-    if settings.sched_slice_ms is not None:  # first: threads started from here on inherit it
-        refused = request_slice(settings.sched_slice_ms)
-        if refused:
-            log.warning("no %.1f ms CPU slice (%s): running with the default",
-                        settings.sched_slice_ms, refused)
     try:
         session = open_session(settings.zenoh_settings())
     except BusUnreachable as err:

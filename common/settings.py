@@ -120,10 +120,6 @@ class BusSettings(_Strict):
         return check_prefix(prefix)
 
 
-SLICE_HELP = ("ask Linux (>= 6.12) for this short CPU time slice, so the service runs as soon as "
-              "its data arrives on a busy host; none: the kernel's default")
-
-
 class ServiceSettings(BaseSettings):
     """Base of every service's settings; subclasses set ``section`` and add their fields."""
 
@@ -133,8 +129,6 @@ class ServiceSettings(BaseSettings):
     instance: str = Field("main", pattern=r"^[A-Za-z0-9_.-]{1,64}$")
     log_level: LogLevel = "INFO"
     bus: BusSettings = BusSettings()
-    sched_slice_ms: float | None = Field(
-        None, ge=0.1, le=100.0, description=SLICE_HELP)
 
     def zenoh_settings(self) -> ZenohSettings:
         """How this service joins the bus (the router overrides this)."""
@@ -145,14 +139,6 @@ class ServiceSettings(BaseSettings):
         # Environment and files are merged by load_settings() in a documented order;
         # constructing with keywords (tests) reads nothing else.
         return (init_settings,)
-
-
-class LatencyCriticalSettings(ServiceSettings):
-    """A service on the mocap → camera chain (router, tracker, ptz): by default it asks for
-    the shortest CPU slice, so a wake-up does not wait behind other work (common/sched.py)."""
-
-    sched_slice_ms: float | None = Field(
-        0.1, ge=0.1, le=100.0, description=SLICE_HELP)
 
 
 class ConfigError(Exception):

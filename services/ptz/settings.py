@@ -6,7 +6,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, SecretStr, model_validator
 
-from common.settings import LatencyCriticalSettings
+from common.settings import ServiceSettings
 
 
 class CameraConnection(BaseModel):
@@ -24,7 +24,7 @@ def _default_cameras() -> dict[str, CameraConnection]:
             "ptz2": CameraConnection(url="http://127.0.0.1:8082", mount="hanging")}
 
 
-class PtzSettings(LatencyCriticalSettings):
+class PtzSettings(ServiceSettings):
     """One instance per camera: ``stb ptz --instance ptz2`` drives ``cameras.ptz2``."""
 
     section = "ptz"

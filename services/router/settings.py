@@ -6,12 +6,12 @@ from pathlib import Path
 
 from pydantic import Field
 
-from common.settings import LatencyCriticalSettings, TlsSettings, ZenohSettings
+from common.settings import ServiceSettings, TlsSettings, ZenohSettings
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 
 
-class RouterSettings(LatencyCriticalSettings):
+class RouterSettings(ServiceSettings):
     section = "router"
 
     listen: list[str] | None = Field(

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from pydantic import Field
 
-from common.settings import LatencyCriticalSettings
+from common.settings import ServiceSettings
 from common.volume import Volume
 
 
-class TrackerSettings(LatencyCriticalSettings):
+class TrackerSettings(ServiceSettings):
     section = "tracker"
 
     qtm_host: str = "127.0.0.1"
