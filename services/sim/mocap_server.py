@@ -152,8 +152,8 @@ class MocapServer:
         self._clients: set[asyncio.StreamWriter] = set()
         self._master: asyncio.StreamWriter | None = None
         self.sent: deque[tuple[int, float]] = deque(maxlen=100_000)
-        """(frame number, wall time it was written to a client): when frames left the sim,
-        for latency figures."""
+        """(frame number, wall time just before it was written to a client): when frames left
+        the sim, for latency figures."""
 
     async def start(self) -> None:
         self._server = await asyncio.start_server(self._serve, self.host, self.port)
@@ -278,8 +278,10 @@ class MocapServer:
             newest = src.frame_now() // divisor * divisor
             first = newest if last is None else max(last + divisor, newest - burst * divisor)
             for number in range(first, newest + 1, divisor):
-                writer.write(data_packet(src.frame_at(number), components))
-                self.sent.append((number, time.time()))
+                data = data_packet(src.frame_at(number), components)
+                leaving = time.time()  # before the write: the reader may run before it returns
+                writer.write(data)
+                self.sent.append((number, leaving))
             last = newest
             if writer.transport.get_write_buffer_size() > 4 * 1024 * 1024:
                 log.warning("QTM client is not reading; closing its connection")
