@@ -12,8 +12,9 @@ Two phases of ``--seconds`` each:
 
 * latency (the chain alone): every PTZ command carries the time of the mocap frame it is
   based on (the tracker's wall time of the frame's QTM stamp, which names the frame); the sim
-  logs when it wrote each frame to the tracker's socket and when each command's request line
-  reached the camera server: arrival − frame written, p50 and p99;
+  logs when it wrote each frame to the tracker's socket (just before the write) and when each
+  command's request line reached the camera server (the kernel's receive stamp): arrival −
+  frame written, p50 and p99;
 * pointing error: 4 times a second each camera's snapshot (VAPIX image.cgi, IR cut filter
   off) is searched for the robot's marker near where the true robot projects; its distance
   from the image centre (352, 288) in pixels: median, p95, and how many snapshots lost it.
