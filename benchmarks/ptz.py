@@ -220,27 +220,28 @@ def frame_latencies_ms(commands: list[tuple[float, float]], sent: dict[int, floa
 def _summary(scenario: str, seconds: float, errors: dict[str, list[float]], quiet: dict,
              loaded: dict, t0_wall: float, rate_hz: float) -> dict:
     out: dict = {"scenario": scenario, "seconds": seconds, "cameras": {}}
+    quiet_sent, loaded_sent = dict(quiet["mocap_sent"]), dict(loaded["mocap_sent"])
     for name, values in errors.items():
         values_a = np.array(values)
         seen = values_a[np.isfinite(values_a)]
-        latencies = frame_latencies_ms(quiet.get(name, []), dict(quiet["mocap_sent"]),
-                                       t0_wall, rate_hz)
-        busy = frame_latencies_ms(loaded.get(name, []), dict(loaded["mocap_sent"]), t0_wall,
-                                  rate_hz)
+        latencies = frame_latencies_ms(quiet.get(name, []), quiet_sent, t0_wall, rate_hz)
+        busy = frame_latencies_ms(loaded.get(name, []), loaded_sent, t0_wall, rate_hz)
         out["cameras"][name] = {
             "snapshots": len(values_a), "marker_lost": int((~np.isfinite(values_a)).sum()),
-            "error_px_median": float(np.median(seen)) if len(seen) else None,
-            "error_px_p95": float(np.percentile(seen, 95)) if len(seen) else None,
+            "error_px_median": _percentile(seen, 50),
+            "error_px_p95": _percentile(seen, 95),
             "commands": len(latencies),
-            "latency_ms_p50": float(np.percentile(latencies, 50)) if len(latencies) else None,
-            "latency_ms_p99": float(np.percentile(latencies, 99)) if len(latencies) else None,
+            "latency_ms_p50": _percentile(latencies, 50),
+            "latency_ms_p99": _percentile(latencies, 99),
             "commands_while_measuring_pointing": len(busy),
-            "latency_while_measuring_pointing_ms_p50":
-                float(np.percentile(busy, 50)) if len(busy) else None,
-            "latency_while_measuring_pointing_ms_p99":
-                float(np.percentile(busy, 99)) if len(busy) else None,
+            "latency_while_measuring_pointing_ms_p50": _percentile(busy, 50),
+            "latency_while_measuring_pointing_ms_p99": _percentile(busy, 99),
         }
     return out
+
+
+def _percentile(values: np.ndarray, q: float) -> float | None:
+    return float(np.percentile(values, q)) if len(values) else None
 
 
 def _true_pose(cam: PtzCameraSettings) -> m.CameraPose:

@@ -160,7 +160,7 @@ class CameraServer:
             def parse_request(self) -> bool:
                 # The request line has just been read: the command reached the camera when
                 # the kernel received the bytes that carried it.
-                self.arrived = self._stamps.arrived_s or time.time()
+                self.arrived = self._stamps.arrived_s
                 return super().parse_request()
 
             def do_GET(self) -> None:  # noqa: N802 - http.server's naming
@@ -175,7 +175,7 @@ class CameraServer:
         return Handler
 
     def _serve(self, request: BaseHTTPRequestHandler, method: str) -> None:
-        arrived = getattr(request, "arrived", 0.0) or time.time()
+        arrived: float = request.arrived  # type: ignore[attr-defined]
         url = urlsplit(request.path)
         args = dict(parse_qsl(url.query, keep_blank_values=True))
         if method == "POST":
