@@ -152,6 +152,5 @@ def run_scenario(scenario: str, algorithm: AlgorithmName, *, seed: int, crater_f
     height = MARKER_HEIGHT_MM.get(scenario, MARKER_HEIGHT_MM["locomotive"])
     if trajectory_csv is not None:
         lab.trajectory = read_trajectory(trajectory_csv, lab, height)
-        start = lab.trajectory.position(0.0)[:2]
-        lab.crane.position = np.array(start, dtype=float)
+        lab.crane.place(*lab.trajectory.position(0.0)[:2])
     return run(lab, algorithm, marker_height_mm=height, seed=seed)

@@ -73,6 +73,14 @@ class CraneModel:
     def time(self) -> float:
         return self._step * STEP_S
 
+    def place(self, x_mm: float, y_mm: float) -> None:
+        """Start at rest at (x, y), clamped to the travel, and report it from the start
+        (not (0, 0) until the first cycle)."""
+        x, y, _ = self.params.clamp(x_mm, y_mm)
+        self.position = np.array([x, y], dtype=float)
+        self.velocity = np.zeros(2)
+        self.reported, self.reported_velocity = self.position.copy(), self.velocity.copy()
+
     # --- register writes -----------------------------------------------------------------
 
     def write_setpoint(self, now: float, x_mm: float, y_mm: float) -> None:

@@ -72,8 +72,7 @@ class Lab:
         params = CraneParams(c.x_min_mm, c.x_max_mm, c.y_min_mm, c.y_max_mm, c.max_speed_mm_s,
                              c.max_accel_mm_s2, c.reaction_s, c.cycle_s, c.watchdog_s)
         crane = CraneModel(params)
-        start = trajectory.position(0.0)[:2]
-        crane.position = np.clip(start, [c.x_min_mm, c.y_min_mm], [c.x_max_mm, c.y_max_mm])
+        crane.place(*trajectory.position(0.0)[:2])
         t = settings.tracking_camera
         area_m2 = (c.x_max_mm - c.x_min_mm) * (c.y_max_mm - c.y_min_mm) / 1e6
         return cls(

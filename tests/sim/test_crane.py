@@ -81,6 +81,14 @@ def test_setpoint_outside_the_workspace_is_clamped_and_flagged() -> None:
     assert crane.position[0] <= 1000.0
 
 
+def test_a_placed_crane_reports_its_place_before_its_first_cycle() -> None:
+    crane = CraneModel(CraneParams(x_max_mm=1000.0))
+    crane.place(5000.0, -300.0)
+    assert crane.position.tolist() == [1000.0, -300.0]  # inside its travel
+    assert crane.reported.tolist() == [1000.0, -300.0]  # not (0, 0) until the first cycle
+    assert crane.velocity.tolist() == [0.0, 0.0]
+
+
 def test_watchdog_stops_the_crane_and_latches_until_reset() -> None:
     crane = _enabled(CraneParams(max_speed_mm_s=500, max_accel_mm_s2=1000, watchdog_s=0.5))
     track = _keep_alive(crane, 3.0, period=0.1, setpoint=(2500.0, 0.0))
