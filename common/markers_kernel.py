@@ -126,8 +126,11 @@ def regions_kernel(image: np.ndarray, row_max: np.ndarray, threshold: int, l_min
     run_row, run_start, run_end, run_w, run_wx = _scan_runs(image, row_max, threshold, l_min)
     label, count = _label_runs(run_row, run_start, run_end)
     sums = np.zeros((count, 9))
+    seed = np.full((count, 2), -1, np.int64)  # a pixel of each region: its first run's start
     for i in range(run_row.shape[0]):
         k = label[i]
+        if seed[k, 0] < 0:
+            seed[k, 0], seed[k, 1] = run_row[i], run_start[i]
         s, e, y = float(run_start[i]), float(run_end[i]), float(run_row[i])
         m = e - s
         sx = m * (s + e - 1) / 2
@@ -160,7 +163,7 @@ def regions_kernel(image: np.ndarray, row_max: np.ndarray, threshold: int, l_min
         out[k, 5], out[k, 6] = long_r / short_r, area
         if area < small_area:
             refined = weighted_ellipse(image, out[k, 0], out[k, 1], int(np.ceil(long_r)) + 3,
-                                       threshold)
+                                       threshold, seed[k, 0], seed[k, 1])
             if not np.isnan(refined[0]):
                 out[k, :5] = refined
                 out[k, 5] = refined[2] / refined[3]
@@ -168,30 +171,45 @@ def regions_kernel(image: np.ndarray, row_max: np.ndarray, threshold: int, l_min
 
 
 @njit(cache=True, nogil=True)
-def weighted_ellipse(image: np.ndarray, u: float, v: float, reach: int,
-                     threshold: int) -> np.ndarray:
-    """(u, v, radius_long, radius_short, angle_deg) from brightness-weighted moments in the
-    window of ``reach`` pixels around (u, v); weights are the brightness above the midpoint
-    between the window border's median (the background) and the threshold. All NaN if the
-    window holds nothing above that midpoint."""
+def weighted_ellipse(image: np.ndarray, u: float, v: float, reach: int, threshold: int,
+                     seed_y: int, seed_x: int) -> np.ndarray:
+    """(u, v, radius_long, radius_short, angle_deg) from brightness-weighted moments of the
+    spot that holds the pixel (seed_y, seed_x), within the window of ``reach`` pixels around
+    (u, v): the 8-connected pixels brighter than the midpoint between the window border's
+    median (the background) and the threshold, weighted by how much brighter. Only the spot
+    itself: a reflection beside the marker must not stretch its ellipse. All NaN if the seed
+    is not above that midpoint."""
     rows, cols = image.shape
     r0, r1 = max(int(v) - reach, 0), min(int(v) + reach + 1, rows)
     c0, c1 = max(int(u) - reach, 0), min(int(u) + reach + 1, cols)
     border = np.concatenate((image[r0, c0:c1], image[r1 - 1, c0:c1], image[r0:r1, c0],
                              image[r0:r1, c1 - 1]))
     floor = (np.median(border.astype(np.float64)) + threshold) / 2
-    w = sx = sy = sxx = syy = sxy = 0.0
-    for y in range(r0, r1):
-        for x in range(c0, c1):
-            weight = image[y, x] - floor
-            if weight > 0:
-                w += weight
-                sx += weight * x
-                sy += weight * y
-                sxx += weight * x * x
-                syy += weight * y * y
-                sxy += weight * x * y
     out = np.full(5, np.nan)
+    if not (r0 <= seed_y < r1 and c0 <= seed_x < c1) or image[seed_y, seed_x] <= floor:
+        return out
+    seen = np.zeros((r1 - r0, c1 - c0), np.bool_)
+    stack = np.empty(((r1 - r0) * (c1 - c0), 2), np.int64)
+    stack[0, 0], stack[0, 1] = seed_y, seed_x
+    seen[seed_y - r0, seed_x - c0] = True
+    top = 1
+    w = sx = sy = sxx = syy = sxy = 0.0
+    while top > 0:
+        top -= 1
+        y, x = stack[top, 0], stack[top, 1]
+        weight = image[y, x] - floor
+        w += weight
+        sx += weight * x
+        sy += weight * y
+        sxx += weight * x * x
+        syy += weight * y * y
+        sxy += weight * x * y
+        for ny in range(max(y - 1, r0), min(y + 2, r1)):
+            for nx in range(max(x - 1, c0), min(x + 2, c1)):
+                if not seen[ny - r0, nx - c0] and image[ny, nx] > floor:
+                    seen[ny - r0, nx - c0] = True
+                    stack[top, 0], stack[top, 1] = ny, nx
+                    top += 1
     if w <= 0:
         return out
     mean_x, mean_y = sx / w, sy / w

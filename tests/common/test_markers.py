@@ -65,6 +65,19 @@ def test_a_marker_beside_a_reflection(rng: np.random.Generator) -> None:
     assert np.hypot(result.markers[0].u - 500.3, result.markers[0].v - 120.7) < 0.3
 
 
+def test_a_small_marker_close_to_a_glint_is_still_round(rng: np.random.Generator) -> None:
+    """A small marker (its shape judged from the blurred spot) a few pixels from a glint a little
+    dimmer than itself: the glint must not stretch the marker's ellipse (seen in the gantry
+    experiment: the marker was lost once a round, where the track passed a reflection)."""
+    glint = np.full((H, W), 16.0)
+    cv2.ellipse(glint, ((308, 215), (16, 6), -20), 230, -1, cv2.LINE_AA)
+    image = np.maximum(disc_frame(rng, [(300.3, 208.6, 2.6)]), glint.astype(np.uint8))
+    result = detect(image)
+    assert result.status == "ok", [(r.u, r.v, r.roundness) for r in result.regions]
+    (marker,) = result.markers
+    assert np.hypot(marker.u - 300.3, marker.v - 208.6) < 0.3
+
+
 def test_threshold_descends_to_find_a_dim_marker_and_stops_at_t_lim(
         rng: np.random.Generator) -> None:
     # An out-of-focus dim marker: a dome whose top (≈ 212) is below the first thresholds.
