@@ -137,15 +137,17 @@ class KalmanPredictor:
     calm_accel_mm_s2: float = 5.0
     agile_accel_mm_s2: float = 400.0
     stay: float = 0.99  # chance a model stays in charge from one period to the next
+    max_gap_s: float = 1.0
+    """A marker lost for up to this long is picked up again with the filters' state (the
+    crane holds meanwhile: the safety layer sees no estimate); after longer, start afresh."""
     _imm: IMMEstimator | None = None
     _t: float = 0.0
 
     def update(self, t_s: float, measured: np.ndarray | None) -> Estimate | None:
         if measured is None:
-            self._imm = None
             return None
         z = np.asarray(measured, dtype=float)
-        if self._imm is None or t_s <= self._t:
+        if self._imm is None or t_s <= self._t or t_s - self._t > self.max_gap_s:
             filters = [self._new_filter(z, q) for q in (self.calm_accel_mm_s2,
                                                         self.agile_accel_mm_s2)]
             switch = np.array([[self.stay, 1 - self.stay], [1 - self.stay, self.stay]])

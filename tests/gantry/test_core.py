@@ -79,6 +79,24 @@ def test_a_lost_marker_gives_no_estimate() -> None:
         assert predictor.update(0.25, None) is None
 
 
+def test_default_picks_up_a_briefly_lost_marker_with_its_velocity() -> None:
+    """One lost frame (the crane holds) does not cost the default its velocity; a gap longer
+    than ``max_gap_s`` does: what it knew is too old, it starts afresh."""
+    def run(gap_s: float) -> np.ndarray:
+        predictor = make_predictor("default")
+        t = np.arange(0, 10, 0.25)
+        for ti in t:
+            predictor.update(ti, np.array([150.0 * ti, 0.0]))
+        assert predictor.update(10.0, None) is None
+        back = 10.0 + gap_s
+        estimate = predictor.update(back, np.array([150.0 * back, 0.0]))
+        assert estimate is not None
+        return estimate.velocity
+
+    assert run(0.25)[0] == pytest.approx(150.0, abs=10.0)
+    assert run(3.0)[0] == 0.0
+
+
 WORKSPACE = Workspace(-3000, 3000, -2500, 2500, margin_mm=50)
 finite = st.floats(-1e7, 1e7, allow_nan=False)
 anything = st.one_of(st.floats(allow_nan=True, allow_infinity=True), finite)
