@@ -17,11 +17,13 @@ Pixel ``[row, col]`` has its centre at ``(u, v) = (col, row)``. Angles are in de
 
 Speed: one vectorised pass finds each row's brightest pixel; only rows that reach the
 threshold are scanned, by the compiled loop in ``markers_kernel.py`` (run lengths, union-find
-and moments in one go). The first call compiles it (a few seconds, then cached on disk).
+and moments in one go). The first call compiles it (a few seconds, then cached on disk):
+services call ``warm_up()`` at start-up.
 """
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Literal, NamedTuple
 
@@ -93,6 +95,17 @@ def detect(frame: np.ndarray, *, threshold: int = 230, t_lim: int = 203, step: i
         if markers:
             return Detection("ok", t, markers, regions)
     return Detection("none", t_lim, (), regions)
+
+
+def warm_up() -> float:
+    """Compile the detector's loop now (or load it from numba's cache), not on the first
+    frame: the first compile in a fresh checkout or container takes seconds, holding the
+    interpreter. Services that detect call this at start-up. Returns the seconds it took."""
+    started = time.perf_counter()
+    frame = np.zeros((16, 16), np.uint8)
+    frame[6:10, 6:10] = 255  # a spot, so that every compiled step runs
+    detect(frame)
+    return time.perf_counter() - started
 
 
 def closest(markers: tuple[Marker, ...] | list[Marker], u: float, v: float,

@@ -14,6 +14,7 @@ import pytest
 import zenoh
 
 from common.bus import Bus, BusUnreachable, open_session
+from common.markers import warm_up
 from common.settings import BusSettings, ZenohSettings
 from tests.ports import free_port
 from tests.simlab import crater, crater_file, lab  # noqa: F401 - shared fixtures
@@ -51,6 +52,13 @@ def open_when_up(settings: ZenohSettings, timeout: float = 15.0) -> zenoh.Sessio
 def rng() -> np.random.Generator:
     """A seeded generator: every test's randomness is reproducible."""
     return np.random.default_rng(1234)
+
+
+@pytest.fixture(scope="session")
+def compiled_detector() -> None:
+    """Services compile the marker detector at start (seconds in a fresh checkout, before
+    they act); tests that time a service's behaviour start with it compiled."""
+    warm_up()
 
 
 @pytest.fixture(scope="module")

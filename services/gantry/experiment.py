@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common.markers import closest, detect
+from common.markers import closest, detect, warm_up
 from services.gantry.locate import TrackingOptics, locate
 from services.gantry.predict import AlgorithmName, make_predictor
 from services.gantry.safety import SetpointGuard, Workspace
@@ -83,7 +83,7 @@ def make_lab(scenario: str, seed: int, crater_file: Path) -> Lab:
 def run(lab: Lab, algorithm: AlgorithmName, *, marker_height_mm: float, seed: int = 0,
         end_s: float | None = None) -> Run:
     """One experiment; ``lab`` is used up (its crane moves)."""
-    detect(np.zeros((8, 8), np.uint8))  # load the compiled detector before the clock starts
+    warm_up()  # load the compiled detector before the clock starts
     started = time.perf_counter()
     cam = lab.tracking
     optics = TrackingOptics(cam.focal_mm, cam.pixel_mm, cam.ref_u, cam.ref_v, cam.height_mm)

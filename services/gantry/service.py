@@ -20,7 +20,7 @@ import numpy as np
 from common import keys
 from common import messages as m
 from common.heightmap import HeightMap
-from common.markers import closest, detect, to_message
+from common.markers import closest, detect, to_message, warm_up
 from common.node import Node, StartupError, run_every
 from services.gantry.crane import CraneError, CraneReading, ModbusCrane
 from services.gantry.frames import FrameInbox, OpenCvFrames, decode
@@ -39,6 +39,7 @@ def run(node: Node, crane: ModbusCrane | None = None) -> None:
         heights = HeightMap.load(s.height_map)
     except ValueError as err:
         raise StartupError(f"gantry.height_map: {err}") from err
+    log.info("detector ready (%.1f s)", warm_up())  # before the crane is driven, not mid-run
     crane = crane or ModbusCrane(s.crane_host, s.crane_port, s.crane_timeout_s)
     if s.frames == "bus":
         inbox = FrameInbox()

@@ -20,6 +20,7 @@ import numpy as np
 from common import keys
 from common import messages as m
 from common.camera import Pose, focal_mm_for_zoom
+from common.markers import warm_up
 from common.node import Node
 from services.ptz.aim import Limits, aim_error_deg
 from services.ptz.calibration import CalibrationMode
@@ -41,6 +42,7 @@ def make_camera(settings: PtzSettings) -> AxisPtzCamera:
 
 def run(node: Node, camera: PtzCamera | None = None) -> None:
     settings: PtzSettings = node.settings  # type: ignore[assignment]
+    log.info("detector ready (%.1f s)", warm_up())  # previews and calibration mode detect
     # Position queries have a client of their own, like previews: a query in flight never
     # holds up a move command (that client is the injected camera's in tests).
     loop = _Loop(node, settings, camera or make_camera(settings),

@@ -25,6 +25,7 @@ from services.sim.crane_server import CraneServer
 from services.sim.render import Blob, TrackingCamera, draw
 from tests.conftest import free_port, wait_for
 
+pytestmark = pytest.mark.usefixtures("compiled_detector")
 CAMERA = TrackingCamera(focal_mm=8.0, pixel_mm=0.0075, height_mm=3500.0)
 GROUND_MM, MARKER_MM = 100.0, 80.0
 
