@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing as mp
+import os
 import subprocess
 import sys
 import tempfile
@@ -87,7 +88,8 @@ def _sim_process(settings_json: str, part: str, t0: float,
         server.close()
 
 
-def run_scenario(scenario: str, seconds: float, workdir: Path) -> dict:
+def run_scenario(scenario: str, seconds: float, workdir: Path, realtime_priority: int = 0
+                 ) -> dict:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     base = SimSettings()
     settings = SimSettings(
@@ -106,7 +108,7 @@ def run_scenario(scenario: str, seconds: float, workdir: Path) -> dict:
         pipes.append(parent)
     t0_wall = [pipe.recv() for pipe in pipes][1]
     lab = Lab.build(settings)  # the same lab (same seed): the robot's true path
-    lab_file = _lab_file(workdir / f"{scenario}.toml", endpoint, settings)
+    lab_file = _lab_file(workdir / f"{scenario}.toml", endpoint, settings, realtime_priority)
     procs = [_stb("router", "--listen", endpoint, lab=lab_file)]
     session = _open(endpoint)
     bus = Bus(session, BusSettings(zenoh=ZenohSettings(connect=[endpoint])))
@@ -120,14 +122,19 @@ def run_scenario(scenario: str, seconds: float, workdir: Path) -> dict:
         procs += [_stb("tracker", lab=lab_file)]
         procs += [_stb("ptz", "--instance", cam.name, lab=lab_file) for cam in settings.cameras]
         time.sleep(max(0.0, t0 - time.monotonic()) + 3.0)  # start-up and first aim
+        realtime = [os.sched_getscheduler(p.pid) == os.SCHED_FIFO for p in procs]
         quiet = _phase(pipes, lambda: time.sleep(seconds))
         errors: dict[str, list[float]] = {}
         loaded = _phase(pipes, lambda: errors.update(
             _pointing_errors(lab, settings, clients, t0_wall, seconds)))
         for pipe in pipes:
             pipe.send("end")
-        return _summary(scenario, seconds, errors, quiet, loaded, t0_wall,
-                        settings.mocap.rate_hz)
+        summary = _summary(scenario, seconds, errors, quiet, loaded, t0_wall,
+                           settings.mocap.rate_hz)
+        # what the chain's processes (router, tracker, PTZ) actually run with, not what was asked
+        summary["scheduling"] = (f"SCHED_FIFO {realtime_priority}" if all(realtime) else
+                                 "normal" if not any(realtime) else "mixed")
+        return summary
     finally:
         for proc in procs[::-1]:
             proc.terminate()
@@ -250,9 +257,11 @@ def _true_pose(cam: PtzCameraSettings) -> m.CameraPose:
                         focal_mm=3.8, mean_error_px=0.0, passpoints=0)
 
 
-def _lab_file(path: Path, endpoint: str, settings: SimSettings) -> Path:
-    lines = ["[bus.zenoh]", f'connect = ["{endpoint}"]', "[tracker]",
-             f"qtm_port = {settings.mocap.port}"]
+def _lab_file(path: Path, endpoint: str, settings: SimSettings, realtime_priority: int
+              ) -> Path:
+    priority = f"realtime_priority = {realtime_priority}"
+    lines = ["[bus.zenoh]", f'connect = ["{endpoint}"]', "[router]", priority, "[ptz]",
+             priority, "[tracker]", priority, f"qtm_port = {settings.mocap.port}"]
     for cam in settings.cameras:
         lines += [f"[ptz.cameras.{cam.name}]", f'url = "http://127.0.0.1:{cam.port}"']
     path.write_text("\n".join(lines) + "\n")
@@ -281,19 +290,24 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=30.0)
     parser.add_argument("--scenario", nargs="+", default=["locomotive", "walker"],
                         choices=["locomotive", "walker"])
+    parser.add_argument("--realtime-priority", type=int, default=10, metavar="N",
+                        help="router, tracker and PTZ at SCHED_FIFO priority N, as the lab "
+                             "runs them (docs/deployment.md); 0 = normal scheduling")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        results = [run_scenario(s, args.seconds, Path(tmp)) for s in args.scenario]
+        results = [run_scenario(s, args.seconds, Path(tmp), args.realtime_priority)
+                   for s in args.scenario]
     if args.json:
         print(json.dumps(results, indent=2))
         return
-    print("| scenario | camera | snapshots (lost) | error px median | p95 | commands | "
-          "latency ms p50 | p99 | while pulling snapshots: p50 | p99 |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("| scenario | scheduling | camera | snapshots (lost) | error px median | p95 | "
+          "commands | latency ms p50 | p99 | while pulling snapshots: p50 | p99 |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in results:
         for name, c in r["cameras"].items():
-            print(f"| {r['scenario']} | {name} | {c['snapshots']} ({c['marker_lost']}) | "
+            print(f"| {r['scenario']} | {r['scheduling']} | {name} | "
+                  f"{c['snapshots']} ({c['marker_lost']}) | "
                   f"{_fmt(c['error_px_median'])} | {_fmt(c['error_px_p95'])} | "
                   f"{c['commands']} | {_fmt(c['latency_ms_p50'])} | "
                   f"{_fmt(c['latency_ms_p99'])} | "

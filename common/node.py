@@ -19,6 +19,7 @@ from types import FrameType
 from common import keys
 from common.bus import Bus, BusUnreachable, open_session
 from common.messages import ServiceHealth
+from common.realtime import use_realtime_priority
 from common.settings import ServiceSettings
 
 log = logging.getLogger(__name__)
@@ -72,6 +73,7 @@ def run_node(service: str, settings: ServiceSettings, body: Callable[[Node], Non
 
     ``body`` must return soon after ``node.stop`` is set. Returns the process exit code.
     """
+    use_realtime_priority(settings.realtime_priority)  # before Zenoh's threads: they inherit it
     try:
         session = open_session(settings.zenoh_settings())
     except BusUnreachable as err:
