@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import os
+import resource
 
 log = logging.getLogger(__name__)
 
@@ -45,7 +46,5 @@ def use_realtime_priority(priority: int) -> bool:
 
 
 def _rtprio_limit() -> str:
-    import resource
-
     soft, _hard = resource.getrlimit(resource.RLIMIT_RTPRIO)
     return "unlimited" if soft == resource.RLIM_INFINITY else str(soft)

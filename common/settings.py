@@ -130,7 +130,8 @@ class ServiceSettings(BaseSettings):
     log_level: LogLevel = "INFO"
     realtime_priority: int = Field(
         0, ge=0, le=99, description="SCHED_FIFO priority 1-99 for this service's threads, so "
-        "that it reacts at once on a busy machine (needs CAP_SYS_NICE); 0 = normal scheduling")
+        "that it reacts at once on a busy machine (needs an rtprio limit or CAP_SYS_NICE); 0 = "
+        "normal scheduling")
     bus: BusSettings = BusSettings()
 
     def zenoh_settings(self) -> ZenohSettings:
