@@ -8,7 +8,6 @@ import signal
 import subprocess
 import threading
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -16,7 +15,7 @@ import zenoh
 
 from common import keys
 from common import messages as m
-from common.bus import Bus, open_session
+from common.bus import Bus
 from common.wiredoc import EXAMPLES
 from services.registry import DEFAULT_UP
 from tests.conftest import client_settings, free_port, open_when_up, stb_process, wait_for
@@ -44,18 +43,6 @@ class AliveWatcher:
         with self._lock:
             return next((at for at, key_, kind in self.events
                          if key_ == key and at > t and kind == str(zenoh.SampleKind.PUT)), None)
-
-
-@pytest.fixture
-def observer(router_endpoint: str) -> Iterator[tuple[Bus, AliveWatcher]]:
-    settings = client_settings(router_endpoint)
-    session = open_session(settings.zenoh)
-    bus = Bus(session, settings)
-    try:
-        yield bus, AliveWatcher(session)
-    finally:
-        bus.close()
-        session.close()
 
 
 def _stop(proc: subprocess.Popen, sig: int = signal.SIGTERM, timeout: float = 5.0) -> int:

@@ -8,24 +8,14 @@ import os
 import resource
 import subprocess
 import sys
-from collections.abc import Iterator
 
 import pytest
 
-from common.bus import open_session
-from tests.conftest import client_settings, free_port, stb_process, wait_for
+from common.bus import Bus
+from tests.conftest import free_port, stb_process, wait_for
 from tests.services.test_processes import AliveWatcher, _stop
 
 PR_CAPBSET_DROP, CAP_SYS_NICE = 24, 23
-
-
-@pytest.fixture
-def alive(router_endpoint: str) -> Iterator[AliveWatcher]:
-    session = open_session(client_settings(router_endpoint).zenoh)
-    try:
-        yield AliveWatcher(session)
-    finally:
-        session.close()
 
 
 def _router(router_endpoint: str, instance: str, priority: int, **popen: object
@@ -63,7 +53,8 @@ def _fifo_allowed() -> bool:
 # machine's root lacks.
 @pytest.mark.skipif(not _fifo_allowed(), reason="needs CAP_SYS_NICE or an rtprio limit ≥ 7")
 def test_every_thread_of_the_service_runs_under_sched_fifo(
-        router_endpoint: str, alive: AliveWatcher) -> None:
+        router_endpoint: str, observer: tuple[Bus, AliveWatcher]) -> None:
+    _, alive = observer
     proc = _router(router_endpoint, "rt1", 7)
     try:
         wait_for(lambda: alive.alive("stb/alive/router/rt1"), timeout=10)
@@ -76,7 +67,8 @@ def test_every_thread_of_the_service_runs_under_sched_fifo(
 
 
 def test_not_permitted_it_says_so_and_runs_with_normal_scheduling(
-        router_endpoint: str, alive: AliveWatcher) -> None:
+        router_endpoint: str, observer: tuple[Bus, AliveWatcher]) -> None:
+    _, alive = observer
     proc = _router(router_endpoint, "rt2", 7, preexec_fn=_unprivileged)
     try:
         wait_for(lambda: alive.alive("stb/alive/router/rt2"), timeout=10)
