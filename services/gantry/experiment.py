@@ -18,7 +18,7 @@ import numpy as np
 
 from common.markers import closest, detect, warm_up
 from services.gantry.locate import TrackingOptics, locate
-from services.gantry.predict import AlgorithmName, make_predictor
+from services.gantry.predict import AlgorithmName, make_predictor, prediction_horizon
 from services.gantry.safety import SetpointGuard, Workspace
 from services.sim.crane import CONTROL_ENABLE
 from services.sim.lab import Lab
@@ -92,9 +92,11 @@ def run(lab: Lab, algorithm: AlgorithmName, *, marker_height_mm: float, seed: in
     guard = SetpointGuard(workspace, max_speed_mm_s=0.95 * c.max_speed_mm_s,
                           max_accel_mm_s2=0.95 * c.max_accel_mm_s2)
     predictor = make_predictor(algorithm, seed=seed,
-                               horizon_s=c.reaction_s + 2 * CONTROL_PERIOD_S)
+                               horizon_s=prediction_horizon(c.reaction_s, CONTROL_PERIOD_S))
     noise_rng = np.random.default_rng((seed, 1))
-    noise = noise_rng.normal(0.0, 2.5, (NOISE_FRAMES, cam.height_px, cam.width_px))
+    noise = noise_rng.normal(0.0, 2.5, (NOISE_FRAMES, cam.height_px, cam.width_px)
+                             ).astype(np.float32)
+    pixels = np.empty((cam.height_px, cam.width_px), np.float32)  # reused: no 1 MB per tick
     render_rng = np.random.default_rng((seed, 2))
     crane = lab.crane
     crane.write_control(0.0, CONTROL_ENABLE)
@@ -112,8 +114,8 @@ def run(lab: Lab, algorithm: AlgorithmName, *, marker_height_mm: float, seed: in
             next_error += ERROR_SAMPLE_S
         lab.crane_state(t)
         crane_xy = lab.crane.reported.copy()  # what its controller reports (≤ 1 cycle old)
-        frame = lab.tracking_frame(t, render_rng).astype(np.float64) + noise[tick % NOISE_FRAMES]
-        image = np.clip(np.rint(frame), 0, 255).astype(np.uint8)
+        np.add(lab.tracking_frame(t, render_rng), noise[tick % NOISE_FRAMES], out=pixels)
+        image = np.clip(np.rint(pixels, out=pixels), 0, 255, out=pixels).astype(np.uint8)
         measured, last_pixel = _measure(image, last_pixel, crane_xy, optics, lab,
                                         marker_height_mm)
         estimate = predictor.update(t, measured)

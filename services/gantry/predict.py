@@ -10,8 +10,8 @@ trustworthy to say (the safety layer then holds the crane).
   the mean of the believed particle positions.
 * ``pf-velocity`` — the same filter's weighted mean velocity in eq. 10.
 * ``default`` — ours: two constant-velocity Kalman filters (calm and agile) mixed by an
-  IMM, predicting over the crane's reaction time, its cycle and its tracking lag (bounded):
-  it neither chases a walker's sway nor lags in a locomotive's turns.
+  IMM, predicting over the crane's reaction time and its cycle (bounded): it neither chases
+  a walker's sway nor lags in a locomotive's turns.
 """
 
 from __future__ import annotations
@@ -127,16 +127,17 @@ class KalmanPredictor:
     """Two constant-velocity Kalman filters mixed by an IMM (filterpy): a calm one (small
     acceleration noise: it does not chase a walking robot's sway) and an agile one (a
     locomotive's turns); the mix follows whichever explains the measurements. The desired
-    position is the mixed position plus velocity · horizon, the horizon covering the crane's
-    reaction time, the wait for its next cycle and its own tracking lag (bounded)."""
+    position is the mixed position plus velocity · horizon (``prediction_horizon``, bounded).
+    The measurement noise is set above the detector's few millimetres: the measured position
+    also carries the crane's, which is up to a cycle old and jumps with the crane's speed."""
 
     name: AlgorithmName = "default"
-    horizon_s: float = 1.0
+    horizon_s: float = 0.875
     max_horizon_s: float = 1.0
-    measurement_noise_mm: float = 10.0
-    calm_accel_mm_s2: float = 5.0
-    agile_accel_mm_s2: float = 400.0
-    stay: float = 0.99  # chance a model stays in charge from one period to the next
+    measurement_noise_mm: float = 25.0
+    calm_accel_mm_s2: float = 40.0
+    agile_accel_mm_s2: float = 150.0
+    stay: float = 0.97  # chance a model stays in charge from one period to the next
     max_gap_s: float = 1.0
     """A marker lost for up to this long is picked up again with the filters' state (the
     crane holds meanwhile: the safety layer sees no estimate); after longer, start afresh."""
@@ -186,7 +187,14 @@ def systematic_resample(weights: np.ndarray, rng: np.random.Generator) -> np.nda
     return np.searchsorted(cumulative, positions)
 
 
-def make_predictor(name: AlgorithmName, *, seed: int = 0, horizon_s: float = 1.0
+def prediction_horizon(reaction_s: float, period_s: float) -> float:
+    """How far ahead ``default`` aims: the crane's reaction time, up to one control period
+    until its controller samples the setpoint, and half a period for the setpoints' staircase
+    (0.875 s for the paper's crane: 0.5 s reaction, 4 Hz)."""
+    return reaction_s + 1.5 * period_s
+
+
+def make_predictor(name: AlgorithmName, *, seed: int = 0, horizon_s: float = 0.875
                    ) -> Predictor:
     if name == "basic":
         return Basic()

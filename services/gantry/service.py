@@ -26,7 +26,7 @@ from services.gantry.crane import CraneError, CraneReading, ModbusCrane
 from services.gantry.frames import FrameInbox, OpenCvFrames, decode
 from services.gantry.locate import TrackingOptics, locate
 from services.gantry.offload import offload
-from services.gantry.predict import Estimate, make_predictor
+from services.gantry.predict import Estimate, make_predictor, prediction_horizon
 from services.gantry.safety import SetpointGuard, Workspace
 from services.gantry.settings import GantrySettings
 
@@ -68,8 +68,8 @@ class Control:
         self.optics = TrackingOptics(s.focal_mm, s.pixel_mm, s.ref_u, s.ref_v,
                                      s.lens_height_mm)
         self.predictor = make_predictor(s.algorithm, seed=s.seed,
-                                        horizon_s=min(s.reaction_s + 2 / s.control_hz,
-                                                      s.max_horizon_s))
+                                        horizon_s=min(prediction_horizon(
+                                            s.reaction_s, 1 / s.control_hz), s.max_horizon_s))
         self.guard = SetpointGuard(
             Workspace(s.x_min_mm, s.x_max_mm, s.y_min_mm, s.y_max_mm, s.workspace_margin_mm),
             s.max_speed_mm_s, s.max_accel_mm_s2, s.stale_after_s)

@@ -37,7 +37,7 @@ class CraneParams:
     y_min_mm: float = -3000.0
     y_max_mm: float = 3000.0
     max_speed_mm_s: float = 500.0
-    max_accel_mm_s2: float = 600.0
+    max_accel_mm_s2: float = 2500.0
     reaction_s: float = 0.5
     cycle_s: float = 0.25
     watchdog_s: float = 0.5

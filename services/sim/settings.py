@@ -66,7 +66,7 @@ class CraneSettings(_Section):
     y_min_mm: float = -3000.0
     y_max_mm: float = 3000.0
     max_speed_mm_s: float = Field(500.0, gt=0)
-    max_accel_mm_s2: float = Field(600.0, gt=0)
+    max_accel_mm_s2: float = Field(2500.0, gt=0)
     reaction_s: float = Field(0.5, ge=0)
     cycle_s: float = Field(0.25, gt=0, description="controller cycle: setpoints taken at 4 Hz")
     watchdog_s: float = Field(0.5, gt=0)

@@ -121,7 +121,7 @@ def test_modbus_client_drives_the_crane_over_tcp() -> None:
     def clock() -> float:
         return time.monotonic() - t0
 
-    crane = CraneModel(CraneParams(watchdog_s=0.5, x_max_mm=3000.0))
+    crane = CraneModel(CraneParams(watchdog_s=0.5, x_max_mm=3000.0, max_accel_mm_s2=600.0))
     server = CraneServer(crane, clock, threading.Lock(), "127.0.0.1", port)
 
     async def main() -> dict:
