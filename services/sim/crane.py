@@ -62,7 +62,7 @@ class CraneModel:
     _last_activity: float = 0.0
     _pending: list[tuple[float, np.ndarray]] = field(default_factory=list)
     _step: int = 0
-    _next_cycle: float = 0.0
+    _next_cycle_step: int = 0  # in whole steps: the cycle does not drift with rounding
     reported: np.ndarray = field(default_factory=lambda: np.zeros(2))
     """Position as the controller reports it: measured once per cycle (4 Hz), like a PLC's
     process image — up to one cycle old when read (the paper: the crane's time of
@@ -123,8 +123,8 @@ class CraneModel:
             self.faults |= FAULT_WATCHDOG
             self._pending.clear()
             self.target = None  # brake to a stop
-        if t >= self._next_cycle:
-            self._next_cycle = t + p.cycle_s
+        if self._step >= self._next_cycle_step:
+            self._next_cycle_step = self._step + max(1, round(p.cycle_s / STEP_S))
             self.reported, self.reported_velocity = self.position.copy(), self.velocity.copy()
             if self.enabled and self._written is not None:
                 x, y, clamped = p.clamp(*self._written)
