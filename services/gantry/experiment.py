@@ -1,11 +1,13 @@
 """The paper's gantry experiments (§3.3) on a simulated clock, much faster than real time.
 
-The whole chain runs in one process with the live system's modules: the sim's tracking
-camera renders a frame at every control tick (4 Hz) from the robot's marker and the crane's
-position, the shared detector finds the marker (closest to the last one), eq. 5–8 give the
-world position with the crater's height map, the predictor gives the desired position, the
-safety guard the setpoint, and the sim's crane model (4 Hz sampling, 0.5 s reaction, velocity
-and acceleration limits) moves. The crane-to-robot error is sampled at 20 Hz.
+The whole chain runs in one process with the live system's modules: the gantry polls the
+crane controller's reported position (40 Hz) and ticks 0.1 s after each new report (4 Hz,
+``CycleSync``), the sim's tracking camera renders a frame at every tick from the robot's
+marker and the crane's position, the shared detector finds the marker (closest to the last
+one), eq. 5–8 give the world position with the crater's height map, the predictor gives the
+desired position, the safety guard the setpoint, and the sim's crane model (4 Hz sampling,
+0.5 s reaction, velocity and acceleration limits) moves. The crane-to-robot error is sampled
+at 20 Hz.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from common.markers import closest, detect, warm_up
+from services.gantry.cycle import AFTER_REPORT_S, CycleSync
 from services.gantry.locate import TrackingOptics, locate
 from services.gantry.predict import AlgorithmName, make_predictor, prediction_horizon
 from services.gantry.safety import SetpointGuard, Workspace
@@ -28,8 +31,10 @@ from services.sim.settings import SimSettings, TrackingCameraSettings
 CONTROL_PERIOD_S = 0.25
 ERROR_SAMPLE_S = 0.05
 NOISE_FRAMES = 8
-TICK_PHASE_S = 0.1
-"""The gantry's ticks are not in step with the crane controller's cycle (which starts at 0)."""
+POLL_S = 0.025  # the gantry reads the controller's reported position at 40 Hz
+START_S = 0.2
+"""The gantry's first poll and tick: out of step with the controller's cycle (which starts at
+0) — its ticks run free until the crane moves and ``CycleSync`` learns when it reports."""
 
 
 @dataclass
@@ -41,6 +46,7 @@ class Run:
     velocity_mm_s: list[np.ndarray] = field(default_factory=list)  # the predictor's velocity
     held: int = 0
     ticks: int = 0
+    report_age_s: list[float] = field(default_factory=list)  # the crane report's age per tick
     wall_s: float = 0.0
 
     def summary(self) -> dict:
@@ -53,6 +59,8 @@ class Run:
                 "rms_mm": round(float(np.sqrt(np.mean(distance ** 2))), 2),
                 "max_mm": round(float(distance.max()), 2),
                 "held_ticks": self.held, "ticks": self.ticks,
+                "report_age_s": round(float(np.median(self.report_age_s)), 3)
+                if self.report_age_s else None,
                 "sim_s": round(sim_s, 2), "wall_s": round(self.wall_s, 3),
                 "speedup": round(sim_s / self.wall_s, 1) if self.wall_s > 0 else None}
 
@@ -106,15 +114,21 @@ def run(lab: Lab, algorithm: AlgorithmName, *, marker_height_mm: float, seed: in
     last_pixel: tuple[float, float] | None = None
     heartbeat = 0
     next_error = 0.0
-    for tick in range(int(end / CONTROL_PERIOD_S) + 1):
-        t = tick * CONTROL_PERIOD_S + TICK_PHASE_S
-        while next_error < t:  # error samples between ticks
+    sync = CycleSync(CONTROL_PERIOD_S, AFTER_REPORT_S)
+    for poll in range(int((end - START_S) / POLL_S) + 1):
+        t = START_S + poll * POLL_S
+        while next_error < t:  # error samples between polls
             samples_t.append(next_error)
             errors.append(lab.crane_state(next_error)[0] - lab.robot(next_error)[:2])
             next_error += ERROR_SAMPLE_S
         lab.crane_state(t)
         crane_xy = lab.crane.reported.copy()  # what its controller reports (≤ 1 cycle old)
-        np.add(lab.tracking_frame(t, render_rng), noise[tick % NOISE_FRAMES], out=pixels)
+        sync.observe(t, (round(crane_xy[0]), round(crane_xy[1])))  # registers: whole mm
+        if not sync.due(t):
+            continue
+        result.report_age_s.append(t - lab.crane.reported_s)
+        np.add(lab.tracking_frame(t, render_rng), noise[result.ticks % NOISE_FRAMES],
+               out=pixels)
         image = np.clip(np.rint(pixels, out=pixels), 0, 255, out=pixels).astype(np.uint8)
         measured, last_pixel = _measure(image, last_pixel, crane_xy, optics, lab,
                                         marker_height_mm)

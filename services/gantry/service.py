@@ -4,8 +4,10 @@ Reads:      tracking-camera frames (stb/gantry/camera/frame, or a camera via Ope
             the crane controller over Modbus/TCP (position, status)
 Publishes:  stb/gantry/detections, stb/gantry/estimate, stb/gantry/setpoint, stb/gantry/state,
             stb/gantry/offload (gravity offload: the cable's tilt from the horizontal error)
-Drives:     the crane controller: a setpoint every control period (4 Hz), a heartbeat for its
-            watchdog (10 Hz); holds when the estimate is stale or the marker is lost
+Drives:     the crane controller: a setpoint every control period (4 Hz), ticking a fixed
+            time after the controller reports its position (polled at 40 Hz, CycleSync), a
+            heartbeat for its watchdog (10 Hz); holds when the estimate is stale or the
+            marker is lost
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from common.heightmap import HeightMap
 from common.markers import closest, detect, to_message, warm_up
 from common.node import Node, StartupError, run_every
 from services.gantry.crane import CraneError, CraneReading, ModbusCrane
+from services.gantry.cycle import CycleSync
 from services.gantry.frames import FrameInbox, OpenCvFrames, decode
 from services.gantry.locate import TrackingOptics, locate
 from services.gantry.offload import offload
@@ -50,7 +53,7 @@ def run(node: Node, crane: ModbusCrane | None = None) -> None:
     threading.Thread(target=run_every, args=(1 / s.heartbeat_hz, node.stop, control.heartbeat,
                                              "heartbeat"), name="heartbeat", daemon=True).start()
     try:
-        run_every(1 / s.control_hz, node.stop, control.tick, "control tick")
+        run_every(1 / s.poll_hz, node.stop, control.poll, "crane poll")
     finally:
         crane.close()
 
@@ -80,6 +83,7 @@ class Control:
         self.reachable = True
         self.offload_warned = False
         self.last_tick = time.monotonic()
+        self.sync = CycleSync(1 / s.control_hz, s.after_report_s)
 
     def heartbeat(self) -> None:
         """Only while the control loop is alive: a stuck or failing loop stops the heartbeat,
@@ -89,10 +93,22 @@ class Control:
         with contextlib.suppress(CraneError):  # the control loop reports it
             self.crane.heartbeat()
 
-    def tick(self) -> None:
-        now = time.time()
+    def poll(self) -> None:
+        """Read the controller's report; tick when due (``CycleSync``)."""
+        polled = time.monotonic()
         try:
             reading = self.crane.read()
+        except CraneError as err:
+            if self.sync.due(polled):
+                self._unreachable(time.time(), err)
+            return
+        self.sync.observe(polled, (reading.x_mm, reading.y_mm))
+        if self.sync.due(polled):
+            self.tick(reading)
+
+    def tick(self, reading: CraneReading) -> None:
+        now = time.time()
+        try:
             if not reading.enabled:
                 log.info("crane not enabled (faults %#x): enabling", reading.faults)
                 self.guard.reset()

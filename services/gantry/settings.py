@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from common.settings import ServiceSettings
+from services.gantry.cycle import AFTER_REPORT_S
 from services.gantry.predict import AlgorithmName
 
 
@@ -21,6 +22,10 @@ class GantrySettings(ServiceSettings):
     algorithm: AlgorithmName = "default"
     control_hz: float = Field(4.0, gt=0, le=20, description="setpoints a second (crane: 4 Hz)")
     heartbeat_hz: float = Field(10.0, gt=0, le=100, description="crane watchdog heartbeat")
+    poll_hz: float = Field(40.0, gt=0, le=200, description="reads of the crane's reported "
+                           "position, to tick a fixed time after each new one")
+    after_report_s: float = Field(AFTER_REPORT_S, ge=0, description="ticks this long after "
+                                  "the controller reports its position")
     stale_after_s: float = Field(0.6, gt=0, le=5, description="older estimate → hold")
     reaction_s: float = Field(0.5, ge=0, le=3, description="crane's reaction time (predicted)")
     max_horizon_s: float = Field(1.0, gt=0, le=3, description="never extrapolate further")
@@ -42,3 +47,13 @@ class GantrySettings(ServiceSettings):
     cable_length_mm: float = Field(2000.0, gt=0, description="gravity-offload cable")
     offload_warn_pct: float = Field(5.0, gt=0, le=100, description="warn above this sideways "
                                     "share of the cable's pull")
+
+    @model_validator(mode="after")
+    def _timing(self) -> GantrySettings:
+        if self.poll_hz < 2 * self.control_hz:
+            raise ValueError(f"poll_hz {self.poll_hz} must be at least twice control_hz "
+                             f"({self.control_hz}): a new report must be seen within a period")
+        if self.after_report_s >= 1 / self.control_hz:
+            raise ValueError(f"after_report_s {self.after_report_s} must be shorter than a "
+                             f"control period ({1 / self.control_hz:g} s)")
+        return self

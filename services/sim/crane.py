@@ -68,6 +68,7 @@ class CraneModel:
     process image — up to one cycle old when read (the paper: the crane's time of
     measurement is only roughly known)."""
     reported_velocity: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    reported_s: float = 0.0  # when ``reported`` was measured
 
     @property
     def time(self) -> float:
@@ -126,6 +127,7 @@ class CraneModel:
         if self._step >= self._next_cycle_step:
             self._next_cycle_step = self._step + max(1, round(p.cycle_s / STEP_S))
             self.reported, self.reported_velocity = self.position.copy(), self.velocity.copy()
+            self.reported_s = t
             if self.enabled and self._written is not None:
                 x, y, clamped = p.clamp(*self._written)
                 self.faults = (self.faults | FAULT_CLAMPED) if clamped else (

@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 import pytest
 
+from services.gantry.cycle import AFTER_REPORT_S
 from services.gantry.experiment import make_lab, run
 from services.gantry.experiment_cli import main
 from services.gantry.frames import OpenCvFrames
@@ -59,6 +60,16 @@ def test_runs_are_reproducible_from_the_seed(crater_file: Path) -> None:
         r.pop("wall_s")
         r.pop("speedup")
     assert results[0] == results[1]
+
+
+def test_the_gantry_ticks_a_fixed_time_after_the_crane_reports(crater_file: Path) -> None:
+    """The run starts out of step (its first tick 0.2 s after the controller's cycle, where
+    every algorithm makes the crane chase itself) and, once the crane moves, settles at
+    ``AFTER_REPORT_S`` after each report (plus up to a 25 ms poll)."""
+    r = run(make_lab("locomotive", 1, crater_file), "basic", marker_height_mm=80.0,
+            end_s=20.0)
+    assert r.report_age_s[0] == pytest.approx(0.195, abs=0.01)
+    assert np.all(np.abs(np.array(r.report_age_s[20:]) - AFTER_REPORT_S) < 0.03)  # after 5 s
 
 
 def test_opencv_frames_from_a_video_file(tmp_path: Path) -> None:

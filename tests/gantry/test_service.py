@@ -154,6 +154,38 @@ def test_offload_figures_follow_the_error(rig: dict) -> None:
     feeder.join()
 
 
+@pytest.mark.parametrize("after_report_s", [0.03, 0.15])
+def test_setpoints_go_out_a_fixed_time_after_the_controller_reports(
+        tmp_path: Path, make_bus: Callable[..., Bus], after_report_s: float) -> None:
+    heights = tmp_path / "flat.npz"
+    HeightMap(np.full((3, 3), GROUND_MM, np.float32), -5000, -5000, 5000).save(heights)
+    crane = CraneRig()
+    ages: list[float] = []  # of the controller's report when a setpoint arrives
+    write = crane.model.write_setpoint
+
+    def recording(now: float, x_mm: float, y_mm: float) -> None:
+        ages.append(now - crane.model.reported_s)
+        write(now, x_mm, y_mm)
+
+    crane.model.write_setpoint = recording  # type: ignore[method-assign]
+    node = Node("gantry", GantrySettings(crane_port=crane.port, height_map=heights,
+                                         marker_height_mm=MARKER_MM,
+                                         after_report_s=after_report_s), make_bus())
+    thread = threading.Thread(target=run, args=(node,), daemon=True)
+    thread.start()
+    try:
+        start = np.array([-300.0, 0.0])
+        _feed({"crane": crane, "world": make_bus()}, lambda t: start + [120.0 * t, 0.0], 6.0)
+    finally:
+        node.stop.set()
+        thread.join(5)
+        crane.close()
+    settled = np.array(ages[-12:])
+    assert len(ages) >= 18, ages
+    # polled at 40 Hz: a new report is seen within 25 ms; plus Modbus and the tick's own work
+    assert np.all((settled > after_report_s - 0.015) & (settled < after_report_s + 0.06)), settled
+
+
 def test_the_crane_holds_while_the_router_is_down_and_tracks_again_after(
         tmp_path: Path) -> None:
     import signal

@@ -1,0 +1,65 @@
+"""When the gantry ticks: a fixed time after the crane controller publishes its position (pure).
+
+The controller reports its position once per cycle (4 Hz), like a PLC's process image. How
+old that report is when a tick reads it decides how much of the crane's own last move shows
+up as robot motion in eq. 8: past ~0.15 s every algorithm makes the crane chase itself
+(docs/experiments.md). So the gantry polls the report faster than the cycle, notes when it
+changes, and puts its ticks ``offset_s`` after the report — whatever the phase between its
+clock and the controller's. While the crane stands still the report does not change: the
+ticks keep the phase learnt last, or run free at the period until one is learnt.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+AFTER_REPORT_S = 0.1
+"""Ticks this long after the controller's report (docs/experiments.md: 0.05–0.1 s is best)."""
+
+
+@dataclass
+class CycleSync:
+    period_s: float
+    offset_s: float = AFTER_REPORT_S
+    remembered: int = 8  # report times averaged (a circular mean over the period)
+    _report_phases: deque[float] = field(init=False)
+    _last_poll: tuple[float, tuple[float, float]] | None = None
+    _next_tick_s: float | None = None
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.offset_s < self.period_s:
+            raise ValueError(f"offset_s {self.offset_s} must lie in [0, {self.period_s})")
+        self._report_phases = deque(maxlen=self.remembered)
+
+    def observe(self, now_s: float, reported_xy: tuple[float, float]) -> None:
+        """One poll of the controller's reported position, read at ``now_s``."""
+        if self._last_poll is not None and reported_xy != self._last_poll[1]:
+            changed_s = 0.5 * (self._last_poll[0] + now_s)  # between the two polls
+            self._report_phases.append(changed_s % self.period_s)
+        self._last_poll = (now_s, reported_xy)
+
+    @property
+    def report_phase_s(self) -> float | None:
+        """When in the period the controller reports (None until the crane has moved)."""
+        if not self._report_phases:
+            return None
+        angles = [2 * math.pi * p / self.period_s for p in self._report_phases]
+        mean = math.atan2(sum(map(math.sin, angles)), sum(map(math.cos, angles)))
+        return (mean / (2 * math.pi) * self.period_s) % self.period_s
+
+    def due(self, now_s: float) -> bool:
+        """Whether to tick now; if so, the next tick is scheduled (never sooner than half a
+        period, never later than one and a half)."""
+        if self._next_tick_s is not None and now_s < self._next_tick_s:
+            return False
+        phase = self.report_phase_s
+        if phase is None:
+            base = now_s if self._next_tick_s is None else self._next_tick_s
+            self._next_tick_s = max(base + self.period_s, now_s + 0.5 * self.period_s)
+        else:
+            target = phase + self.offset_s
+            k = math.ceil((now_s + 0.5 * self.period_s - target) / self.period_s)
+            self._next_tick_s = target + k * self.period_s
+        return True

@@ -1,0 +1,62 @@
+"""CycleSync: the gantry ticks a fixed time after the crane controller reports, whatever the
+phase between their clocks; it runs free until it has seen a report change."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from services.gantry.cycle import CycleSync
+
+PERIOD, POLL = 0.25, 0.025
+
+
+def _ticks(sync: CycleSync, report_phase: float, start: float, seconds: float,
+           moves: tuple[float, float] = (0.0, np.inf)) -> list[float]:
+    """Poll a controller that reports at ``report_phase`` + k · PERIOD, its position changing
+    at every report while the crane ``moves`` (from, until); the poll times the sync ticked."""
+    ticks = []
+    for t in start + POLL * np.arange(int(seconds / POLL)):
+        moved_until = min(max(t, moves[0]), moves[1])
+        reports = np.floor((moved_until - report_phase) / PERIOD)  # reports of a move by t
+        sync.observe(float(t), (float(reports), 0.0))
+        if sync.due(float(t)):
+            ticks.append(float(t))
+    return ticks
+
+
+@pytest.mark.parametrize("report_phase", [0.005, 0.08, 0.13, 0.2, 0.249])
+def test_ticks_settle_at_the_offset_after_each_report(report_phase: float) -> None:
+    sync = CycleSync(PERIOD, offset_s=0.1)
+    ticks = _ticks(sync, report_phase, start=0.2, seconds=10.0)
+    ages = [(t - report_phase) % PERIOD for t in ticks[4:]]
+    assert min(ages) >= 0.1 - POLL / 2 - 1e-9 and max(ages) <= 0.1 + POLL + 1e-9, ages
+    assert np.diff(ticks).min() >= PERIOD / 2 and np.diff(ticks).max() <= 1.5 * PERIOD + POLL
+    assert len(ticks) == pytest.approx(10.0 / PERIOD, abs=2)
+    assert sync.report_phase_s == pytest.approx(report_phase, abs=POLL / 2 + 1e-9)
+
+
+def test_runs_free_at_the_period_until_the_crane_moves_and_keeps_the_phase_after() -> None:
+    sync = CycleSync(PERIOD, offset_s=0.1)
+    moves = (5.0, 8.0)
+    still = _ticks(sync, 0.2, start=0.0, seconds=5.0, moves=moves)
+    assert sync.report_phase_s is None
+    assert np.allclose(np.diff(still), PERIOD), "free-running: no drift at poll granularity"
+    _ticks(sync, 0.2, start=5.0, seconds=3.0, moves=moves)
+    learnt = sync.report_phase_s
+    assert learnt == pytest.approx(0.2, abs=POLL / 2 + 1e-9)
+    after = _ticks(sync, 0.2, start=8.0, seconds=3.0, moves=moves)
+    assert sync.report_phase_s == learnt
+    assert all(abs((t - 0.2) % PERIOD - 0.1) <= POLL + 1e-9 for t in after[1:])
+
+
+def test_follows_a_controller_whose_cycle_moves() -> None:
+    sync = CycleSync(PERIOD, offset_s=0.05)
+    _ticks(sync, 0.03, start=0.0, seconds=5.0)
+    ticks = _ticks(sync, 0.17, start=5.0, seconds=5.0)  # the controller restarted
+    assert all(abs((t - 0.17) % PERIOD - 0.05) <= POLL + 1e-9 for t in ticks[-8:])
+
+
+def test_an_offset_outside_the_period_is_refused() -> None:
+    with pytest.raises(ValueError, match="offset_s"):
+        CycleSync(PERIOD, offset_s=0.25)
