@@ -15,8 +15,9 @@ import math
 from collections import deque
 from dataclasses import dataclass, field
 
-AFTER_REPORT_S = 0.1
-"""Ticks this long after the controller's report (docs/experiments.md: 0.05–0.1 s is best)."""
+AFTER_REPORT_S = 0.075
+"""Ticks this long after the controller's report: then ~0.1 s old when read, in the middle of
+the range where the default does best (docs/experiments.md)."""
 
 
 @dataclass

@@ -1,7 +1,7 @@
 """The paper's gantry experiments (§3.3) on a simulated clock, much faster than real time.
 
 The whole chain runs in one process with the live system's modules: the gantry polls the
-crane controller's reported position (40 Hz) and ticks 0.1 s after each new report (4 Hz,
+crane controller's reported position (40 Hz) and ticks 0.075 s after each new report (4 Hz,
 ``CycleSync``), the sim's tracking camera renders a frame at every tick from the robot's
 marker and the crane's position, the shared detector finds the marker (closest to the last
 one), eq. 5–8 give the world position with the crater's height map, the predictor gives the
