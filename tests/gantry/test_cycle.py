@@ -6,7 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from common.settings import ConfigError, load_settings
 from services.gantry.cycle import CycleSync
+from services.gantry.settings import GantrySettings
 
 PERIOD, POLL = 0.25, 0.025
 
@@ -60,3 +62,13 @@ def test_follows_a_controller_whose_cycle_moves() -> None:
 def test_an_offset_outside_the_period_is_refused() -> None:
     with pytest.raises(ValueError, match="offset_s"):
         CycleSync(PERIOD, offset_s=0.25)
+
+
+@pytest.mark.parametrize(("overrides", "field"), [
+    ({"after_report_s": 0.25}, "gantry.after_report_s"),
+    ({"control_hz": 10, "after_report_s": 0.1}, "gantry.after_report_s"),
+    ({"poll_hz": 6}, "gantry.poll_hz"),
+])
+def test_timing_settings_that_cannot_work_name_the_field(overrides: dict, field: str) -> None:
+    with pytest.raises(ConfigError, match=field.replace(".", r"\.")):
+        load_settings(GantrySettings, overrides=overrides, environ={})
