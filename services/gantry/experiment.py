@@ -24,7 +24,7 @@ from services.gantry.locate import TrackingOptics, locate
 from services.gantry.predict import AlgorithmName, make_predictor, prediction_horizon
 from services.gantry.safety import SetpointGuard, Workspace
 from services.sim.crane import CONTROL_ENABLE
-from services.sim.lab import Lab
+from services.sim.lab import Lab, load_or_make_crater
 from services.sim.robots import MARKER_HEIGHT_MM, SAMPLE_HZ, Trajectory
 from services.sim.settings import SimSettings, TrackingCameraSettings
 
@@ -83,9 +83,12 @@ def read_trajectory(path: Path, lab: Lab, marker_height_mm: float) -> Trajectory
 
 
 def make_lab(scenario: str, seed: int, crater_file: Path) -> Lab:
+    """The sim's lab for one run. A missing height map is made from the sim's own default seed,
+    not the run's: every ``--seed`` runs in the same crater, whichever ran first."""
+    crater = load_or_make_crater(SimSettings(crater_file=crater_file))
     settings = SimSettings(scenario=scenario, seed=seed, loop=False, crater_file=crater_file,
                            tracking_camera=TrackingCameraSettings(noise=0.0))
-    return Lab.build(settings)
+    return Lab.build(settings, crater)
 
 
 def run(lab: Lab, algorithm: AlgorithmName, *, marker_height_mm: float, seed: int = 0,

@@ -62,6 +62,15 @@ def test_runs_are_reproducible_from_the_seed(crater_file: Path) -> None:
     assert results[0] == results[1]
 
 
+def test_a_missing_crater_is_the_same_whichever_seed_runs_first(tmp_path: Path) -> None:
+    first, other = tmp_path / "a" / "crater.npz", tmp_path / "b" / "crater.npz"
+    first.parent.mkdir()
+    other.parent.mkdir()
+    make_lab("walker", 3, first)
+    make_lab("locomotive", 1, other)
+    assert np.array_equal(np.load(first)["heights_mm"], np.load(other)["heights_mm"])
+
+
 def test_the_gantry_ticks_a_fixed_time_after_the_crane_reports(crater_file: Path) -> None:
     """The run starts out of step (its first tick 0.2 s after the controller's cycle, where
     every algorithm makes the crane chase itself) and, once the crane moves, settles at
