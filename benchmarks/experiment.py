@@ -1,0 +1,92 @@
+"""Gantry experiment speed: simulated seconds per wall-clock second (issue #7: at least 50×).
+
+    .venv/bin/python -m benchmarks.experiment [--scenarios locomotive,walker] [--seeds 1,2,3]
+
+Runs every algorithm on every scenario and seed, one after the other in this one process (the
+first run included: the CLI's first run is a user's first run), on the crater the CLI uses
+(``run/sim/crater.npz``, made if missing). Real time is the reference: the ratio is the
+speed-up. Prints per algorithm the median and least speed-up and the wall time, and where the
+time goes in one walker run (render, detect, the rest), so that a slow-down shows its cause.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+import services.gantry.experiment as experiment
+from services.gantry.predict import ALGORITHMS
+from services.sim.lab import Lab
+from services.sim.robots import MARKER_HEIGHT_MM
+
+
+def speed(scenarios: list[str], seeds: list[int], crater: Path) -> dict[str, dict]:
+    runs: dict[str, list[dict]] = {name: [] for name in ALGORITHMS}
+    for scenario in scenarios:
+        for seed in seeds:
+            for name in ALGORITHMS:
+                s = experiment.run_scenario(scenario, name, seed=seed, crater_file=crater
+                                            ).summary()
+                runs[name].append(s)
+                print(f"  {scenario:<10} seed {seed}  {name:<18} {s['sim_s']:6.1f} s simulated "
+                      f"in {s['wall_s']:5.2f} s  ({s['speedup']:.0f}×)", flush=True)
+    return {name: {"runs": len(r),
+                   "median_speedup": round(float(np.median([s["speedup"] for s in r])), 1),
+                   "least_speedup": round(float(min(s["speedup"] for s in r)), 1),
+                   "wall_s": round(float(sum(s["wall_s"] for s in r)), 2)}
+            for name, r in runs.items()}
+
+
+def profile_walker(crater: Path) -> dict[str, float]:
+    """Wall time of one default walker run, split into rendering, detection and the rest."""
+    spent = {"render": 0.0, "detect": 0.0}
+    render, detect = Lab.tracking_frame, experiment.detect
+
+    def timed_render(self: Lab, *args: object) -> np.ndarray:
+        t = time.perf_counter()
+        try:
+            return render(self, *args)
+        finally:
+            spent["render"] += time.perf_counter() - t
+
+    def timed_detect(*args: object, **kwargs: object) -> object:
+        t = time.perf_counter()
+        try:
+            return detect(*args, **kwargs)
+        finally:
+            spent["detect"] += time.perf_counter() - t
+
+    Lab.tracking_frame, experiment.detect = timed_render, timed_detect  # type: ignore[assignment]
+    try:
+        r = experiment.run(experiment.make_lab("walker", 1, crater), "default",
+                           marker_height_mm=MARKER_HEIGHT_MM["walker"], seed=1)
+    finally:
+        Lab.tracking_frame, experiment.detect = render, detect  # type: ignore[method-assign]
+    return {"wall_s": round(r.wall_s, 3), "render_s": round(spent["render"], 3),
+            "detect_s": round(spent["detect"], 3),
+            "rest_s": round(r.wall_s - spent["render"] - spent["detect"], 3)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scenarios", default="locomotive,walker")
+    parser.add_argument("--seeds", default="1,2,3")
+    parser.add_argument("--crater", type=Path, default=Path("run/sim/crater.npz"))
+    args = parser.parse_args()
+    scenarios = args.scenarios.split(",")
+    seeds = [int(s) for s in args.seeds.split(",")]
+    print(f"gantry experiment speed on {platform.processor() or platform.machine()}, "
+          f"{scenarios} × seeds {seeds}:")
+    result = {"per_algorithm": speed(scenarios, seeds, args.crater),
+              "walker_default_profile": profile_walker(args.crater)}
+    print(json.dumps(result, indent=1))
+
+
+if __name__ == "__main__":
+    main()
