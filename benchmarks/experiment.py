@@ -15,7 +15,9 @@ import argparse
 import json
 import platform
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -45,23 +47,19 @@ def speed(scenarios: list[str], seeds: list[int], crater: Path) -> dict[str, dic
 def profile_walker(crater: Path) -> dict[str, float]:
     """Wall time of one default walker run, split into rendering, detection and the rest."""
     spent = {"render": 0.0, "detect": 0.0}
+
+    def timed(what: str, fn: Callable[..., Any]) -> Callable[..., Any]:
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            t = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                spent[what] += time.perf_counter() - t
+        return wrapper
+
     render, detect = Lab.tracking_frame, experiment.detect
-
-    def timed_render(self: Lab, *args: object) -> np.ndarray:
-        t = time.perf_counter()
-        try:
-            return render(self, *args)
-        finally:
-            spent["render"] += time.perf_counter() - t
-
-    def timed_detect(*args: object, **kwargs: object) -> object:
-        t = time.perf_counter()
-        try:
-            return detect(*args, **kwargs)
-        finally:
-            spent["detect"] += time.perf_counter() - t
-
-    Lab.tracking_frame, experiment.detect = timed_render, timed_detect  # type: ignore[assignment]
+    Lab.tracking_frame = timed("render", render)  # type: ignore[method-assign]
+    experiment.detect = timed("detect", detect)
     try:
         r = experiment.run(experiment.make_lab("walker", 1, crater), "default",
                            marker_height_mm=MARKER_HEIGHT_MM["walker"], seed=1)

@@ -122,6 +122,16 @@ class ParticleFilter:
         return w / total if total > 0 and np.isfinite(total) else None
 
 
+def prediction_horizon(reaction_s: float, period_s: float) -> float:
+    """How far ahead ``default`` aims: the crane's reaction time, up to one control period
+    until its controller samples the setpoint, and half a period for the setpoints' staircase
+    (0.875 s for the paper's crane: 0.5 s reaction, 4 Hz)."""
+    return reaction_s + 1.5 * period_s
+
+
+PAPER_HORIZON_S = prediction_horizon(0.5, 0.25)  # the paper's crane: 0.5 s reaction, 4 Hz
+
+
 @dataclass
 class KalmanPredictor:
     """Two constant-velocity Kalman filters mixed by an IMM (filterpy): a calm one (small
@@ -132,7 +142,7 @@ class KalmanPredictor:
     also carries the crane's, which is up to a cycle old and jumps with the crane's speed."""
 
     name: AlgorithmName = "default"
-    horizon_s: float = 0.875
+    horizon_s: float = PAPER_HORIZON_S
     max_horizon_s: float = 1.0
     measurement_noise_mm: float = 25.0
     calm_accel_mm_s2: float = 40.0
@@ -187,14 +197,7 @@ def systematic_resample(weights: np.ndarray, rng: np.random.Generator) -> np.nda
     return np.searchsorted(cumulative, positions)
 
 
-def prediction_horizon(reaction_s: float, period_s: float) -> float:
-    """How far ahead ``default`` aims: the crane's reaction time, up to one control period
-    until its controller samples the setpoint, and half a period for the setpoints' staircase
-    (0.875 s for the paper's crane: 0.5 s reaction, 4 Hz)."""
-    return reaction_s + 1.5 * period_s
-
-
-def make_predictor(name: AlgorithmName, *, seed: int = 0, horizon_s: float = 0.875
+def make_predictor(name: AlgorithmName, *, seed: int = 0, horizon_s: float = PAPER_HORIZON_S
                    ) -> Predictor:
     if name == "basic":
         return Basic()

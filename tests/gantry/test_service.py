@@ -61,12 +61,15 @@ class CraneRig:
 
 
 @pytest.fixture
-def rig(tmp_path: Path, make_bus: Callable[..., Bus]) -> Iterator[dict]:
+def rig(request: pytest.FixtureRequest, tmp_path: Path, make_bus: Callable[..., Bus]
+        ) -> Iterator[dict]:
+    """The gantry service against a CraneRig; ``indirect`` parameters: more settings."""
     heights = tmp_path / "flat.npz"
     HeightMap(np.full((3, 3), GROUND_MM, np.float32), -5000, -5000, 5000).save(heights)
     crane = CraneRig()
     settings = GantrySettings(crane_port=crane.port, height_map=heights,
-                              marker_height_mm=MARKER_MM, stale_after_s=0.6)
+                              marker_height_mm=MARKER_MM, stale_after_s=0.6,
+                              **getattr(request, "param", {}))
     node = Node("gantry", settings, make_bus())
     world = make_bus()
     setpoints: list[m.CraneSetpoint] = []
@@ -154,12 +157,10 @@ def test_offload_figures_follow_the_error(rig: dict) -> None:
     feeder.join()
 
 
-@pytest.mark.parametrize("after_report_s", [0.03, 0.15])
-def test_setpoints_go_out_a_fixed_time_after_the_controller_reports(
-        tmp_path: Path, make_bus: Callable[..., Bus], after_report_s: float) -> None:
-    heights = tmp_path / "flat.npz"
-    HeightMap(np.full((3, 3), GROUND_MM, np.float32), -5000, -5000, 5000).save(heights)
-    crane = CraneRig()
+@pytest.mark.parametrize("rig", [{"after_report_s": 0.03}, {"after_report_s": 0.15}],
+                         indirect=True)
+def test_setpoints_go_out_a_fixed_time_after_the_controller_reports(rig: dict) -> None:
+    crane, after_report_s = rig["crane"], rig["node"].settings.after_report_s
     ages: list[float] = []  # of the controller's report when a setpoint arrives
     write = crane.model.write_setpoint
 
@@ -168,18 +169,8 @@ def test_setpoints_go_out_a_fixed_time_after_the_controller_reports(
         write(now, x_mm, y_mm)
 
     crane.model.write_setpoint = recording  # type: ignore[method-assign]
-    node = Node("gantry", GantrySettings(crane_port=crane.port, height_map=heights,
-                                         marker_height_mm=MARKER_MM,
-                                         after_report_s=after_report_s), make_bus())
-    thread = threading.Thread(target=run, args=(node,), daemon=True)
-    thread.start()
-    try:
-        start = np.array([-300.0, 0.0])
-        _feed({"crane": crane, "world": make_bus()}, lambda t: start + [120.0 * t, 0.0], 6.0)
-    finally:
-        node.stop.set()
-        thread.join(5)
-        crane.close()
+    start = np.array([-300.0, 0.0])
+    _feed(rig, lambda t: start + [120.0 * t, 0.0], 6.0)
     settled = np.array(ages[-12:])
     assert len(ages) >= 18, ages
     # polled at 40 Hz: a new report is seen within 25 ms; plus Modbus and the tick's own work
