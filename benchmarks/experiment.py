@@ -21,8 +21,10 @@ from typing import Any
 
 import numpy as np
 
-import services.gantry.experiment as experiment
+import services.gantry.control as control
+from services.experiment import gantry as experiment
 from services.gantry.predict import ALGORITHMS
+from services.gantry.settings import GantrySettings
 from services.sim.lab import Lab
 from services.sim.robots import MARKER_HEIGHT_MM
 
@@ -57,14 +59,15 @@ def profile_walker(crater: Path) -> dict[str, float]:
                 spent[what] += time.perf_counter() - t
         return wrapper
 
-    render, detect = Lab.tracking_frame, experiment.detect
+    render, detect = Lab.tracking_frame, control.detect
     Lab.tracking_frame = timed("render", render)  # type: ignore[method-assign]
-    experiment.detect = timed("detect", detect)
+    control.detect = timed("detect", detect)
+    settings = experiment.gantry_for(GantrySettings(), "default", seed=1,
+                                     marker_height_mm=MARKER_HEIGHT_MM["walker"])
     try:
-        r = experiment.run(experiment.make_lab("walker", 1, crater), "default",
-                           marker_height_mm=MARKER_HEIGHT_MM["walker"], seed=1)
+        r = experiment.run(experiment.make_lab("walker", 1, crater), settings)
     finally:
-        Lab.tracking_frame, experiment.detect = render, detect  # type: ignore[method-assign]
+        Lab.tracking_frame, control.detect = render, detect  # type: ignore[method-assign]
     return {"wall_s": round(r.wall_s, 3), "render_s": round(spent["render"], 3),
             "detect_s": round(spent["detect"], 3),
             "rest_s": round(r.wall_s - spent["render"] - spent["detect"], 3)}

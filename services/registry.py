@@ -53,8 +53,8 @@ TOOLS: dict[str, ServiceInfo] = {
                           "stb report IN.mcap --out DIR", "", "services.report.cli"),
     "config": ServiceInfo("check a lab config file: stb config check --lab FILE", ""),
     "experiment": ServiceInfo("the paper's gantry experiments on a simulated clock: "
-                              "stb experiment gantry --scenario locomotive --algorithm all", "",
-                              "services.gantry.experiment_cli"),
+                              "stb experiment gantry --scenario walker | identify", "",
+                              "services.experiment.cli"),
     "detect": ServiceInfo("find markers in image files (paper §2.1): stb detect IMAGE --json",
                           "", "services.detect_cli"),
 }

@@ -11,6 +11,7 @@ import socket
 import struct
 import threading
 from dataclasses import dataclass
+from typing import Protocol
 
 from pymodbus.client import ModbusTcpClient
 from pymodbus.exceptions import ModbusException
@@ -54,6 +55,31 @@ class CraneReading:
         return bool(self.faults & r.FAULT_WATCHDOG)
 
 
+def reading_from(v: list[int]) -> CraneReading:
+    """The controller's input registers (from address 0) as a reading."""
+    def i32(at: int) -> float:
+        return float(r.registers_to_int32(v[at], v[at + 1]))
+
+    return CraneReading(i32(r.IR_ACTUAL_X), i32(r.IR_ACTUAL_Y), i32(r.IR_VELOCITY_X),
+                        i32(r.IR_VELOCITY_Y), v[r.IR_STATUS], v[r.IR_FAULTS],
+                        i32(r.IR_TARGET_X), i32(r.IR_TARGET_Y))
+
+
+class Crane(Protocol):
+    """The crane controller as the gantry uses it: the Modbus driver here, a simulated one in
+    the experiments. Every method raises ``CraneError`` when the controller cannot be used."""
+
+    def read(self) -> CraneReading: ...
+
+    def enable(self) -> None: ...
+
+    def disable(self) -> None: ...
+
+    def write_setpoint(self, x_mm: float, y_mm: float) -> None: ...
+
+    def heartbeat(self) -> None: ...
+
+
 class ModbusCrane:
     def __init__(self, host: str, port: int, timeout_s: float = 0.5) -> None:
         self.host, self.port = host, port
@@ -78,14 +104,7 @@ class ModbusCrane:
     def read(self) -> CraneReading:
         with self._lock:
             reply = self._call(lambda: self._client.read_input_registers(0, count=r.IR_COUNT))
-        v = reply.registers
-
-        def i32(at: int) -> float:
-            return float(r.registers_to_int32(v[at], v[at + 1]))
-
-        return CraneReading(i32(r.IR_ACTUAL_X), i32(r.IR_ACTUAL_Y), i32(r.IR_VELOCITY_X),
-                            i32(r.IR_VELOCITY_Y), v[r.IR_STATUS], v[r.IR_FAULTS],
-                            i32(r.IR_TARGET_X), i32(r.IR_TARGET_Y))
+        return reading_from(reply.registers)
 
     def close(self) -> None:
         with self._lock:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from typing import Protocol
 
 import cv2
 import numpy as np
@@ -15,6 +16,14 @@ from common import messages as m
 
 log = logging.getLogger(__name__)
 Frame = tuple[float, np.ndarray]  # (capture time, gray uint8 image)
+
+
+class FrameSource(Protocol):
+    """Where the tracking camera's frames come from: the bus, a camera on this host, or the
+    sim's camera in the experiments."""
+
+    def take(self) -> Frame | None:
+        """The newest frame not taken yet, or None."""
 
 
 class FrameInbox:

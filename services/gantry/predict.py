@@ -65,7 +65,12 @@ class Basic:
 
 @dataclass
 class ParticleFilter:
-    """Eq. 11–12. Particles carry a position and the (noisy) velocity they were moved with."""
+    """Eq. 11–12. Each particle is a position and its own velocity (eq. 11's v_i); moving it
+    adds Gaussian noise to that velocity (v_n), which the particle keeps. Weighting by the
+    distance to the measurement (eq. 12, or a Gaussian) and resampling keep the particles —
+    and so the velocities — that predicted well: the weighted mean velocity is the filtered
+    velocity of ``pf-velocity``, the mean of the moved particles the desired position of
+    ``pf-position`` (docs/experiments.md: why this reading of eq. 11)."""
 
     name: AlgorithmName = "pf-position"
     output: Literal["position", "velocity"] = "position"
@@ -89,29 +94,30 @@ class ParticleFilter:
             return None
         z = np.asarray(measured, dtype=float)
         if self._pos is None or self._last is None or t_s <= self._last[0]:
-            self._pos = z + self._rng.normal(0.0, 1.0, (self.particles, 2))
-            self._vel = np.zeros((self.particles, 2))
-            self._last = (t_s, z)
-            return Estimate(z, np.zeros(2), z)
+            return self._start(t_s, z, np.zeros(2))
+        assert self._vel is not None
         dt = t_s - self._last[0]
         v_measured = (z - self._last[1]) / dt  # eq. 9
         self._last = (t_s, z)
         weights = self._weights(np.hypot(*(self._pos - z).T))
         if weights is None:  # every belief is far off: start again from the measurement
-            self._pos = None
-            return self.update(t_s, z)
-        assert self._vel is not None
+            return self._start(t_s, z, v_measured)
         v_filtered = weights @ self._vel
         keep = systematic_resample(weights, self._rng)
-        self._pos = self._pos[keep]
+        self._pos, self._vel = self._pos[keep], self._vel[keep]
         current = self._pos.mean(axis=0)
-        # eq. 11: move each particle with the measured velocity plus its own noise
-        self._vel = v_measured + self._rng.normal(0.0, self.velocity_noise_mm_s,
-                                                  (self.particles, 2))
-        self._pos = self._pos + self._vel * dt
+        self._vel = self._vel + self._rng.normal(0.0, self.velocity_noise_mm_s, self._vel.shape)
+        self._pos = self._pos + self._vel * dt  # eq. 11
         if self.output == "velocity":
-            return Estimate(z, v_filtered, z + v_filtered * dt)
-        return Estimate(current, v_measured, self._pos.mean(axis=0))
+            return Estimate(z, v_filtered, z + v_filtered * dt)  # eq. 10
+        return Estimate(current, v_filtered, self._pos.mean(axis=0))
+
+    def _start(self, t_s: float, z: np.ndarray, velocity: np.ndarray) -> Estimate:
+        self._pos = z + self._rng.normal(0.0, 1.0, (self.particles, 2))
+        self._vel = velocity + self._rng.normal(0.0, self.velocity_noise_mm_s,
+                                                (self.particles, 2))
+        self._last = (t_s, z)
+        return Estimate(z, velocity, z.copy())
 
     def _weights(self, distance: np.ndarray) -> np.ndarray | None:
         if self.model == "linear":
@@ -197,16 +203,28 @@ def systematic_resample(weights: np.ndarray, rng: np.random.Generator) -> np.nda
     return np.searchsorted(cumulative, positions)
 
 
-def make_predictor(name: AlgorithmName, *, seed: int = 0, horizon_s: float = PAPER_HORIZON_S
-                   ) -> Predictor:
+@dataclass(frozen=True)
+class ParticleOptions:
+    """The paper's particle filters' own parameters (not given in the paper)."""
+
+    particles: int = 500
+    velocity_noise_mm_s: float = 40.0
+    diff_max_mm: float = 300.0
+
+
+def make_predictor(name: AlgorithmName, *, seed: int = 0, horizon_s: float = PAPER_HORIZON_S,
+                   particle: ParticleOptions = ParticleOptions()) -> Predictor:
+    pf = {"particles": particle.particles, "seed": seed,
+          "velocity_noise_mm_s": particle.velocity_noise_mm_s,
+          "diff_max_mm": particle.diff_max_mm}
     if name == "basic":
         return Basic()
     if name == "pf-position":
-        return ParticleFilter(name, "position", "linear", seed=seed)
+        return ParticleFilter(name, "position", "linear", **pf)
     if name == "pf-position-gauss":
-        return ParticleFilter(name, "position", "gauss", seed=seed)
+        return ParticleFilter(name, "position", "gauss", **pf)
     if name == "pf-velocity":
-        return ParticleFilter(name, "velocity", "linear", seed=seed)
+        return ParticleFilter(name, "velocity", "linear", **pf)
     if name == "default":
         return KalmanPredictor(horizon_s=horizon_s)
     raise ValueError(f"unknown algorithm {name!r}; choose one of {', '.join(ALGORITHMS)}")

@@ -22,34 +22,33 @@ import numpy as np
 from common import keys
 from common import messages as m
 from common.heightmap import HeightMap
-from common.markers import closest, detect, to_message, warm_up
+from common.markers import to_message, warm_up
 from common.node import Node, StartupError, run_every
+from services.gantry.control import Controller, Step
 from services.gantry.crane import CraneError, CraneReading, ModbusCrane
-from services.gantry.cycle import CycleSync
-from services.gantry.frames import FrameInbox, OpenCvFrames, decode
-from services.gantry.locate import TrackingOptics, locate
+from services.gantry.frames import FrameInbox, FrameSource, OpenCvFrames, decode
+from services.gantry.loop import GantryLoop
 from services.gantry.offload import offload
-from services.gantry.predict import Estimate, make_predictor, prediction_horizon
-from services.gantry.safety import SetpointGuard, Workspace
 from services.gantry.settings import GantrySettings
 
 log = logging.getLogger(__name__)
 
 
-def run(node: Node, crane: ModbusCrane | None = None) -> None:
+def run(node: Node) -> None:
     s: GantrySettings = node.settings  # type: ignore[assignment]
     try:
         heights = HeightMap.load(s.height_map)
     except ValueError as err:
         raise StartupError(f"gantry.height_map: {err}") from err
     log.info("detector ready (%.1f s)", warm_up())  # before the crane is driven, not mid-run
-    crane = crane or ModbusCrane(s.crane_host, s.crane_port, s.crane_timeout_s)
+    crane = ModbusCrane(s.crane_host, s.crane_port, s.crane_timeout_s)
+    frames: FrameSource
     if s.frames == "bus":
-        inbox = FrameInbox()
+        inbox = frames = FrameInbox()
         node.bus.subscribe(keys.GANTRY_FRAME, lambda msg: _put(inbox, msg))
     else:
-        inbox = OpenCvFrames(s.frames.removeprefix("opencv:"), node.stop)
-    control = Control(node, s, crane, heights, inbox)
+        frames = OpenCvFrames(s.frames.removeprefix("opencv:"), node.stop)
+    control = Control(node, s, GantryLoop(s, crane, frames, Controller(s, heights)))
     threading.Thread(target=run_every, args=(1 / s.heartbeat_hz, node.stop, control.heartbeat,
                                              "heartbeat"), name="heartbeat", daemon=True).start()
     try:
@@ -65,25 +64,13 @@ def _put(inbox: FrameInbox, msg: m.CameraFrame) -> None:
 
 
 class Control:
-    def __init__(self, node: Node, s: GantrySettings, crane: ModbusCrane, heights: HeightMap,
-                 frames: FrameInbox) -> None:
-        self.node, self.s, self.crane, self.heights, self.frames = node, s, crane, heights, frames
-        self.optics = TrackingOptics(s.focal_mm, s.pixel_mm, s.ref_u, s.ref_v,
-                                     s.lens_height_mm)
-        self.predictor = make_predictor(s.algorithm, seed=s.seed,
-                                        horizon_s=min(prediction_horizon(
-                                            s.reaction_s, 1 / s.control_hz), s.max_horizon_s))
-        self.guard = SetpointGuard(
-            Workspace(s.x_min_mm, s.x_max_mm, s.y_min_mm, s.y_max_mm, s.workspace_margin_mm),
-            s.max_speed_mm_s, s.max_accel_mm_s2, s.stale_after_s)
-        self.estimate: Estimate | None = None
-        self.estimate_s: float | None = None
-        self.last_pixel: tuple[float, float] | None = None
+    """The loop on real time, and what it publishes."""
+
+    def __init__(self, node: Node, s: GantrySettings, loop: GantryLoop) -> None:
+        self.node, self.s, self.loop = node, s, loop
         self.seq = 0
-        self.reachable = True
         self.offload_warned = False
         self.last_tick = time.monotonic()
-        self.sync = CycleSync(1 / s.control_hz, s.after_report_s)
 
     def heartbeat(self) -> None:
         """Only while the control loop is alive: a stuck or failing loop stops the heartbeat,
@@ -91,54 +78,43 @@ class Control:
         if time.monotonic() - self.last_tick > 2.5 / self.s.control_hz:
             return
         with contextlib.suppress(CraneError):  # the control loop reports it
-            self.crane.heartbeat()
+            self.loop.crane.heartbeat()
 
     def poll(self) -> None:
-        """Read the controller's report; tick when due (``CycleSync``)."""
-        polled = time.monotonic()
-        try:
-            reading = self.crane.read()
-        except CraneError as err:
-            if self.sync.due(polled):
-                self._unreachable(time.time(), err)
+        tick = self.loop.poll(time.time(), time.monotonic())
+        if tick is None:
             return
-        self.sync.observe(polled, (reading.x_mm, reading.y_mm))
-        if self.sync.due(polled):
-            self.tick(reading)
-
-    def tick(self, reading: CraneReading) -> None:
-        now = time.time()
-        try:
-            if not reading.enabled:
-                log.info("crane not enabled (faults %#x): enabling", reading.faults)
-                self.guard.reset()
-                self.crane.enable()
-        except CraneError as err:
-            self._unreachable(now, err)
+        if tick.step is None or tick.reading is None:
+            self._unreachable(tick.now_s, str(tick.error))
             return
-        if not self.reachable:
-            log.info("crane controller reachable again")
-            self.reachable = True
-        crane_xy = np.array([reading.x_mm, reading.y_mm])
-        frame = self.frames.take()
-        if frame is not None:
-            self._measure(frame, crane_xy)
-        decision = self.guard.decide(now, None if self.estimate is None else
-                                     self.estimate.desired, self.estimate_s, crane_xy)
-        try:
-            self.crane.write_setpoint(*decision.setpoint)
-        except CraneError as err:
-            self._unreachable(now, err)
-            return
-        self.seq += 1
         self.last_tick = time.monotonic()
+        self._publish(tick.now_s, tick.step, tick.reading)
+
+    def _publish(self, now: float, step: Step, reading: CraneReading) -> None:
+        if step.detection is not None and step.frame_s is not None:
+            height, width = step.frame_shape
+            self.node.bus.publish(keys.GANTRY_DETECTIONS, to_message(
+                step.detection, "tracking", step.frame_s, width, height))
+            self._estimate(step)
+        self.seq += 1
         self.node.bus.publish(keys.GANTRY_SETPOINT, m.CraneSetpoint(
-            measured_s=now, seq=self.seq, x_mm=float(decision.setpoint[0]),
-            y_mm=float(decision.setpoint[1]), hold=decision.hold))
-        self.node.set_status("degraded" if decision.hold else "ok", decision.reason)
-        self._state(now, "holding" if decision.hold else "tracking", reading)
-        if self.estimate is not None and not decision.hold:
-            self._offload(now, float(np.hypot(*(self.estimate.position - crane_xy))))
+            measured_s=now, seq=self.seq, x_mm=float(step.setpoint[0]),
+            y_mm=float(step.setpoint[1]), hold=step.hold))
+        self.node.set_status("degraded" if step.hold else "ok", step.reason)
+        self._state(now, "holding" if step.hold else "tracking", reading)
+        if step.estimate is not None and not step.hold:
+            crane_xy = np.array([reading.x_mm, reading.y_mm])
+            self._offload(now, float(np.hypot(*(step.estimate.position - crane_xy))))
+
+    def _estimate(self, step: Step) -> None:
+        e, xyz = step.estimate, step.measured_xyz
+        assert step.frame_s is not None
+        self.node.bus.publish(keys.GANTRY_ESTIMATE, m.RobotEstimate(
+            measured_s=step.frame_s, algorithm=self.s.algorithm, valid=e is not None,
+            x_mm=float(e.position[0]) if e else 0.0, y_mm=float(e.position[1]) if e else 0.0,
+            z_mm=0.0 if xyz is None else float(xyz[2]),
+            vx_mm_s=float(e.velocity[0]) if e else 0.0,
+            vy_mm_s=float(e.velocity[1]) if e else 0.0))
 
     def _offload(self, now: float, error_mm: float) -> None:
         o = offload(error_mm, self.s.cable_length_mm, self.s.offload_warn_pct)
@@ -151,38 +127,8 @@ class Control:
             cable_length_mm=self.s.cable_length_mm, vertical_loss_pct=o.vertical_loss_pct,
             horizontal_share_pct=o.horizontal_share_pct, warning=o.warning))
 
-    def _measure(self, frame: tuple[float, np.ndarray], crane_xy: np.ndarray) -> None:
-        captured, image = frame
-        result = detect(image, max_markers=20)
-        height, width = image.shape
-        self.node.bus.publish(keys.GANTRY_DETECTIONS,
-                              to_message(result, "tracking", captured, width, height))
-        marker = None
-        if result.markers:
-            ref = self.last_pixel or (self.optics.ref_u, self.optics.ref_v)
-            marker = closest(result.markers, *ref)
-        measured = None
-        if marker is not None:
-            self.last_pixel = (marker.u, marker.v)
-            xyz = locate(marker.u, marker.v, crane_xy, self.optics, self.heights,
-                         self.s.marker_height_mm)
-            measured = xyz[:2]
-        self.estimate = self.predictor.update(captured, measured)
-        self.estimate_s = captured if self.estimate is not None else None
-        e = self.estimate
-        z = 0.0 if measured is None else float(xyz[2])
-        self.node.bus.publish(keys.GANTRY_ESTIMATE, m.RobotEstimate(
-            measured_s=captured, algorithm=self.s.algorithm, valid=e is not None,
-            x_mm=float(e.position[0]) if e else 0.0, y_mm=float(e.position[1]) if e else 0.0,
-            z_mm=z, vx_mm_s=float(e.velocity[0]) if e else 0.0,
-            vy_mm_s=float(e.velocity[1]) if e else 0.0))
-
-    def _unreachable(self, now: float, err: CraneError) -> None:
-        self.guard.reset()  # the crane may have stopped meanwhile: start afresh when it is back
-        if self.reachable:
-            log.warning("%s", err)
-        self.reachable = False
-        self.node.set_status("degraded", str(err))
+    def _unreachable(self, now: float, error: str) -> None:
+        self.node.set_status("degraded", error)
         self.node.bus.publish(keys.GANTRY_STATE, m.CraneState(
             measured_s=now, status="unreachable", x_mm=0.0, y_mm=0.0, target_x_mm=0.0,
             target_y_mm=0.0, enabled=False, moving=False, fault_bits=0))

@@ -4,11 +4,27 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pydantic import Field, ValidationInfo, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
 
 from common.settings import ServiceSettings
 from services.gantry.cycle import AFTER_REPORT_S
-from services.gantry.predict import AlgorithmName
+from services.gantry.predict import AlgorithmName, ParticleOptions
+
+_PF = ParticleOptions()
+
+
+class ParticleFilterSettings(BaseModel):
+    """The paper's particle filters (``pf-*``, eq. 11–12): their own parameters, which the
+    paper does not give (docs/experiments.md: identified with the sim)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    particles: int = Field(_PF.particles, ge=10, le=100_000)
+    velocity_noise_mm_s: float = Field(_PF.velocity_noise_mm_s, gt=0, le=10_000,
+                                       description="eq. 11's v_n (standard deviation)")
+    diff_max_mm: float = Field(_PF.diff_max_mm, gt=0, le=100_000, description="eq. 12")
+
+    def options(self) -> ParticleOptions:
+        return ParticleOptions(**self.model_dump())
 
 
 class GantrySettings(ServiceSettings):
@@ -44,6 +60,7 @@ class GantrySettings(ServiceSettings):
     max_speed_mm_s: float = Field(450.0, gt=0, description="setpoint motion limit")
     max_accel_mm_s2: float = Field(550.0, gt=0)
     seed: int = 0
+    particle_filter: ParticleFilterSettings = ParticleFilterSettings()
     cable_length_mm: float = Field(2000.0, gt=0, description="gravity-offload cable")
     offload_warn_pct: float = Field(5.0, gt=0, le=100, description="warn above this sideways "
                                     "share of the cable's pull")

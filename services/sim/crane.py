@@ -1,16 +1,24 @@
 """The gantry crane as its controller behaves (pure, on an injected time; fixed 5 ms steps).
 
-* The controller samples the setpoint registers once per cycle (4 Hz); a sampled setpoint
-  becomes the motion target ``reaction_s`` (0.5 s) later — the paper's measured delay.
-* Each axis moves towards its target with velocity and acceleration limits and never leaves
-  the workspace; setpoints outside it are clamped and flagged.
+* The controller runs a cycle of ``cycle_s`` (4 Hz, paper §3.2). At each cycle it samples the
+  setpoint registers; a sampled setpoint becomes the axes' target ``dead_time_s`` later.
+* Each axis has a position loop: it runs towards its target at the target's distance divided
+  by ``position_time_constant_s`` (0: as fast as the limits allow), within its speed and
+  acceleration limits and the workspace; setpoints outside it are clamped and flagged.
+* At each cycle the controller also publishes the position it has from the drives — measured
+  ``report_latency_s`` earlier, give or take ``report_jitter_s / 2`` (the paper: "the delay and
+  exact time of measurement of the gantry crane is roughly known").
 * Watchdog: while enabled, if neither a setpoint write nor a heartbeat change arrives for
   ``watchdog_s``, the crane brakes to a stop, disables itself and latches a fault. It moves
   again only after a fault reset and a new enable.
+
+Parameter values and where they come from: docs/experiments.md (identified against the
+paper's Tables 3–4 with ``stb experiment identify``) and docs/devices.md.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -27,7 +35,8 @@ from common.crane_registers import (  # noqa: F401 - its users import the bits f
 )
 
 STEP_S = 0.005
-
+HISTORY_S = 2.0
+"""How far back ``position_at`` can look: report latency and jitter, a tracking frame's age."""
 
 
 @dataclass(frozen=True)
@@ -38,9 +47,18 @@ class CraneParams:
     y_max_mm: float = 3000.0
     max_speed_mm_s: float = 500.0
     max_accel_mm_s2: float = 2500.0
-    reaction_s: float = 0.5
     cycle_s: float = 0.25
+    dead_time_s: float = 0.1
+    position_time_constant_s: float = 0.0
+    report_latency_s: float = 0.0
+    report_jitter_s: float = 0.0
     watchdog_s: float = 0.5
+
+    @property
+    def reaction_s(self) -> float:
+        """How long after a setpoint is written the crane follows it, on average: half a
+        cycle until it is sampled, the dead time, the position loop's lag on a ramp."""
+        return 0.5 * self.cycle_s + self.dead_time_s + self.position_time_constant_s
 
     def clamp(self, x_mm: float, y_mm: float) -> tuple[float, float, bool]:
         cx = min(max(x_mm, self.x_min_mm), self.x_max_mm)
@@ -51,36 +69,70 @@ class CraneParams:
 @dataclass
 class CraneModel:
     params: CraneParams = CraneParams()
-    position: np.ndarray = field(default_factory=lambda: np.zeros(2))
-    velocity: np.ndarray = field(default_factory=lambda: np.zeros(2))
-    target: np.ndarray | None = None
+    rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
+    """Draws the report's timing jitter."""
     enabled: bool = False
     faults: int = 0
     heartbeat: int = 0
     setpoints_taken: int = 0
+    reported_s: float = 0.0
+    """When the position the controller reports now was measured."""
+    published_s: float = 0.0
+    """When the controller published it (its last cycle)."""
+    _p: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    _v: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    _target: list[float] | None = None
     _written: tuple[float, float] | None = None  # setpoint registers as last written
     _last_activity: float = 0.0
-    _pending: list[tuple[float, np.ndarray]] = field(default_factory=list)
+    _pending: list[tuple[int, tuple[float, float]]] = field(default_factory=list)
     _step: int = 0
     _next_cycle_step: int = 0  # in whole steps: the cycle does not drift with rounding
-    reported: np.ndarray = field(default_factory=lambda: np.zeros(2))
-    """Position as the controller reports it: measured once per cycle (4 Hz), like a PLC's
-    process image — up to one cycle old when read (the paper: the crane's time of
-    measurement is only roughly known)."""
-    reported_velocity: np.ndarray = field(default_factory=lambda: np.zeros(2))
-    reported_s: float = 0.0  # when ``reported`` was measured
+    _reported: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  # x, y, vx, vy
+    _history: list[tuple[float, float, float, float]] = field(init=False)
+    """(x, y, vx, vy) at the end of step i, at [i % its length]."""
+
+    def __post_init__(self) -> None:
+        self._history = [(0.0, 0.0, 0.0, 0.0)] * int(round(HISTORY_S / STEP_S))
 
     @property
     def time(self) -> float:
         return self._step * STEP_S
 
+    @property
+    def position(self) -> np.ndarray:
+        return np.array(self._p)
+
+    @property
+    def velocity(self) -> np.ndarray:
+        return np.array(self._v)
+
+    @property
+    def target(self) -> np.ndarray | None:
+        return None if self._target is None else np.array(self._target)
+
+    @property
+    def reported(self) -> np.ndarray:
+        """Position as the controller reports it (published once per cycle, like a PLC's
+        process image; measured ``report_latency_s`` ± jitter before)."""
+        return np.array(self._reported[:2])
+
+    @property
+    def reported_velocity(self) -> np.ndarray:
+        return np.array(self._reported[2:])
+
     def place(self, x_mm: float, y_mm: float) -> None:
         """Start at rest at (x, y), clamped to the travel, and report it from the start
         (not (0, 0) until the first cycle)."""
         x, y, _ = self.params.clamp(x_mm, y_mm)
-        self.position = np.array([x, y], dtype=float)
-        self.velocity = np.zeros(2)
-        self.reported, self.reported_velocity = self.position.copy(), self.velocity.copy()
+        self._p, self._v = [x, y], [0.0, 0.0]
+        self._reported = (x, y, 0.0, 0.0)
+        self._history = [(x, y, 0.0, 0.0)] * len(self._history)
+
+    def position_at(self, t: float) -> np.ndarray:
+        """Where the crane was at ``t`` (at most ``HISTORY_S`` ago; clamped to that)."""
+        step = min(max(int(round(t / STEP_S)), self._step - len(self._history) + 1, 0),
+                   self._step)
+        return np.array(self._history[step % len(self._history)][:2])
 
     # --- register writes -----------------------------------------------------------------
 
@@ -104,18 +156,19 @@ class CraneModel:
                 self._last_activity = now
                 self._pending.clear()
                 self._written = None
-                self.target = None
+                self._target = None
             self.enabled = True
         elif not value & CONTROL_ENABLE:
             self.enabled = False
-            self.target = self.position.copy()
+            self._target = list(self._p)
 
     # --- time ----------------------------------------------------------------------------
 
     def advance_to(self, now: float) -> None:
-        while (self._step + 1) * STEP_S <= now + 1e-12:
+        last = int(math.floor(now / STEP_S + 1e-9))
+        while self._step < last:
             self._step += 1
-            self._tick(self.time)
+            self._tick(self._step * STEP_S)
 
     def _tick(self, t: float) -> None:
         p = self.params
@@ -123,45 +176,63 @@ class CraneModel:
             self.enabled = False
             self.faults |= FAULT_WATCHDOG
             self._pending.clear()
-            self.target = None  # brake to a stop
+            self._target = None  # brake to a stop
         if self._step >= self._next_cycle_step:
-            self._next_cycle_step = self._step + max(1, round(p.cycle_s / STEP_S))
-            self.reported, self.reported_velocity = self.position.copy(), self.velocity.copy()
-            self.reported_s = t
-            if self.enabled and self._written is not None:
-                x, y, clamped = p.clamp(*self._written)
-                self.faults = (self.faults | FAULT_CLAMPED) if clamped else (
-                    self.faults & ~FAULT_CLAMPED)
-                self._pending.append((t + p.reaction_s, np.array([x, y])))
-                self.setpoints_taken += 1
-        while self._pending and self._pending[0][0] <= t:
-            self.target = self._pending.pop(0)[1]
+            self._cycle(t)
+        while self._pending and self._pending[0][0] <= self._step:
+            self._target = list(self._pending.pop(0)[1])
         self._move()
+        p, v = self._p, self._v
+        self._history[self._step % len(self._history)] = (p[0], p[1], v[0], v[1])
+
+    def _cycle(self, t: float) -> None:
+        p = self.params
+        self._next_cycle_step = self._step + max(1, round(p.cycle_s / STEP_S))
+        age = p.report_latency_s
+        if p.report_jitter_s > 0:
+            age += self.rng.uniform(-0.5, 0.5) * p.report_jitter_s
+        # the state at the end of step i is history[i]; this step has not moved yet
+        measured = max(self._step - max(int(round(age / STEP_S)), 1),
+                       self._step - len(self._history) + 1)
+        self._reported = self._history[measured % len(self._history)]
+        self.reported_s, self.published_s = measured * STEP_S, t
+        if self.enabled and self._written is not None:
+            x, y, clamped = p.clamp(*self._written)
+            self.faults = (self.faults | FAULT_CLAMPED) if clamped else (
+                self.faults & ~FAULT_CLAMPED)
+            self._pending.append((self._step + int(round(p.dead_time_s / STEP_S)), (x, y)))
+            self.setpoints_taken += 1
 
     def _move(self) -> None:
         p = self.params
         dv_max = p.max_accel_mm_s2 * STEP_S
-        if self.target is None or not self.enabled:
-            desired = np.zeros(2)  # brake
-        else:
-            error = self.target - self.position
-            reachable = np.sqrt(2 * p.max_accel_mm_s2 * np.abs(error))
-            desired = np.sign(error) * np.minimum(p.max_speed_mm_s, reachable)
-            close = np.abs(error) < 0.5 * dv_max * STEP_S + 1e-9
-            desired[close] = error[close] / STEP_S
-        self.velocity += np.clip(desired - self.velocity, -dv_max, dv_max)
-        self.position += self.velocity * STEP_S
-        low = np.array([p.x_min_mm, p.y_min_mm])
-        high = np.array([p.x_max_mm, p.y_max_mm])
-        outside = (self.position < low) | (self.position > high)
-        self.position = np.clip(self.position, low, high)
-        self.velocity[outside] = 0.0
+        braking = self._target is None or not self.enabled
+        for axis, low, high in ((0, p.x_min_mm, p.x_max_mm), (1, p.y_min_mm, p.y_max_mm)):
+            pos, vel = self._p[axis], self._v[axis]
+            desired = 0.0 if braking else _desired_speed(
+                self._target[axis] - pos, p, dv_max)  # type: ignore[index]
+            vel += min(max(desired - vel, -dv_max), dv_max)
+            pos += vel * STEP_S
+            if pos < low or pos > high:
+                pos, vel = min(max(pos, low), high), 0.0
+            self._p[axis], self._v[axis] = pos, vel
 
     # --- what the controller reports ---------------------------------------------------------
 
     def status(self) -> int:
-        moving = bool(np.any(np.abs(self.velocity) > 0.5))
-        at_target = self.target is not None and bool(
-            np.all(np.abs(self.target - self.position) < 1.0))
+        moving = abs(self._v[0]) > 0.5 or abs(self._v[1]) > 0.5
+        at_target = self._target is not None and all(
+            abs(self._target[i] - self._p[i]) < 1.0 for i in (0, 1))
         return ((ENABLED if self.enabled else 0) | (MOVING if moving else 0)
                 | (AT_TARGET if at_target else 0) | (FAULTED if self.faults else 0))
+
+
+def _desired_speed(error: float, p: CraneParams, dv_max: float) -> float:
+    """The position loop's speed towards a target ``error`` mm away: proportional (or flat
+    out), never faster than the limit nor than it can brake within the distance left."""
+    if abs(error) < 0.5 * dv_max * STEP_S + 1e-9:
+        return error / STEP_S
+    limit = min(p.max_speed_mm_s, math.sqrt(2 * p.max_accel_mm_s2 * abs(error)))
+    tau = p.position_time_constant_s
+    speed = abs(error) / tau if tau > 0 else limit
+    return math.copysign(min(speed, limit), error)

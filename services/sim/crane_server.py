@@ -17,6 +17,8 @@ from common.crane_registers import (
     HR_CONTROL,
     HR_COUNT,
     HR_HEARTBEAT,
+    HR_SETPOINT_X,
+    HR_SETPOINT_Y,
     IR_COUNT,
     int32_to_registers,
     registers_to_int32,
@@ -61,27 +63,34 @@ class CraneServer:
             if function_code in _WRITE_CODES and values is not None:
                 after = list(registers)
                 after[address - start: address - start + len(values)] = [int(v) for v in values]
-                self._written(now, address, len(values), after)
+                write_holding(self.model, now, address, len(values), after)
             elif function_code == _READ_INPUT:
                 self.model.advance_to(now)
-                registers[:IR_COUNT] = self._input_registers()
+                registers[:IR_COUNT] = input_registers(self.model)
         return None
 
-    def _written(self, now: float, address: int, count: int, hr: list[int]) -> None:
-        touched = set(range(address, address + count))
-        if touched & {0, 1, 2, 3}:
-            self.model.write_setpoint(now, registers_to_int32(hr[0], hr[1]),
-                                      registers_to_int32(hr[2], hr[3]))
-        if HR_CONTROL in touched:
-            self.model.write_control(now, hr[HR_CONTROL])
-        if HR_HEARTBEAT in touched:
-            self.model.write_heartbeat(now, hr[HR_HEARTBEAT])
 
-    def _input_registers(self) -> list[int]:
-        m = self.model
-        target = m.position if m.target is None else m.target
-        return (int32_to_registers(m.reported[0]) + int32_to_registers(m.reported[1])
-                + int32_to_registers(m.reported_velocity[0])
-                + int32_to_registers(m.reported_velocity[1])
-                + [m.status(), m.faults, m.heartbeat & 0xFFFF, m.setpoints_taken & 0xFFFF]
-                + int32_to_registers(target[0]) + int32_to_registers(target[1]))
+
+def write_holding(model: CraneModel, now: float, address: int, count: int,
+                  holding: list[int]) -> None:
+    """Play a write of ``count`` holding registers at ``address`` (``holding``: all of them,
+    as they are after the write) against the model."""
+    touched = set(range(address, address + count))
+    if touched & {HR_SETPOINT_X, HR_SETPOINT_X + 1, HR_SETPOINT_Y, HR_SETPOINT_Y + 1}:
+        model.write_setpoint(now, registers_to_int32(*holding[HR_SETPOINT_X:HR_SETPOINT_X + 2]),
+                             registers_to_int32(*holding[HR_SETPOINT_Y:HR_SETPOINT_Y + 2]))
+    if HR_CONTROL in touched:
+        model.write_control(now, holding[HR_CONTROL])
+    if HR_HEARTBEAT in touched:
+        model.write_heartbeat(now, holding[HR_HEARTBEAT])
+
+
+def input_registers(model: CraneModel) -> list[int]:
+    """The input registers as the controller reports the model's state now."""
+    target = model.position if model.target is None else model.target
+    reported, velocity = model.reported, model.reported_velocity
+    return (int32_to_registers(reported[0]) + int32_to_registers(reported[1])
+            + int32_to_registers(velocity[0]) + int32_to_registers(velocity[1])
+            + [model.status(), model.faults, model.heartbeat & 0xFFFF,
+               model.setpoints_taken & 0xFFFF]
+            + int32_to_registers(target[0]) + int32_to_registers(target[1]))

@@ -7,16 +7,24 @@ seed, so the live servers (real time) and fast experiments (simulated time) see 
 from __future__ import annotations
 
 import logging
+import math
 import threading
 from dataclasses import dataclass
 
 import numpy as np
 
 from common.camera import Pose
-from services.sim.crane import CraneModel, CraneParams
+from services.sim.crane import CraneModel
 from services.sim.mocap_server import MocapFrame
 from services.sim.ptz import PtzHead
-from services.sim.render import MARKER_RADIUS_MM, Blob, Glint, TrackingCamera, draw
+from services.sim.render import (
+    MARKER_RADIUS_MM,
+    Blob,
+    Glint,
+    NoiseBank,
+    TrackingCamera,
+    draw,
+)
 from services.sim.robots import Trajectory, calibration, make_trajectory, railway_keep_clear
 from services.sim.settings import SimSettings
 from services.sim.world import CraterMap, CraterShape, generate_crater
@@ -56,6 +64,7 @@ class Lab:
     crane_lock: threading.Lock
     tracking: TrackingCamera
     wand: Trajectory
+    noise: NoiseBank
     robot_start_s: float | None = 0.0
     """Sim time the robot's scenario starts; None: the robot waits at its start while the
     calibration wand is carried through the cameras' view."""
@@ -64,14 +73,14 @@ class Lab:
     def build(cls, settings: SimSettings, crater: CraterMap | None = None) -> Lab:
         crater = crater if crater is not None else load_or_make_crater(settings)
         rng = np.random.default_rng(settings.seed)
-        trajectory = make_trajectory(settings.scenario, crater, rng)
+        trajectory = make_trajectory(settings.scenario, crater, rng,
+                                     railway=settings.locomotive.railway(),
+                                     walk=settings.walker.walk())
         wand = calibration(crater, np.random.default_rng((settings.seed, 11)),
                            speed_mm_s=settings.wand_speed_mm_s, dwell_s=settings.wand_dwell_s)
         waiting = settings.scenario == "calibration" or bool(settings.calibrate_first)
         c = settings.crane
-        params = CraneParams(c.x_min_mm, c.x_max_mm, c.y_min_mm, c.y_max_mm, c.max_speed_mm_s,
-                             c.max_accel_mm_s2, c.reaction_s, c.cycle_s, c.watchdog_s)
-        crane = CraneModel(params)
+        crane = CraneModel(c.params(), np.random.default_rng((settings.seed, 13)))
         crane.place(*trajectory.position(0.0)[:2])
         t = settings.tracking_camera
         area_m2 = (c.x_max_mm - c.x_min_mm) * (c.y_max_mm - c.y_min_mm) / 1e6
@@ -90,7 +99,9 @@ class Lab:
             crane=crane, crane_lock=threading.Lock(),
             tracking=TrackingCamera(t.focal_mm, t.pixel_mm, t.width_px, t.height_px,
                                     t.height_mm),
-            wand=wand, robot_start_s=None if waiting else 0.0)
+            wand=wand, noise=NoiseBank(t.noise, t.width_px, t.height_px,
+                                       np.random.default_rng((settings.seed, 17))),
+            robot_start_s=None if waiting else 0.0)
 
     # --- the robot ---------------------------------------------------------------------------
 
@@ -175,22 +186,32 @@ class Lab:
             self.crane.advance_to(t)
             return self.crane.position.copy(), self.crane.velocity.copy()
 
+    def newest_capture(self, now: float) -> tuple[int, float]:
+        """The newest tracking frame that has arrived by ``now`` (frames are taken at the
+        camera's rate and arrive ``delay_s`` after their exposure): its number and the time
+        its exposure ended."""
+        cam = self.settings.tracking_camera
+        number = math.floor((now - cam.delay_s) * cam.rate_hz + 1e-9)
+        return number, number / cam.rate_hz
+
     def tracking_frame(self, t: float, rng: np.random.Generator) -> np.ndarray:
-        """The downward tracking camera's image at ``t`` (uint8, height × width)."""
-        crane, _ = self.crane_state(t)
-        cam = self.tracking
-        blobs = []
+        """The downward tracking camera's frame whose exposure ends at ``t`` (uint8, height ×
+        width): everything that moves relative to the crane smears over the exposure. The
+        crane must have been advanced to ``t`` or later (``crane_state``)."""
+        cam, exposure = self.tracking, self.settings.tracking_camera.exposure_s
+        with self.crane_lock:
+            crane, crane_before = (self.crane.position_at(t),
+                                   self.crane.position_at(t - exposure))
         u, v, r = cam.pixel_of(self.robot(t), *crane)
-        blobs.append(Blob(u, v, r, r))
+        u0, v0, _ = cam.pixel_of(self.robot(t - exposure), *crane_before)
+        blobs = [Blob(u, v, r, r, smear_u=u - u0, smear_v=v - v0)]
         for g in self.ground_glints:
             gu, gv, scale = cam.pixel_of(np.array([g.x_mm, g.y_mm, g.z_mm]), *crane)
             if -50 < gu < cam.width_px + 50 and -50 < gv < cam.height_px + 50:
                 k = scale / MARKER_RADIUS_MM
                 blobs.append(Blob(gu, gv, max(g.long_mm * k, 1.5), max(g.short_mm * k, 0.6),
                                   g.angle_rad, 230.0))
-        return draw(blobs, cam.width_px, cam.height_px, rng,
-                    noise_sigma=self.settings.tracking_camera.noise)
-
+        return draw(blobs, cam.width_px, cam.height_px, rng, noise=self.noise)
 
 def _on_ground(crater: CraterMap, rng: np.random.Generator, count: int, r_min: float,
                r_max: float) -> np.ndarray:

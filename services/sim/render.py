@@ -26,6 +26,8 @@ class Blob:
     b_px: float
     angle_rad: float = 0.0
     peak: float = 255.0
+    smear_u: float = 0.0  # how far it moved over the exposure (px); it ends at (u, v)
+    smear_v: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -40,34 +42,66 @@ class Glint:
     angle_rad: float
 
 
+class NoiseBank:
+    """Sensor noise for many frames from a few fields drawn once and cycled: a frame's worth
+    of normal deviates costs milliseconds, and the detector cannot tell the difference."""
+
+    def __init__(self, sigma: float, width: int, height: int, rng: np.random.Generator,
+                 fields: int = 8) -> None:
+        self._fields = rng.normal(0.0, sigma, (fields, height, width)).astype(np.float32)
+        self._next = 0
+
+    def add_to(self, image: np.ndarray) -> None:
+        image += self._fields[self._next]
+        self._next = (self._next + 1) % len(self._fields)
+
+
 def draw(blobs: list[Blob], width: int, height: int, rng: np.random.Generator, *,
-         background: float = 16.0, noise_sigma: float = 2.5) -> np.ndarray:
-    """An 8-bit gray image of ``blobs`` on a noisy background, edges anti-aliased."""
+         background: float = 16.0, noise_sigma: float = 2.5, noise: NoiseBank | None = None
+         ) -> np.ndarray:
+    """An 8-bit gray image of ``blobs`` on a noisy background (``noise`` if given, else
+    ``noise_sigma`` drawn from ``rng``), edges anti-aliased, moving blobs smeared."""
     image = np.full((height, width), background, dtype=np.float32)
     for blob in blobs:
         _draw_blob(image, blob)
-    if noise_sigma > 0:
+    if noise is not None:
+        noise.add_to(image)
+    elif noise_sigma > 0:
         image += rng.normal(0.0, noise_sigma, size=image.shape).astype(np.float32)
-    return np.clip(np.rint(image), 0, 255).astype(np.uint8)
+    np.rint(image, out=image)
+    return np.clip(image, 0, 255, out=image).astype(np.uint8)
 
 
 def _draw_blob(image: np.ndarray, blob: Blob) -> None:
     reach = max(blob.a_px, blob.b_px) + 2
-    c0, c1 = int(np.floor(blob.u - reach)), int(np.ceil(blob.u + reach)) + 1
-    r0, r1 = int(np.floor(blob.v - reach)), int(np.ceil(blob.v + reach)) + 1
+    u_lo, u_hi = min(blob.u, blob.u - blob.smear_u), max(blob.u, blob.u - blob.smear_u)
+    v_lo, v_hi = min(blob.v, blob.v - blob.smear_v), max(blob.v, blob.v - blob.smear_v)
+    c0, c1 = int(np.floor(u_lo - reach)), int(np.ceil(u_hi + reach)) + 1
+    r0, r1 = int(np.floor(v_lo - reach)), int(np.ceil(v_hi + reach)) + 1
     height, width = image.shape
     c0, c1, r0, r1 = max(c0, 0), min(c1, width), max(r0, 0), min(r1, height)
     if c0 >= c1 or r0 >= r1:
         return
-    cols, rows = np.meshgrid(np.arange(c0, c1) - blob.u, np.arange(r0, r1) - blob.v)
-    cos, sin = np.cos(blob.angle_rad), np.sin(blob.angle_rad)
-    along, across = cols * cos + rows * sin, -cols * sin + rows * cos
-    # Distance to the ellipse's edge in pixels (exact for a circle); 1 px wide soft edge.
-    scale = min(blob.a_px, blob.b_px)
-    rho = np.sqrt((along / blob.a_px) ** 2 + (across / blob.b_px) ** 2)
-    coverage = np.clip((1.0 - rho) * scale + 0.5, 0.0, 1.0)
+    cols, rows = np.meshgrid(np.arange(c0, c1, dtype=float), np.arange(r0, r1, dtype=float))
+    samples = max(1, int(np.ceil(np.hypot(blob.smear_u, blob.smear_v) * 2)))
+    coverage = np.zeros_like(cols)
+    for k in range(samples):  # the exposure, as the mean of where the blob was
+        back = (samples - 1 - k) / max(samples - 1, 1) if samples > 1 else 0.0
+        coverage += _coverage(cols - (blob.u - back * blob.smear_u),
+                              rows - (blob.v - back * blob.smear_v), blob)
+    coverage /= samples
     patch = image[r0:r1, c0:c1]
     np.maximum(patch, patch + coverage * (blob.peak - patch), out=patch)
+
+
+def _coverage(du: np.ndarray, dv: np.ndarray, blob: Blob) -> np.ndarray:
+    """How much of each pixel the blob covers, centred at offsets (du, dv): distance to the
+    ellipse's edge in pixels (exact for a circle), a 1 px wide soft edge."""
+    cos, sin = np.cos(blob.angle_rad), np.sin(blob.angle_rad)
+    along, across = du * cos + dv * sin, -du * sin + dv * cos
+    scale = min(blob.a_px, blob.b_px)
+    rho = np.sqrt((along / blob.a_px) ** 2 + (across / blob.b_px) ** 2)
+    return np.clip((1.0 - rho) * scale + 0.5, 0.0, 1.0)
 
 
 def marker_blobs(points_world: np.ndarray, pose: Pose, intr: Intrinsics, *,

@@ -33,7 +33,15 @@ class Trajectory:
 
     def position(self, t_s: float) -> np.ndarray:
         """Marker position at ``t_s``; before the start the first, after the end the last."""
-        return np.array([np.interp(t_s, self.t_s, self.xyz_mm[:, i]) for i in range(3)])
+        t, n = self.t_s, len(self.t_s)
+        if n > 1 and t_s > t[0] and t_s < t[-1]:
+            guess = int((t_s - t[0]) / (t[-1] - t[0]) * (n - 1))  # exact on an even grid
+            i = min(max(guess, 0), n - 2)
+            if not t[i] <= t_s <= t[i + 1]:
+                i = int(np.searchsorted(t, t_s, side="right")) - 1
+            w = (t_s - t[i]) / (t[i + 1] - t[i])
+            return self.xyz_mm[i] * (1.0 - w) + self.xyz_mm[i + 1] * w
+        return self.xyz_mm[0 if n == 1 or t_s <= t[0] else -1].copy()
 
     def velocity(self, t_s: float, dt_s: float = 0.02) -> np.ndarray:
         return (self.position(t_s + dt_s / 2) - self.position(t_s - dt_s / 2)) / dt_s
@@ -78,12 +86,28 @@ class Oval:
         return out + [self.centre_x_mm, self.centre_y_mm]
 
 
-def locomotive(world: CraterMap, *, oval: Oval = Oval(), speed_mm_s: float = 290.0,
-               rounds: int = 5, accel_mm_s2: float = 300.0,
+@dataclass(frozen=True)
+class Railway:
+    """The paper's model railway run: an oval, ``rounds`` rounds at ``speed_mm_s`` (the paper:
+    five at ca. 29 cm/s), then a stop exactly at the start. The oval's shape is not in the
+    paper: identified (docs/experiments.md)."""
+
+    speed_mm_s: float = 290.0
+    rounds: int = 5
+    straight_mm: float = 1500.0
+    radius_mm: float = 500.0
+
+    @property
+    def oval(self) -> Oval:
+        return Oval(self.straight_mm, self.radius_mm)
+
+
+def locomotive(world: CraterMap, railway: Railway = Railway(), *, accel_mm_s2: float = 300.0,
                marker_height_mm: float = MARKER_HEIGHT_MM["locomotive"],
                start_delay_s: float = 2.0) -> Trajectory:
-    """Five rounds at ~29 cm/s, then a stop exactly at the start (paper §3.3)."""
-    distance = rounds * oval.length_mm
+    """``rounds`` rounds of the oval, then a stop exactly at the start (paper §3.3)."""
+    speed_mm_s = railway.speed_mm_s
+    distance = railway.rounds * railway.oval.length_mm
     ramp_s = speed_mm_s / accel_mm_s2
     ramp_mm = 0.5 * accel_mm_s2 * ramp_s**2
     cruise_s = (distance - 2 * ramp_mm) / speed_mm_s
@@ -94,7 +118,7 @@ def locomotive(world: CraterMap, *, oval: Oval = Oval(), speed_mm_s: float = 290
                  np.where(tm < ramp_s + cruise_s, ramp_mm + speed_mm_s * (tm - ramp_s),
                           distance - 0.5 * accel_mm_s2
                           * np.clip(2 * ramp_s + cruise_s - tm, 0, None) ** 2))
-    xy = oval.point(s)
+    xy = railway.oval.point(s)
     z = world.height_at(xy[:, 0], xy[:, 1]) + marker_height_mm
     return Trajectory("locomotive", t, np.column_stack([xy, z]))
 
@@ -102,48 +126,72 @@ def locomotive(world: CraterMap, *, oval: Oval = Oval(), speed_mm_s: float = 290
 # --- walker: a slow legged robot on the slopes ------------------------------------------------
 
 
-def walker(world: CraterMap, rng: np.random.Generator, *, duration_s: float = 240.0,
-           speed_mm_s: float = 60.0, step_hz: float = 0.8, sway_mm: float = 20.0,
-           bob_mm: float = 8.0, slide_per_s: float = 0.04, slide_mm: tuple[float, float] =
-           (120.0, 300.0), steep_deg: float = 28.0,
-           marker_height_mm: float = MARKER_HEIGHT_MM["walker"]
+@dataclass(frozen=True)
+class Walk:
+    """How the walker moves (paper §3.3: "slower but in a more oscillating way", now and then
+    sliding "a little faster downhill"). The paper gives no figures: identified
+    (docs/experiments.md)."""
+
+    speed_mm_s: float = 60.0
+    step_hz: float = 0.8
+    sway_mm: float = 20.0
+    surge_mm: float = 0.0
+    slide_per_s: float = 0.04
+    slide_speed_mm_s: float = 325.0
+    duration_s: float = 240.0
+
+
+WAYPOINTS_MM = np.array([[0.0, -600.0], [300.0, 1200.0], [-200.0, 2100.0], [200.0, 1400.0],
+                         [-400.0, 300.0], [500.0, -900.0], [0.0, -600.0]])
+"""Up the crater wall and down again (y up the slope)."""
+
+
+def walker(world: CraterMap, rng: np.random.Generator, walk: Walk = Walk(), *,
+           bob_mm: float = 8.0, slide_mm: tuple[float, float] = (120.0, 300.0),
+           steep_deg: float = 28.0, marker_height_mm: float = MARKER_HEIGHT_MM["walker"]
            ) -> Trajectory:
-    """Walks up and down the crater wall; its marker sways with every step, and on steep
-    ground it now and then slides downhill (faster than it walks), as in paper §3.3."""
-    waypoints = np.array([[0.0, -600.0], [300.0, 1200.0], [-200.0, 2100.0], [200.0, 1400.0],
-                          [-400.0, 300.0], [500.0, -900.0], [0.0, -600.0]])
-    t = np.arange(0, duration_s, 1 / SAMPLE_HZ)
-    xy = np.empty((len(t), 2))
-    pos, target, heading = waypoints[0].copy(), 1, np.zeros(2)
+    """Walks up and down the crater wall; its marker sways sideways once per gait cycle and
+    surges forward and back twice, and on steep ground it now and then slides downhill
+    (faster than it walks), as in paper §3.3."""
+    t = np.arange(0, walk.duration_s, 1 / SAMPLE_HZ)
+    xy = _walk_path(world, rng, walk, len(t), slide_mm, steep_deg)
+    phase = 2 * np.pi * walk.step_hz * t
+    ahead = np.column_stack([np.gradient(xy[:, 0]), np.gradient(xy[:, 1])])
+    norms = np.linalg.norm(ahead, axis=1, keepdims=True)
+    ahead = np.divide(ahead, norms, out=np.zeros_like(ahead), where=norms > 1e-9)
+    lateral = np.column_stack([-ahead[:, 1], ahead[:, 0]])
+    swayed = (xy + lateral * (walk.sway_mm * np.sin(phase))[:, None]
+              + ahead * (walk.surge_mm * np.sin(2 * phase))[:, None])
+    z = (world.height_at(swayed[:, 0], swayed[:, 1]) + marker_height_mm
+         + bob_mm * np.abs(np.sin(phase)))
+    return Trajectory("walker", t, np.column_stack([swayed, z]))
+
+
+def _walk_path(world: CraterMap, rng: np.random.Generator, walk: Walk, samples: int,
+               slide_mm: tuple[float, float], steep_deg: float) -> np.ndarray:
+    """The walker's path without its sway: waypoint to waypoint, slides on steep ground."""
+    xy = np.empty((samples, 2))
+    pos, target = WAYPOINTS_MM[0].copy(), 1
     slide_left, slide_dir, slide_speed = 0.0, np.zeros(2), 0.0
     dt = 1 / SAMPLE_HZ
-    for i in range(len(t)):
+    for i in range(samples):
         if slide_left > 0:
             step = min(slide_speed * dt, slide_left)
             pos += slide_dir * step
             slide_left -= step
         else:
-            to_target = waypoints[target] - pos
-            dist = np.linalg.norm(to_target)
+            to_target = WAYPOINTS_MM[target] - pos
+            dist = np.hypot(*to_target)
             if dist < 20:
-                target = (target + 1) % len(waypoints)
+                target = (target + 1) % len(WAYPOINTS_MM)
             else:
-                heading = to_target / dist
-                pos += heading * speed_mm_s * dt
-            slope = world.slope_at(*pos)
-            if slope > steep_deg and rng.random() < slide_per_s * dt:
+                pos += to_target / dist * walk.speed_mm_s * dt
+            if rng.random() < walk.slide_per_s * dt and world.slope_at(*pos) > steep_deg:
                 slide_dir = world.downhill(*pos)
                 slide_left = rng.uniform(*slide_mm)
-                slide_speed = rng.uniform(250.0, 400.0)
+                slide_speed = walk.slide_speed_mm_s * rng.uniform(0.8, 1.2)
         xy[i] = pos
-    phase = 2 * np.pi * step_hz * t
-    lateral = np.column_stack([-np.gradient(xy[:, 1]), np.gradient(xy[:, 0])])
-    norms = np.linalg.norm(lateral, axis=1, keepdims=True)
-    lateral = np.divide(lateral, norms, out=np.zeros_like(lateral), where=norms > 1e-9)
-    swayed = xy + lateral * (sway_mm * np.sin(phase))[:, None]
-    z = (world.height_at(swayed[:, 0], swayed[:, 1]) + marker_height_mm
-         + bob_mm * np.abs(np.sin(phase)))
-    return Trajectory("walker", t, np.column_stack([swayed, z]))
+    return xy
 
 
 # --- calibration: a marker carried through the cameras' view -----------------------------------
@@ -175,16 +223,16 @@ def calibration(world: CraterMap, rng: np.random.Generator, *, points: int = 150
     return Trajectory("calibration", tt, xyz)
 
 
-def make_trajectory(scenario: Scenario, world: CraterMap, rng: np.random.Generator
-                    ) -> Trajectory:
+def make_trajectory(scenario: Scenario, world: CraterMap, rng: np.random.Generator, *,
+                    railway: Railway = Railway(), walk: Walk = Walk()) -> Trajectory:
     if scenario == "locomotive":
-        return locomotive(world)
+        return locomotive(world, railway)
     if scenario == "walker":
-        return walker(world, rng)
+        return walker(world, rng, walk)
     return calibration(world, rng)
 
 
-def railway_keep_clear(oval: Oval = Oval(), margin_mm: float = 350.0
+def railway_keep_clear(oval: Oval = Railway().oval, margin_mm: float = 350.0
                        ) -> tuple[tuple[float, float, float], ...]:
     """Discs along the railway where the crater generator puts no rocks."""
     pts = oval.point(np.linspace(0, oval.length_mm, 60, endpoint=False))

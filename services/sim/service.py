@@ -2,7 +2,8 @@
 
 Serves:     QTM RT on mocap.port (22223), VAPIX HTTP per camera (8081, 8082),
             Modbus/TCP crane controller on crane.port (5020)
-Publishes:  stb/gantry/camera/frame (CameraFrame, 25 Hz) as the tracking camera's host would;
+Publishes:  stb/gantry/camera/frame (CameraFrame, 25 Hz) as the tracking camera's host would,
+            each tracking_camera.delay_s after its exposure ended;
             stb/sim/truth/robot/{robot}, stb/sim/truth/crane, stb/sim/truth/ptz/{camera}
             (ground truth, 20 Hz; for tests and evaluation only)
 """
@@ -61,7 +62,7 @@ def run(node: Node) -> None:
         if settings.calibrate_first and settings.scenario != "calibration":
             _start_robot_once_calibrated(node, lab, settings.calibrate_first, clock)
         threads = [
-            _every(1 / settings.tracking_camera.rate_hz, node.stop,
+            _every(1 / (4 * settings.tracking_camera.rate_hz), node.stop,  # on time ± 10 ms
                    _frame_publisher(node, lab, settings, clock)),
             _every(1 / settings.truth_rate_hz, node.stop, _truth_publisher(node, lab, clock)),
         ]
@@ -181,16 +182,24 @@ def _every(period_s: float, stop: threading.Event, action: Callable[[], None]
 
 def _frame_publisher(node: Node, lab: Lab, settings: SimSettings, clock: Clock
                      ) -> Callable[[], None]:
+    """Each frame goes out ``delay_s`` after its exposure ended, stamped with that time."""
     rng = np.random.default_rng((settings.seed, 5))
     cam = settings.tracking_camera
     seq = itertools.count()
+    last = [-1]
 
     def publish() -> None:
-        t = clock()
-        image = lab.tracking_frame(t, rng)
+        now = clock()
+        number, captured = lab.newest_capture(now)
+        if number <= last[0] or captured < 0:
+            return
+        last[0] = number
+        lab.crane_state(now)  # the crane's history now covers the exposure
+        image = lab.tracking_frame(captured, rng)
         node.bus.publish(keys.GANTRY_FRAME, m.CameraFrame(
-            measured_s=clock.wall(t), camera=cam.name, seq=next(seq), width_px=cam.width_px,
-            height_px=cam.height_px, encoding="mono8", data=image.tobytes()))
+            measured_s=clock.wall(captured), camera=cam.name, seq=next(seq),
+            width_px=cam.width_px, height_px=cam.height_px, encoding="mono8",
+            data=image.tobytes()))
 
     return publish
 

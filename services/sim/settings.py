@@ -12,6 +12,8 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from common.settings import ServiceSettings
+from services.sim.crane import CraneParams
+from services.sim.robots import Railway, Walk
 
 
 class _Section(BaseModel):
@@ -58,23 +60,44 @@ def _default_cameras() -> list[PtzCameraSettings]:
     ]
 
 
+_CRANE = CraneParams()
+
+
 class CraneSettings(_Section):
+    """The simulated crane controller (``services/sim/crane.py``). The defaults are the crane
+    identified against the paper's Tables 3–4 (docs/experiments.md)."""
+
     host: str = "127.0.0.1"
     port: int = Field(5020, ge=0, le=65535)
-    x_min_mm: float = -3000.0
-    x_max_mm: float = 3000.0
-    y_min_mm: float = -3000.0
-    y_max_mm: float = 3000.0
-    max_speed_mm_s: float = Field(500.0, gt=0)
-    max_accel_mm_s2: float = Field(2500.0, gt=0)
-    reaction_s: float = Field(0.5, ge=0)
-    cycle_s: float = Field(0.25, gt=0, description="controller cycle: setpoints taken at 4 Hz")
-    watchdog_s: float = Field(0.5, gt=0)
+    x_min_mm: float = _CRANE.x_min_mm
+    x_max_mm: float = _CRANE.x_max_mm
+    y_min_mm: float = _CRANE.y_min_mm
+    y_max_mm: float = _CRANE.y_max_mm
+    max_speed_mm_s: float = Field(_CRANE.max_speed_mm_s, gt=0)
+    max_accel_mm_s2: float = Field(_CRANE.max_accel_mm_s2, gt=0)
+    cycle_s: float = Field(_CRANE.cycle_s, gt=0, le=2,
+                           description="controller cycle: setpoints taken at 4 Hz")
+    dead_time_s: float = Field(_CRANE.dead_time_s, ge=0, le=3,
+                               description="a sampled setpoint becomes the target this later")
+    position_time_constant_s: float = Field(
+        _CRANE.position_time_constant_s, ge=0, le=3,
+        description="the axes' position loop: distance / this = speed (0: flat out)")
+    report_latency_s: float = Field(_CRANE.report_latency_s, ge=0, le=1,
+                                    description="the reported position's age when published")
+    report_jitter_s: float = Field(_CRANE.report_jitter_s, ge=0, le=1,
+                                   description="spread (full width) of that age")
+    watchdog_s: float = Field(_CRANE.watchdog_s, gt=0)
+
+    def params(self) -> CraneParams:
+        return CraneParams(**self.model_dump(exclude={"host", "port"}))
 
 
 class TrackingCameraSettings(_Section):
     name: str = "tracking"
     rate_hz: float = Field(25.0, gt=0, le=120)
+    delay_s: float = Field(0.04, ge=0, le=1, description="from the end of a frame's exposure "
+                           "to its arrival at the gantry: readout, transfer, the bus")
+    exposure_s: float = Field(0.004, ge=0, le=0.1, description="a moving marker smears over it")
     focal_mm: float = Field(8.0, gt=0)
     pixel_mm: float = Field(0.0075, gt=0)
     width_px: int = Field(640, ge=64, le=4096)
@@ -82,6 +105,39 @@ class TrackingCameraSettings(_Section):
     height_mm: float = Field(3500.0, gt=0, description="lens height above world z = 0")
     noise: float = Field(2.5, ge=0, description="gray-level noise sigma")
     reflections_per_m2: float = Field(0.5, ge=0, le=20, description="stray reflections")
+
+
+_WALK, _RAIL = Walk(), Railway()
+
+
+class WalkerSettings(_Section):
+    """The walker scenario's robot (paper §3.3, Table 4); the defaults are identified."""
+
+    speed_mm_s: float = Field(_WALK.speed_mm_s, gt=0, le=1000)
+    step_hz: float = Field(_WALK.step_hz, gt=0, le=10, description="gait cycles per second")
+    sway_mm: float = Field(_WALK.sway_mm, ge=0, le=500, description="sideways, amplitude")
+    surge_mm: float = Field(_WALK.surge_mm, ge=0, le=500, description="forward and back, "
+                            "amplitude (twice per gait cycle)")
+    slide_per_s: float = Field(_WALK.slide_per_s, ge=0, le=10,
+                               description="chance a second of slipping on steep ground")
+    slide_speed_mm_s: float = Field(_WALK.slide_speed_mm_s, gt=0, le=3000,
+                                    description="mean speed of a slide downhill (±20 %)")
+    duration_s: float = Field(_WALK.duration_s, gt=0)
+
+    def walk(self) -> Walk:
+        return Walk(**self.model_dump())
+
+
+class LocomotiveSettings(_Section):
+    """The paper's model railway (§3.3, Table 3): an oval, five rounds at ~29 cm/s."""
+
+    speed_mm_s: float = Field(_RAIL.speed_mm_s, gt=0, le=3000)
+    rounds: int = Field(_RAIL.rounds, ge=1, le=100)
+    straight_mm: float = Field(_RAIL.straight_mm, ge=0, le=6000)
+    radius_mm: float = Field(_RAIL.radius_mm, gt=0, le=3000)
+
+    def railway(self) -> Railway:
+        return Railway(**self.model_dump())
 
 
 class SimSettings(ServiceSettings):
@@ -104,6 +160,8 @@ class SimSettings(ServiceSettings):
     cameras: list[PtzCameraSettings] = Field(default_factory=_default_cameras)
     crane: CraneSettings = CraneSettings()
     tracking_camera: TrackingCameraSettings = TrackingCameraSettings()
+    walker: WalkerSettings = WalkerSettings()
+    locomotive: LocomotiveSettings = LocomotiveSettings()
 
     def host_of(self, device_host: str) -> str:
         return self.bind or device_host

@@ -67,6 +67,8 @@ def test_predictors_lead_the_robot_on_simple_paths(algorithm: str, kind: str) ->
     # a straight-line prediction h seconds ahead on the circle misses it by r·(ω·h)²/2
     limit = {"straight": 40.0, "circle": 60.0 + 800 * (0.3 * 0.25 * ahead) ** 2 / 2,
              "stop-and-go": 90.0}[kind]
+    if algorithm.startswith("pf-position") and kind == "circle":
+        limit = 150.0  # the paper's "worse dynamic behavior": its particles lag in turns
     assert np.median(errors) < limit, (algorithm, kind, np.median(errors))
     if algorithm == "basic" and kind == "straight":
         assert np.median(errors) < 15.0, "eq. 9–10 is exact on a straight line"

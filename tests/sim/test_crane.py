@@ -46,12 +46,47 @@ def _keep_alive(crane: CraneModel, until: float, period: float = 0.1,
     return track
 
 
-def test_reacts_about_half_a_second_after_a_setpoint() -> None:
-    crane = _enabled()
-    crane.write_setpoint(0.01, 1000.0, 0.0)
+def test_a_setpoint_is_taken_at_the_next_cycle_and_acted_on_a_dead_time_later() -> None:
+    crane = _enabled(CraneParams(dead_time_s=0.3, cycle_s=0.25))
+    crane.write_setpoint(0.01, 1000.0, 0.0)  # just after the cycle at 0: taken at 0.25
     track = _keep_alive(crane, 3.0, period=0.01)
     started = next(t for t, p in track if p[0] > 0.5)
-    assert 0.5 <= started <= 0.5 + 0.25 + 0.05, "reaction time + at most one 4 Hz cycle"
+    assert 0.25 + 0.3 <= started <= 0.25 + 0.3 + 0.05
+
+
+def test_the_position_loop_lags_a_ramp_by_its_time_constant() -> None:
+    crane = _enabled(CraneParams(dead_time_s=0.0, position_time_constant_s=0.2,
+                                 cycle_s=0.05, max_speed_mm_s=1000, max_accel_mm_s2=5000))
+    beat = 0
+    for k in range(1, 200):  # a setpoint ramp at 200 mm/s for 10 s
+        t = 0.05 * k
+        beat += 1
+        crane.write_setpoint(t, 200.0 * t, 0.0)
+        crane.write_heartbeat(t, beat)
+    # the target is the setpoint written a cycle before (0.05 s) and steps every cycle (half
+    # a cycle on average); the loop adds its time constant: speed = distance / τ
+    lag = 200.0 * 9.95 - crane.position[0]
+    assert lag == pytest.approx(200.0 * (0.05 + 0.025 + 0.2), abs=10.0)
+    assert crane.velocity[0] == pytest.approx(200.0, abs=30.0)  # ripples with the steps
+
+
+def test_the_reported_position_is_as_old_as_the_latency_give_or_take_the_jitter() -> None:
+    latency, jitter = 0.1, 0.08
+    crane = _enabled(CraneParams(report_latency_s=latency, report_jitter_s=jitter,
+                                 dead_time_s=0.0))
+    ages = []
+    for k in range(1, 50):
+        cycle = 0.25 * k
+        crane.write_setpoint(cycle - 0.1, 200.0 * cycle, 0.0)
+        crane.write_heartbeat(cycle - 0.1, k)
+        crane.advance_to(cycle + 0.01)  # the controller publishes at its cycle
+        ages.append(crane.published_s - crane.reported_s)
+        assert crane.reported[0] == crane.position_at(crane.reported_s)[0]
+    assert crane.reported[0] < crane.position[0] - 5, "moving: the report is behind"
+    settled = np.array(ages[8:])
+    assert settled.min() >= latency - jitter / 2 - 0.006
+    assert settled.max() <= latency + jitter / 2 + 0.006
+    assert settled.std() > jitter / 6, "not one fixed age (uniform: jitter / √12)"
 
 
 def test_speed_and_acceleration_limits_and_arrival() -> None:
@@ -121,7 +156,8 @@ def test_modbus_client_drives_the_crane_over_tcp() -> None:
     def clock() -> float:
         return time.monotonic() - t0
 
-    crane = CraneModel(CraneParams(watchdog_s=0.5, x_max_mm=3000.0, max_accel_mm_s2=600.0))
+    crane = CraneModel(CraneParams(watchdog_s=0.5, x_max_mm=3000.0, max_accel_mm_s2=600.0,
+                                   dead_time_s=0.5))
     server = CraneServer(crane, clock, threading.Lock(), "127.0.0.1", port)
 
     async def main() -> dict:
@@ -155,7 +191,7 @@ def test_modbus_client_drives_the_crane_over_tcp() -> None:
 
     result = asyncio.run(main())
     early, moving, silent = result["early"], result["moving"], result["silent"]
-    assert early[regs.IR_ACTUAL_X: regs.IR_ACTUAL_X + 4] == [0, 0, 0, 0], "0.5 s reaction"
+    assert early[regs.IR_ACTUAL_X: regs.IR_ACTUAL_X + 4] == [0, 0, 0, 0], "0.5 s dead time"
     x = regs.registers_to_int32(moving[regs.IR_ACTUAL_X], moving[regs.IR_ACTUAL_X + 1])
     y = regs.registers_to_int32(moving[regs.IR_ACTUAL_Y], moving[regs.IR_ACTUAL_Y + 1])
     assert 0 < x < 800 and -300 < y < 0

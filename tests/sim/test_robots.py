@@ -4,7 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from services.sim.robots import MARKER_DIAMETER_MM, Oval, calibration, locomotive, walker
+from services.sim.robots import (
+    MARKER_DIAMETER_MM,
+    Railway,
+    Walk,
+    calibration,
+    locomotive,
+    walker,
+)
 from services.sim.world import CraterMap
 
 
@@ -19,7 +26,7 @@ def test_locomotive_runs_five_rounds_at_29_cm_s_and_stops_at_its_start(
     moving = speeds > 10
     assert abs(np.median(speeds[moving]) - 290.0) < 1.0
     travelled = speeds.sum() / 100.0
-    assert abs(travelled - 5 * Oval().length_mm) < 5.0
+    assert abs(travelled - 5 * Railway().oval.length_mm) < 5.0
     np.testing.assert_allclose(track.xyz_mm[-1], track.xyz_mm[0], atol=0.5)
     assert speeds[-100:].max() < 1e-6, "standing still at the end"
 
@@ -45,8 +52,8 @@ def test_walker_is_slow_sways_and_sometimes_slides_downhill(crater: CraterMap) -
 
 
 def test_walker_is_deterministic_under_a_seed(crater: CraterMap) -> None:
-    a = walker(crater, np.random.default_rng(9), duration_s=60)
-    b = walker(crater, np.random.default_rng(9), duration_s=60)
+    a = walker(crater, np.random.default_rng(9), Walk(duration_s=60))
+    b = walker(crater, np.random.default_rng(9), Walk(duration_s=60))
     assert np.array_equal(a.xyz_mm, b.xyz_mm)
 
 

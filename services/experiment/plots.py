@@ -11,7 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from services.gantry.experiment import Run  # noqa: E402
+from services.experiment.gantry import Run  # noqa: E402
 
 
 def write_plots(runs: list[Run], scenario: str, out_dir: Path) -> list[Path]:

@@ -1,0 +1,120 @@
+"""``stb experiment``: the paper's gantry experiments (§3.3) on a simulated clock.
+
+    stb experiment gantry [--scenario locomotive|walker] [--trajectory FILE.csv |
+        --recording RUN.mcap] [--algorithm NAME|all] [--seed N] [--lab FILE] [--plot DIR] [--json]
+    stb experiment identify [--seeds 1-5] [--evaluations N] [--lab FILE] [--json]
+
+``gantry`` runs the gantry's own controller with the lab's gantry settings (``--lab``, else
+the defaults) against the simulated crane and tracking camera, and prints per algorithm the
+crane-to-robot error: std x / y (the paper's Tables 3 and 4), rms and max, and how much faster
+than real time it ran. ``identify`` fits the simulated crane and robots so that the paper's
+three algorithms reproduce those tables (docs/experiments.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from common.settings import ConfigError, load_settings
+from services.experiment.paper import TABLES
+from services.gantry.predict import ALGORITHMS
+from services.gantry.settings import GantrySettings
+from services.sim.settings import SimSettings
+
+PROG = "stb experiment"
+EXIT_USAGE = 2
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = _parser()
+    args = parser.parse_args(sys.argv[1:] if argv is None else list(argv))
+    if args.command is None:
+        parser.print_help()
+        return EXIT_USAGE
+    try:
+        gantry = load_settings(GantrySettings, args.lab)
+        sim = load_settings(SimSettings, args.lab)
+    except ConfigError as err:
+        print(f"{PROG}: {err}", file=sys.stderr)
+        return EXIT_USAGE
+    if args.command == "identify":
+        from services.experiment.identify_cli import identify
+
+        return identify(args, gantry, sim)
+    return _gantry(args, gantry, sim)
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog=PROG, description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    commands = parser.add_subparsers(dest="command", metavar="gantry|identify")
+    g = commands.add_parser("gantry", help="the gantry experiments: Tables 3 and 4",
+                            description="Run the paper's gantry experiment on a simulated clock.")
+    g.add_argument("--scenario", choices=["locomotive", "walker"], default="locomotive")
+    path = g.add_mutually_exclusive_group()
+    path.add_argument("--trajectory", type=Path, metavar="FILE.csv",
+                      help="a robot path instead of the scenario's: CSV t,x,y (s, mm)")
+    path.add_argument("--recording", type=Path, metavar="RUN.mcap",
+                      help="the robot's path from a recording (stb record): the sim's truth "
+                      "if recorded, else the tracker's robot position")
+    g.add_argument("--algorithm", choices=[*ALGORITHMS, "all"], default="all")
+    g.add_argument("--seed", type=int, default=1)
+    g.add_argument("--plot", type=Path, metavar="DIR", help="error-over-time plots")
+    g.add_argument("--json", action="store_true", help="one JSON document on stdout")
+    i = commands.add_parser("identify", help="fit the sim to the paper's Tables 3 and 4",
+                            description="Identify the simulated crane and robots against the "
+                            "paper's Tables 3 and 4 (docs/experiments.md).")
+    i.add_argument("--seeds", default="1-5", help="seeds averaged per evaluation (1-5)")
+    i.add_argument("--evaluations", type=int, default=0, metavar="N",
+                   help="fit with at most N evaluations (0: only evaluate the current values)")
+    i.add_argument("--start", type=Path, metavar="FIT.json",
+                   help="start from the parameters of an earlier fit")
+    i.add_argument("--out", type=Path, metavar="FIT.json", help="write the fit here")
+    i.add_argument("--workers", type=int, default=2, help="processes (default 2)")
+    i.add_argument("--json", action="store_true")
+    for sub in (g, i):
+        sub.add_argument("--lab", type=Path, metavar="FILE",
+                         help="the lab file: its [gantry] and [sim] settings (else defaults)")
+        sub.add_argument("--crater", type=Path, default=Path("run/sim/crater.npz"),
+                         help="height map (made from the sim's default seed if missing)")
+    return parser
+
+
+def _gantry(args: argparse.Namespace, gantry: GantrySettings, sim: SimSettings) -> int:
+    from services.experiment.gantry import run_scenario
+    from services.experiment.paths import read_csv, read_recording
+
+    try:
+        path = (read_csv(args.trajectory) if args.trajectory else
+                read_recording(args.recording) if args.recording else None)
+    except ValueError as err:
+        print(f"{PROG} gantry: {err}", file=sys.stderr)
+        return EXIT_USAGE
+    names = ALGORITHMS if args.algorithm == "all" else (args.algorithm,)
+    runs = []
+    for name in names:
+        runs.append(run_scenario(args.scenario, name, seed=args.seed, crater_file=args.crater,
+                                 gantry=gantry, sim=sim, path=path))
+        if not args.json:
+            print(_line(runs[-1].summary(), None if path else args.scenario), flush=True)
+    if args.plot:
+        from services.experiment.plots import write_plots
+
+        for written in write_plots(runs, args.scenario, args.plot):
+            print(f"wrote {written}", file=sys.stderr if args.json else sys.stdout)
+    if args.json:
+        print(json.dumps({"scenario": args.scenario, "seed": args.seed,
+                          "path": str(args.trajectory or args.recording or ""),
+                          "results": [r.summary() for r in runs]}))
+    return 0
+
+
+def _line(s: dict, scenario: str | None) -> str:
+    paper = TABLES.get(scenario or "", {}).get(s["algorithm"])
+    return (f"{s['algorithm']:<18} std x {s['std_x_mm']:7.1f}  y {s['std_y_mm']:7.1f}  rms "
+            f"{s['rms_mm']:7.1f}  max {s['max_mm']:7.1f} mm   ({s['speedup']:.0f}× real time)"
+            + (f"   paper: {paper[0]} / {paper[1]} mm" if paper else ""))

@@ -1,0 +1,78 @@
+"""The sim's crane controller and tracking camera as the gantry's drivers see them, on a
+simulated clock: the same register encoding as over Modbus/TCP, frames that arrive as over
+the bus (after their exposure and a delay), no sockets and no waiting."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from common.crane_registers import (
+    CONTROL_ENABLE,
+    CONTROL_RESET,
+    HR_CONTROL,
+    HR_COUNT,
+    HR_HEARTBEAT,
+    HR_SETPOINT_X,
+    int32_to_registers,
+)
+from services.gantry.crane import CraneReading, reading_from
+from services.gantry.frames import Frame
+from services.sim.crane_server import input_registers, write_holding
+from services.sim.lab import Lab
+
+
+class SimClock:
+    """The experiment's time, set by its loop."""
+
+    def __init__(self, now_s: float = 0.0) -> None:
+        self.now_s = now_s
+
+    def __call__(self) -> float:
+        return self.now_s
+
+
+class ModelCrane:
+    """The ``Crane`` Protocol over the sim's crane model, through its register map."""
+
+    def __init__(self, lab: Lab, clock: SimClock) -> None:
+        self.lab, self.clock = lab, clock
+        self._holding = [0] * HR_COUNT
+        self._beat = 0
+
+    def read(self) -> CraneReading:
+        self.lab.crane.advance_to(self.clock())
+        return reading_from(input_registers(self.lab.crane))
+
+    def enable(self) -> None:
+        self._write(HR_CONTROL, [CONTROL_ENABLE | CONTROL_RESET])
+
+    def disable(self) -> None:
+        self._write(HR_CONTROL, [0])
+
+    def write_setpoint(self, x_mm: float, y_mm: float) -> None:
+        self._write(HR_SETPOINT_X, int32_to_registers(x_mm) + int32_to_registers(y_mm))
+
+    def heartbeat(self) -> None:
+        self._beat = (self._beat + 1) % 65536
+        self._write(HR_HEARTBEAT, [self._beat])
+
+    def _write(self, address: int, values: list[int]) -> None:
+        self._holding[address:address + len(values)] = values
+        write_holding(self.lab.crane, self.clock(), address, len(values), self._holding)
+
+
+class SimFrames:
+    """The ``FrameSource`` Protocol: the sim's tracking camera, the newest frame that has
+    arrived by now, rendered when it is taken."""
+
+    def __init__(self, lab: Lab, clock: SimClock, rng: np.random.Generator) -> None:
+        self.lab, self.clock, self.rng = lab, clock, rng
+        self._taken = -1
+
+    def take(self) -> Frame | None:
+        number, captured = self.lab.newest_capture(self.clock())
+        if number <= self._taken or captured < 0:
+            return None
+        self._taken = number
+        self.lab.crane.advance_to(self.clock())
+        return captured, self.lab.tracking_frame(captured, self.rng)
