@@ -183,7 +183,8 @@ class Evaluator:
 def fit(evaluate: Evaluator, start: Mapping[str, float], *, evaluations: int, seed: int = 1,
         progress: Callable[[int, Evaluation, Evaluation], None] | None = None) -> Evaluation:
     """CMA-ES over the parameters scaled to [0, 1] within their ranges, from ``start``;
-    stops after ``evaluations`` (or when CMA-ES converges). Returns the best evaluation."""
+    at most ``evaluations`` (whole generations; fewer if CMA-ES converges). Returns the best
+    evaluation."""
     import cma
 
     names = [p.name for p in PARAMETERS]
@@ -201,7 +202,7 @@ def fit(evaluate: Evaluator, start: Mapping[str, float], *, evaluations: int, se
         progress(done, best, best)
     es = cma.CMAEvolutionStrategy(x0, 0.15, {"bounds": [0, 1], "seed": seed, "verbose": -9,
                                              "maxfevals": max(evaluations - 1, 1)})
-    while not es.stop() and done < evaluations:
+    while not es.stop() and done + es.popsize <= evaluations:  # whole generations only
         xs = es.ask()
         results = evaluate.many([values_of(x) for x in xs])
         es.tell(xs, [r.cost for r in results])

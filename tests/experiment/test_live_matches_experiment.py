@@ -1,0 +1,99 @@
+"""One controller, one result: the live gantry service (its own process, on real time, over
+Zenoh and Modbus/TCP) against the sim service gives the error the experiment gives on the
+same path, within 15 %."""
+
+from __future__ import annotations
+
+import signal
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from common import keys
+from common import messages as m
+from common.bus import Bus
+from services.experiment.gantry import gantry_for, make_lab, run
+from services.gantry.settings import GantrySettings
+from services.sim.robots import MARKER_HEIGHT_MM
+from tests.conftest import free_port, stb_process, wait_for
+
+pytestmark = pytest.mark.usefixtures("compiled_detector")
+END_S = 40.0  # scenario seconds run
+WINDOW_S = (10.0, 38.0)  # compared: once both have settled, before the live run's end
+
+
+def _lab_file(tmp_path: Path, router: str, crater: Path) -> Path:
+    lab = tmp_path / "lab.toml"
+    lab.write_text(f"""
+[bus.zenoh]
+connect = ["{router}"]
+[gantry]
+crane_port = {(crane := free_port())}
+height_map = "{crater}"
+marker_height_mm = {MARKER_HEIGHT_MM["locomotive"]}
+[sim]
+scenario = "locomotive"
+seed = 1
+loop = false
+crater_file = "{crater}"
+[sim.mocap]
+port = {free_port()}
+[sim.crane]
+port = {crane}
+[[sim.cameras]]
+name = "ptz1"
+port = {free_port()}
+x_mm = 3550
+y_mm = 1090
+z_mm = 2190
+rx_deg = 180
+ry_deg = 30
+rz_deg = 165
+""")
+    return lab
+
+
+def _rms_in_window(t: np.ndarray, error: np.ndarray) -> float:
+    inside = (t >= WINDOW_S[0]) & (t <= WINDOW_S[1])
+    assert inside.sum() > 100, "enough samples in the window"
+    return float(np.sqrt(np.mean(np.sum(error[inside] ** 2, axis=1))))
+
+
+def test_the_live_service_tracks_as_the_experiment_does(tmp_path: Path, router_endpoint: str,
+                                                        crater_file: Path,
+                                                        make_bus: Callable[..., Bus]) -> None:
+    lab = _lab_file(tmp_path, router_endpoint, crater_file)
+    bus = make_bus()
+    robots: list[m.RobotTruth] = []
+    cranes: list[m.CraneTruth] = []
+    bus.subscribe(keys.TRUTH_ROBOT, robots.append, latest=False)
+    bus.subscribe(keys.TRUTH_CRANE, cranes.append, latest=False)
+    health: list[m.ServiceHealth] = []
+    bus.subscribe(keys.HEALTH, health.append, service="gantry")
+    gantry = stb_process("gantry", "--lab", str(lab))
+    sim = None
+    try:
+        wait_for(lambda: health, timeout=30)  # started: it waits for the crane controller
+        sim = stb_process("sim", "--lab", str(lab))
+        wait_for(lambda: len(robots) > 0, timeout=20)
+        start = robots[0].measured_s  # the sim's clock starts just before its first truth
+        wait_for(lambda: cranes and cranes[-1].measured_s - start > END_S, timeout=END_S + 30)
+    finally:
+        for proc in (gantry, sim):
+            if proc is not None and proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+                proc.wait(10)
+    by_time = {round(c.measured_s, 3): c for c in cranes}
+    pairs = [(r.measured_s - start, by_time[round(r.measured_s, 3)], r) for r in robots
+             if round(r.measured_s, 3) in by_time]
+    t = np.array([p[0] for p in pairs])
+    live_error = np.array([[c.x_mm - r.x_mm, c.y_mm - r.y_mm] for _, c, r in pairs])
+    live = _rms_in_window(t, live_error)
+
+    settings = gantry_for(GantrySettings(), "default", seed=0,
+                          marker_height_mm=MARKER_HEIGHT_MM["locomotive"])
+    experiment = run(make_lab("locomotive", 1, crater_file), settings, end_s=END_S)
+    simulated = _rms_in_window(experiment.t_s, experiment.error_mm)
+    assert live == pytest.approx(simulated, rel=0.15), (live, simulated)

@@ -1,0 +1,79 @@
+"""The gantry's control step (pure): frames in, a safe setpoint out — no bus, no crane, no
+clock."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from common.heightmap import HeightMap
+from services.gantry.control import Controller
+from services.gantry.settings import GantrySettings
+from services.sim.render import Blob, TrackingCamera, draw
+
+GROUND_MM, MARKER_MM = 100.0, 80.0
+FLAT = HeightMap(np.full((3, 3), GROUND_MM, np.float32), -5000, -5000, 5000)
+CAMERA = TrackingCamera(focal_mm=8.0, pixel_mm=0.0075, height_mm=3500.0)
+SETTINGS = GantrySettings(marker_height_mm=MARKER_MM, algorithm="basic", stale_after_s=0.6)
+
+pytestmark = pytest.mark.usefixtures("compiled_detector")
+
+
+def _frame(markers_xy: list[tuple[float, float]], crane_xy: np.ndarray) -> np.ndarray:
+    blobs = []
+    for xy in markers_xy:
+        u, v, r = CAMERA.pixel_of(np.array([*xy, GROUND_MM + MARKER_MM]), *crane_xy)
+        blobs.append(Blob(u, v, r, r))
+    return draw(blobs, CAMERA.width_px, CAMERA.height_px, np.random.default_rng(0))
+
+
+def test_a_marker_in_the_frame_becomes_the_robots_position_and_a_setpoint() -> None:
+    control = Controller(SETTINGS, FLAT)
+    crane = np.array([200.0, -100.0])
+    robot = np.array([350.0, -20.0])
+    step = control.step(10.0, (9.96, _frame([tuple(robot)], crane)), crane)
+    assert step.detection is not None and step.frame_s == 9.96
+    assert step.frame_shape == (CAMERA.height_px, CAMERA.width_px)
+    assert step.measured_xyz is not None
+    np.testing.assert_allclose(step.measured_xyz[:2], robot, atol=1.5)  # eq. 5–8
+    assert step.estimate_s == 9.96 and not step.hold and step.reason == ""
+    moved = step.setpoint - crane
+    assert 0 < np.hypot(*moved) <= SETTINGS.max_speed_mm_s * 0.25 + 1e-6, "guarded"
+    assert np.dot(moved, robot - crane) > 0, "towards the robot"
+
+
+def test_without_new_frames_it_holds_once_the_estimate_is_stale() -> None:
+    control = Controller(SETTINGS, FLAT)
+    crane = np.array([0.0, 0.0])
+    control.step(1.0, (0.96, _frame([(100.0, 0.0)], crane)), crane)
+    assert not control.step(1.25, None, crane).hold, "0.29 s old: still used"
+    stale = control.step(1.75, None, crane)
+    assert stale.hold and "old" in stale.reason
+
+
+def test_a_lost_marker_holds_and_says_so() -> None:
+    control = Controller(SETTINGS, FLAT)
+    crane = np.array([0.0, 0.0])
+    control.step(1.0, (0.96, _frame([(100.0, 0.0)], crane)), crane)
+    lost = control.step(1.25, (1.21, _frame([], crane)), crane)
+    assert lost.hold and lost.reason == "no estimate" and lost.measured_xyz is None
+
+
+def test_of_several_spots_it_keeps_the_one_nearest_the_last() -> None:
+    control = Controller(SETTINGS, FLAT)
+    crane = np.array([0.0, 0.0])
+    control.step(1.0, (0.96, _frame([(50.0, 40.0)], crane)), crane)
+    step = control.step(1.25, (1.21, _frame([(60.0, 40.0), (-300.0, 250.0)], crane)), crane)
+    assert step.measured_xyz is not None
+    np.testing.assert_allclose(step.measured_xyz[:2], [60.0, 40.0], atol=1.5)
+
+
+def test_after_a_restart_the_setpoint_starts_from_where_the_crane_stands() -> None:
+    control = Controller(SETTINGS, FLAT)
+    crane = np.array([0.0, 0.0])
+    for k in range(6):  # ramp towards a robot far away
+        control.step(k * 0.25, (k * 0.25 - 0.04, _frame([(250.0, 0.0)], crane)), crane)
+    control.restart()  # e.g. the crane stopped on its own
+    stood = np.array([-200.0, 0.0])
+    step = control.step(1.75, None, stood)
+    assert np.hypot(*(step.setpoint - stood)) <= SETTINGS.max_speed_mm_s * 0.25 + 1e-6
