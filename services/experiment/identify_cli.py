@@ -95,9 +95,10 @@ def _start(path: Path | None, gantry: GantrySettings, sim: SimSettings) -> dict[
 
 def _report(result: Evaluation, gantry: GantrySettings, sim: SimSettings, seconds: float
             ) -> dict:
-    return {"values": result.values, "seeds": list(result.seeds), "cost": round(result.cost, 4),
-            "worst_deviation": round(result.worst, 4), "within_tolerance":
-            result.worst <= TOLERANCE, "seconds": round(seconds, 1),
+    return {"values": result.values, "seeds": list(result.seeds),
+            "cost": round(float(result.cost), 4),
+            "worst_deviation": round(float(result.worst), 4), "within_tolerance":
+            bool(result.worst <= TOLERANCE), "seconds": round(seconds, 1),
             "std_mm": {sc: {a: list(v) for a, v in algs.items()}
                        for sc, algs in result.std_mm.items()},
             "paper_mm": {sc: {a: list(v) for a, v in algs.items()}
