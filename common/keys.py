@@ -110,6 +110,10 @@ GANTRY_SETPOINT = Topic("gantry/setpoint", m.CraneSetpoint,
 GANTRY_STATE = Topic("gantry/state", m.CraneState, "crane position and the gantry's status")
 GANTRY_OFFLOAD = Topic("gantry/offload", m.GravityOffload,
                        "gravity offload: vertical force lost and sideways pull of the cable")
+GANTRY_COMMAND = Topic("gantry/command", m.GantryCommand,
+                       "arm, disarm, stop, reset: only operators may send them", stream=False)
+GANTRY_COMMAND_REPLY = Topic("gantry/command/reply", m.GantryCommandReply,
+                             "the gantry's answer to each command", stream=False)
 TRUTH_ROBOT = Topic("sim/truth/robot/{robot}", m.RobotTruth, "sim only: true robot marker")
 TRUTH_CRANE = Topic("sim/truth/crane", m.CraneTruth, "sim only: true crane position")
 TRUTH_PTZ = Topic("sim/truth/ptz/{camera}", m.PtzTruth, "sim only: true camera pan/tilt/zoom")
@@ -120,7 +124,8 @@ ALL_TOPICS: tuple[Topic, ...] = (
     TRACKER_MARKERS, TRACKER_ROBOT, PTZ_STATE, PTZ_DETECTIONS, PTZ_CALIBRATION, PTZ_SNAPSHOT,
     PTZ_PREVIEW,
     CALIB_COLLECT, CALIB_PROGRESS, CALIB_POSE, GANTRY_FRAME, GANTRY_DETECTIONS, GANTRY_ESTIMATE,
-    GANTRY_SETPOINT, GANTRY_STATE, GANTRY_OFFLOAD, TRUTH_ROBOT, TRUTH_CRANE, TRUTH_PTZ, HEALTH,
+    GANTRY_SETPOINT, GANTRY_STATE, GANTRY_OFFLOAD, GANTRY_COMMAND, GANTRY_COMMAND_REPLY,
+    TRUTH_ROBOT, TRUTH_CRANE, TRUTH_PTZ, HEALTH,
 )
 
 ALIVE = "alive/{service}/{instance}"

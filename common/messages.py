@@ -224,7 +224,11 @@ class CraneSetpoint(Message):
     hold: bool = Field(description="True: stay where you are (no valid estimate)")
 
 
-CraneStatus = Literal["idle", "tracking", "holding", "stale", "fault", "unreachable"]
+CraneStatus = Literal["idle", "tracking", "holding", "stale", "fault", "stopped", "unreachable"]
+
+
+GantryMode = Literal["disarmed", "armed", "stopped"]
+GantryCommandName = Literal["arm", "disarm", "stop", "reset"]
 
 
 class CraneState(Message):
@@ -238,6 +242,32 @@ class CraneState(Message):
     enabled: bool
     moving: bool
     fault_bits: int = Field(ge=0, le=0xFFFF, description="controller fault register")
+    safety_ok: bool = Field(True, description="the controller's safety circuit is closed")
+    mode: GantryMode = Field("disarmed", description="disarmed: never moves the crane; "
+                             "armed: tracks; stopped: latched until an operator's reset")
+    mode_by: str = Field("", max_length=128, description="who changed the mode last")
+    mode_reason: str = Field("", max_length=500, description="why")
+    mode_since_s: float = Field(0.0, description="when, UNIX seconds")
+
+
+class GantryCommand(Message):
+    """An operator's command to the gantry; only the operator and web identities may send
+    it (deploy/zenoh/router.json5)."""
+
+    command: GantryCommandName
+    operator: str = Field(max_length=128, description="who asks (a name, or web:<address>)")
+    reason: str = Field("", max_length=500)
+    id: str = Field(max_length=64, description="chosen by the sender; the reply repeats it")
+
+
+class GantryCommandReply(Message):
+    """What the gantry made of a command."""
+
+    id: str = Field(max_length=64)
+    command: GantryCommandName
+    accepted: bool
+    detail: str = Field(max_length=500, description="why refused, or what changed")
+    mode: GantryMode = Field(description="the gantry's mode after it")
 
 
 class GravityOffload(Message):

@@ -6,16 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from common.crane_registers import (
-    CONTROL_ENABLE,
-    CONTROL_RESET,
-    HR_CONTROL,
-    HR_COUNT,
-    HR_HEARTBEAT,
-    HR_SETPOINT_X,
-    int32_to_registers,
-)
-from services.gantry.crane import CraneReading, reading_from
+from common.crane_registers import RegisterMap
+from services.gantry.crane import RegisterCrane
 from services.gantry.frames import Frame
 from services.sim.crane_server import input_registers, write_holding
 from services.sim.lab import Lab
@@ -31,34 +23,22 @@ class SimClock:
         return self.now_s
 
 
-class ModelCrane:
-    """The ``Crane`` Protocol over the sim's crane model, through its register map."""
+class ModelCrane(RegisterCrane):
+    """The ``Crane`` Protocol over the sim's crane model, through the register map."""
 
-    def __init__(self, lab: Lab, clock: SimClock) -> None:
+    def __init__(self, lab: Lab, clock: SimClock, registers: RegisterMap) -> None:
+        super().__init__(registers)
         self.lab, self.clock = lab, clock
-        self._holding = [0] * HR_COUNT
-        self._beat = 0
+        self._holding = [0] * registers.holding_count
 
-    def read(self) -> CraneReading:
+    def _read_input(self) -> list[int]:
         self.lab.crane.advance_to(self.clock())
-        return reading_from(input_registers(self.lab.crane))
-
-    def enable(self) -> None:
-        self._write(HR_CONTROL, [CONTROL_ENABLE | CONTROL_RESET])
-
-    def disable(self) -> None:
-        self._write(HR_CONTROL, [0])
-
-    def write_setpoint(self, x_mm: float, y_mm: float) -> None:
-        self._write(HR_SETPOINT_X, int32_to_registers(x_mm) + int32_to_registers(y_mm))
-
-    def heartbeat(self) -> None:
-        self._beat = (self._beat + 1) % 65536
-        self._write(HR_HEARTBEAT, [self._beat])
+        return input_registers(self.lab.crane, self.registers)
 
     def _write(self, address: int, values: list[int]) -> None:
         self._holding[address:address + len(values)] = values
-        write_holding(self.lab.crane, self.clock(), address, len(values), self._holding)
+        write_holding(self.lab.crane, self.clock(), range(address, address + len(values)),
+                      self._holding, self.registers)
 
 
 class SimFrames:

@@ -2,7 +2,8 @@
 
 The gantry's own loop runs with the lab's gantry settings — ``GantryLoop`` polling the crane
 controller's report at ``poll_hz`` and ticking ``after_report_s`` after each new one
-(``CycleSync``), its ``Controller`` detecting, picking, locating, predicting and guarding —
+(``CycleSync``), its ``Controller`` detecting, picking, locating, predicting and guarding, armed
+as an operator would arm it once the robot is in view —
 against the sim's crane controller (its register map, on the simulated clock) and the sim's
 tracking camera (frames that arrive ``delay_s`` after their exposure, as over the bus). Only
 the wire and the waiting are left out. The crane-to-robot error is sampled at 20 Hz.
@@ -19,7 +20,8 @@ import numpy as np
 from common.markers import warm_up
 from services.experiment.devices import ModelCrane, SimClock, SimFrames
 from services.gantry.control import Controller
-from services.gantry.loop import GantryLoop
+from services.gantry.loop import GantryLoop, Request
+from services.gantry.modes import Command
 from services.gantry.predict import AlgorithmName
 from services.gantry.settings import GantrySettings
 from services.sim.lab import Lab, load_or_make_crater
@@ -85,9 +87,10 @@ def run(lab: Lab, settings: GantrySettings, *, end_s: float | None = None) -> Ru
     warm_up()  # load the compiled detector before the clock starts
     started = time.perf_counter()
     clock = SimClock(START_S)
-    loop = GantryLoop(settings, ModelCrane(lab, clock),
+    loop = GantryLoop(settings, ModelCrane(lab, clock, settings.crane),
                       SimFrames(lab, clock, np.random.default_rng((settings.seed, 2))),
-                      Controller(settings, lab.crater))
+                      Controller(settings, lab.crater), START_S)
+    arm_asked = False
     end = lab.trajectory.duration_s if end_s is None else end_s
     result = Run(settings.algorithm, np.array([]), np.zeros((0, 2)))
     samples_t: list[float] = []
@@ -104,6 +107,9 @@ def run(lab: Lab, settings: GantrySettings, *, end_s: float | None = None) -> Ru
         if tick is None or tick.step is None:
             continue
         step = tick.step
+        if not arm_asked and step.estimate is not None:  # as an operator would, once in view
+            loop.request(Request(Command.ARM, "experiment", "the robot is in view"))
+            arm_asked = True
         result.report_age_s.append(t - lab.crane.reported_s)
         if step.estimate is not None and step.frame_s is not None:
             result.velocity_t_s.append(t)

@@ -1,4 +1,5 @@
-"""The crane controller over Modbus/TCP (pymodbus): the register map of docs/devices.md.
+"""The crane controller over Modbus/TCP (pymodbus), through the lab's register map
+(``common.crane_registers.RegisterMap``; docs/devices.md).
 
 One client, one lock: the control loop and the heartbeat share the connection. Every failure
 is a ``CraneUnreachable`` (transport) or ``CraneRejected`` (a Modbus exception reply).
@@ -17,6 +18,7 @@ from pymodbus.client import ModbusTcpClient
 from pymodbus.exceptions import ModbusException
 
 from common import crane_registers as r
+from common.crane_registers import DEFAULT_MAP, RegisterMap
 
 
 class CraneError(Exception):
@@ -51,18 +53,41 @@ class CraneReading:
         return bool(self.status & r.MOVING)
 
     @property
-    def watchdog_tripped(self) -> bool:
-        return bool(self.faults & r.FAULT_WATCHDOG)
+    def safety_ok(self) -> bool:
+        """The controller's safety circuit is closed (no e-stop pressed)."""
+        return bool(self.status & r.SAFETY_OK)
+
+    @property
+    def latched_faults(self) -> int:
+        return self.faults & r.LATCHED_FAULTS
+
+    @property
+    def fault_names(self) -> str:
+        return r.fault_names(self.faults)
 
 
-def reading_from(v: list[int]) -> CraneReading:
-    """The controller's input registers (from address 0) as a reading."""
-    def i32(at: int) -> float:
-        return float(r.registers_to_int32(v[at], v[at + 1]))
+def reading_from(block: list[int], start: int, registers: RegisterMap = DEFAULT_MAP
+                 ) -> CraneReading:
+    """The controller's input registers (a block read from address ``start``) as a reading."""
+    def value(name: str) -> float:
+        return registers.read(name, block, start)
 
-    return CraneReading(i32(r.IR_ACTUAL_X), i32(r.IR_ACTUAL_Y), i32(r.IR_VELOCITY_X),
-                        i32(r.IR_VELOCITY_Y), v[r.IR_STATUS], v[r.IR_FAULTS],
-                        i32(r.IR_TARGET_X), i32(r.IR_TARGET_Y))
+    def word(name: str) -> int:
+        return block[getattr(registers, name) - start]
+
+    return CraneReading(value("actual_x"), value("actual_y"), value("velocity_x"),
+                        value("velocity_y"), word("status"), word("faults"), value("target_x"),
+                        value("target_y"))
+
+
+def setpoint_writes(registers: RegisterMap, x_mm: float, y_mm: float
+                    ) -> list[tuple[int, list[int]]]:
+    """(address, values) writes of a setpoint: one write when x and y are adjacent, so that
+    the controller never samples half of it."""
+    x, y = registers.encode("setpoint_x", x_mm), registers.encode("setpoint_y", y_mm)
+    if registers.setpoint_y == registers.setpoint_x + len(x):
+        return [(registers.setpoint_x, x + y)]
+    return [(registers.setpoint_x, x), (registers.setpoint_y, y)]
 
 
 class Crane(Protocol):
@@ -75,36 +100,65 @@ class Crane(Protocol):
 
     def disable(self) -> None: ...
 
+    def reset_faults(self) -> None: ...
+
     def write_setpoint(self, x_mm: float, y_mm: float) -> None: ...
 
     def heartbeat(self) -> None: ...
 
 
-class ModbusCrane:
-    def __init__(self, host: str, port: int, timeout_s: float = 0.5) -> None:
-        self.host, self.port = host, port
-        self._client = ModbusTcpClient(host, port=port, timeout=timeout_s, retries=0)
-        self._lock = threading.Lock()
+class RegisterCrane:
+    """The ``Crane`` Protocol over a register map; a subclass moves the registers (Modbus/TCP
+    here, the sim's model in the experiments)."""
+
+    def __init__(self, registers: RegisterMap) -> None:
+        self.registers = registers
         self._beat = 0
 
     def enable(self) -> None:
-        """Reset faults and enable; the controller drops whatever setpoint it had queued."""
-        self._write(r.HR_CONTROL, [r.CONTROL_ENABLE | r.CONTROL_RESET])
+        """Enable only: a latched fault stays latched (``reset_faults`` is the operator's)."""
+        self._write(self.registers.control, [r.CONTROL_ENABLE])
 
     def disable(self) -> None:
-        self._write(r.HR_CONTROL, [0])
+        self._write(self.registers.control, [0])
+
+    def reset_faults(self) -> None:
+        """Clear the controller's latched faults; the crane stays disabled."""
+        self._write(self.registers.control, [r.CONTROL_RESET])
 
     def write_setpoint(self, x_mm: float, y_mm: float) -> None:
-        self._write(r.HR_SETPOINT_X, r.int32_to_registers(x_mm) + r.int32_to_registers(y_mm))
+        for address, values in setpoint_writes(self.registers, x_mm, y_mm):
+            self._write(address, values)
 
     def heartbeat(self) -> None:
         self._beat = (self._beat + 1) % 65536
-        self._write(r.HR_HEARTBEAT, [self._beat])
+        self._write(self.registers.heartbeat, [self._beat])
 
     def read(self) -> CraneReading:
+        return reading_from(self._read_input(), self.registers.input_start, self.registers)
+
+    def _write(self, address: int, values: list[int]) -> None:
+        raise NotImplementedError
+
+    def _read_input(self) -> list[int]:
+        """The input registers from ``registers.input_start``, ``input_count`` of them."""
+        raise NotImplementedError
+
+
+class ModbusCrane(RegisterCrane):
+    def __init__(self, host: str, port: int, timeout_s: float = 0.5,
+                 registers: RegisterMap = DEFAULT_MAP) -> None:
+        super().__init__(registers)
+        self.host, self.port = host, port
+        self._client = ModbusTcpClient(host, port=port, timeout=timeout_s, retries=0)
+        self._lock = threading.Lock()
+
+    def _read_input(self) -> list[int]:
+        start, count = self.registers.input_start, self.registers.input_count
         with self._lock:
-            reply = self._call(lambda: self._client.read_input_registers(0, count=r.IR_COUNT))
-        return reading_from(reply.registers)
+            reply = self._call(lambda: self._client.read_input_registers(
+                start, count=count, device_id=self.registers.unit_id))
+        return reply.registers
 
     def close(self) -> None:
         with self._lock:
@@ -112,7 +166,8 @@ class ModbusCrane:
 
     def _write(self, address: int, values: list[int]) -> None:
         with self._lock:
-            self._call(lambda: self._client.write_registers(address, values))
+            self._call(lambda: self._client.write_registers(address, values,
+                                                            device_id=self.registers.unit_id))
 
     def _call(self, request):  # type: ignore[no-untyped-def]
         try:

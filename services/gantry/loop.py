@@ -2,14 +2,18 @@
 experiments' alike).
 
 Polled faster than the control period (``poll_hz``), it reads the crane controller's report,
+carries out the operator's commands and the stops the crane makes by itself (``ModeKeeper``),
 lets ``CycleSync`` decide when to tick (a fixed time after the report), and on a tick hands
-the newest frame and the reported position to the ``Controller`` and the setpoint to the crane.
+the newest frame and the reported position to the ``Controller`` — and, only while armed, the
+setpoint to the crane.
 """
 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+import threading
+from collections import deque
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -17,64 +21,174 @@ from services.gantry.control import Controller, Step
 from services.gantry.crane import Crane, CraneError, CraneReading
 from services.gantry.cycle import CycleSync
 from services.gantry.frames import FrameSource
+from services.gantry.modes import Action, Command, Decision, Facts, Mode, ModeKeeper
 from services.gantry.settings import GantrySettings
 
 log = logging.getLogger(__name__)
 
+COMMAND_MAX_AGE_S = 2.0
+"""An arm, disarm or reset older than this is refused (it was meant for another moment);
+a stop never is."""
+
+
+@dataclass(frozen=True)
+class Request:
+    command: Command
+    by: str
+    reason: str = ""
+    id: str = ""
+    sent_s: float | None = None  # when the operator sent it (None: now)
+
+
+@dataclass(frozen=True)
+class Reply:
+    request: Request
+    decision: Decision
+
 
 @dataclass(frozen=True)
 class Tick:
-    """One control period's outcome: the report it read, what the controller did, or why the
-    crane could not be driven (``error``; then ``step`` is None)."""
+    """One poll's outcome worth reporting: the report it read, what the controller did (on a
+    control tick), the replies to commands and the stops by the crane itself, or why the crane
+    could not be reached (``error``)."""
 
     now_s: float
     reading: CraneReading | None
-    step: Step | None
+    step: Step | None = None
     error: CraneError | None = None
+    replies: tuple[Reply, ...] = ()
+    changes: tuple[Decision, ...] = field(default=())  # mode changes the crane caused
 
 
 class GantryLoop:
     def __init__(self, settings: GantrySettings, crane: Crane, frames: FrameSource,
-                 controller: Controller) -> None:
+                 controller: Controller, now_s: float) -> None:
+        self.settings = settings
         self.crane, self.frames, self.controller = crane, frames, controller
         self.sync = CycleSync(1 / settings.control_hz, settings.after_report_s)
+        self.modes = ModeKeeper(now_s)
         self.reachable = True
+        self.reading: CraneReading | None = None
+        self._error: CraneError | None = None  # of the last tick's setpoint
+        self._requests: deque[Request] = deque()
+        self._lock = threading.Lock()
+
+    @property
+    def armed(self) -> bool:
+        return self.modes.mode is Mode.ARMED
+
+    def request(self, request: Request) -> None:
+        """An operator's command, carried out at the next poll (from any thread)."""
+        with self._lock:
+            self._requests.append(request)
 
     def poll(self, now_s: float, monotonic_s: float | None = None) -> Tick | None:
-        """Read the controller's report; tick when due. ``now_s`` is the frames' clock (their
-        capture times), ``monotonic_s`` the scheduling clock (default: ``now_s``)."""
+        """Read the controller's report, carry out commands and stops, tick when due.
+        ``now_s`` is the frames' clock (their capture times), ``monotonic_s`` the scheduling
+        clock (default: ``now_s``). Returns None when there is nothing to report."""
         mono = now_s if monotonic_s is None else monotonic_s
+        error: CraneError | None = None
         try:
-            reading = self.crane.read()
+            self.reading = self.crane.read()
         except CraneError as err:
-            return self._unreachable(now_s, err) if self.sync.due(mono) else None
-        self.sync.observe(mono, (reading.x_mm, reading.y_mm))
-        if not self.sync.due(mono):
+            self.reading, error = None, err
+        replies = self._carry_out_requests(now_s)
+        changes = self._observe(now_s)
+        if self.reading is not None:
+            self.sync.observe(mono, (self.reading.x_mm, self.reading.y_mm))
+        due = self.sync.due(mono)
+        if not due and not replies and not changes:
             return None
-        return self._tick(now_s, reading)
+        if self.reading is None:
+            assert error is not None
+            return Tick(now_s, None, None, self._unreachable(error), replies, changes)
+        step = self._tick(now_s, self.reading) if due else None
+        return Tick(now_s, self.reading, step, self._error, replies, changes)
 
-    def _tick(self, now_s: float, reading: CraneReading) -> Tick:
+    # --- commands and stops ----------------------------------------------------------------
+
+    def _carry_out_requests(self, now_s: float) -> tuple[Reply, ...]:
+        with self._lock:
+            requests, self._requests = list(self._requests), deque()
+        return tuple(Reply(r, self._carry_out(r, now_s)) for r in requests)
+
+    def _carry_out(self, request: Request, now_s: float) -> Decision:
+        age = 0.0 if request.sent_s is None else now_s - request.sent_s
+        if request.command is not Command.STOP and abs(age) > COMMAND_MAX_AGE_S:
+            return Decision(False, self.modes.mode, Action.NONE,
+                            f"sent {age:.1f} s ago: too old to act on, send it again")
+        estimate_s = self.controller.estimate_s
+        facts = Facts(self.reading, None if estimate_s is None else now_s - estimate_s,
+                      self.settings.stale_after_s)
+        before = (self.modes.mode, self.modes.by, self.modes.reason, self.modes.since_s)
+        decision = self.modes.command(request.command, request.by, request.reason, now_s, facts)
+        if not decision.accepted:
+            log.warning("%s from %s refused: %s", request.command, request.by, decision.detail)
+            return decision
+        failed = self._act(decision.action)
+        if failed is not None and request.command is Command.STOP:
+            detail = (f"stopped; the controller did not answer ({failed}): its watchdog stops "
+                      "the crane")
+            return Decision(True, self.modes.mode, decision.action, detail)
+        if failed is not None:
+            self.modes.mode, self.modes.by, self.modes.reason, self.modes.since_s = before
+            log.warning("%s from %s failed: %s", request.command, request.by, failed)
+            return Decision(False, self.modes.mode, Action.NONE,
+                            f"the crane controller did not take it: {failed}")
+        log.info("%s by %s: now %s (%s)", request.command, request.by, decision.mode,
+                 decision.detail)
+        return decision
+
+    def _observe(self, now_s: float) -> tuple[Decision, ...]:
+        if self.reading is None:
+            return ()
+        stop = self.modes.observe(self.reading, now_s)
+        if stop is None:
+            return ()
+        log.warning("crane stopped by itself: %s; the gantry is stopped until an operator "
+                    "resets it", stop.detail)
+        self._act(stop.action)
+        return (stop,)
+
+    def _act(self, action: Action) -> CraneError | None:
+        """Do ``action`` to the crane; the error if the controller did not take it."""
         try:
-            if not reading.enabled:
-                log.info("crane not enabled (faults %#x): enabling", reading.faults)
-                self.controller.restart()
+            if action is Action.ENABLE:
+                self.controller.restart()  # the first setpoint starts where the crane stands
                 self.crane.enable()
+            elif action is Action.DISABLE:
+                self.crane.disable()
+            elif action is Action.FREEZE_AND_DISABLE:
+                self.controller.restart()
+                if self.reading is not None:
+                    self.crane.write_setpoint(self.reading.x_mm, self.reading.y_mm)
+                self.crane.disable()
+            elif action is Action.RESET_FAULTS:
+                self.crane.reset_faults()
         except CraneError as err:
-            return self._unreachable(now_s, err)
+            return err
+        return None
+
+    # --- the control tick ------------------------------------------------------------------
+
+    def _tick(self, now_s: float, reading: CraneReading) -> Step:
+        """Measure and estimate always; drive the crane only while armed."""
+        self._error = None
         if not self.reachable:
             log.info("crane controller reachable again")
             self.reachable = True
         step = self.controller.step(now_s, self.frames.take(),
                                     np.array([reading.x_mm, reading.y_mm]))
-        try:
-            self.crane.write_setpoint(*step.setpoint)
-        except CraneError as err:
-            return self._unreachable(now_s, err)
-        return Tick(now_s, reading, step)
+        if self.armed:
+            try:
+                self.crane.write_setpoint(*step.setpoint)
+            except CraneError as err:
+                self._error = self._unreachable(err)
+        return step
 
-    def _unreachable(self, now_s: float, err: CraneError) -> Tick:
+    def _unreachable(self, err: CraneError) -> CraneError:
         self.controller.restart()  # the crane may have stopped meanwhile: start afresh
         if self.reachable:
             log.warning("%s", err)
         self.reachable = False
-        return Tick(now_s, None, None, err)
+        return err

@@ -1,13 +1,17 @@
 """Gantry service: the crane keeps itself above the robot (paper §3).
 
-Reads:      tracking-camera frames (stb/gantry/camera/frame, or a camera via OpenCV)
-            the crane controller over Modbus/TCP (position, status)
-Publishes:  stb/gantry/detections, stb/gantry/estimate, stb/gantry/setpoint, stb/gantry/state,
-            stb/gantry/offload (gravity offload: the cable's tilt from the horizontal error)
-Drives:     the crane controller: a setpoint every control period (4 Hz), ticking a fixed
-            time after the controller reports its position (polled at 40 Hz, CycleSync), a
-            heartbeat for its watchdog (10 Hz); holds when the estimate is stale or the
-            marker is lost
+Reads:      tracking-camera frames (stb/gantry/camera/frame, or a camera via OpenCV),
+            operators' commands (stb/gantry/command: arm, disarm, stop, reset),
+            the crane controller over Modbus/TCP (position, status, faults, safety circuit)
+Publishes:  stb/gantry/detections, stb/gantry/estimate, stb/gantry/setpoint, stb/gantry/state
+            (with the mode: disarmed, armed, stopped; who changed it and why),
+            stb/gantry/command/reply, stb/gantry/offload (the cable's tilt from the error)
+Drives:     the crane controller, only while armed (services/gantry/modes.py): a setpoint
+            every control period (4 Hz), ticking a fixed time after the controller reports its
+            position (polled at 40 Hz, CycleSync), a heartbeat for its watchdog (10 Hz); holds
+            when the estimate is stale or the marker is lost. It starts disarmed, never resets
+            a latched fault itself, and stops (setpoint frozen, crane disabled) on an operator's
+            stop, a fault, the safety circuit opening or the crane disabled at the controller.
 """
 
 from __future__ import annotations
@@ -27,7 +31,8 @@ from common.node import Node, StartupError, run_every
 from services.gantry.control import Controller, Step
 from services.gantry.crane import CraneError, CraneReading, ModbusCrane
 from services.gantry.frames import FrameInbox, FrameSource, OpenCvFrames, decode
-from services.gantry.loop import GantryLoop
+from services.gantry.loop import GantryLoop, Reply, Request
+from services.gantry.modes import Command, Mode
 from services.gantry.offload import offload
 from services.gantry.settings import GantrySettings
 
@@ -41,16 +46,19 @@ def run(node: Node) -> None:
     except ValueError as err:
         raise StartupError(f"gantry.height_map: {err}") from err
     log.info("detector ready (%.1f s)", warm_up())  # before the crane is driven, not mid-run
-    crane = ModbusCrane(s.crane_host, s.crane_port, s.crane_timeout_s)
+    crane = ModbusCrane(s.crane_host, s.crane_port, s.crane_timeout_s, s.crane)
     frames: FrameSource
     if s.frames == "bus":
         inbox = frames = FrameInbox()
         node.bus.subscribe(keys.GANTRY_FRAME, lambda msg: _put(inbox, msg))
     else:
         frames = OpenCvFrames(s.frames.removeprefix("opencv:"), node.stop)
-    control = Control(node, s, GantryLoop(s, crane, frames, Controller(s, heights)))
+    control = Control(node, s, GantryLoop(s, crane, frames, Controller(s, heights),
+                                          time.time()))
+    node.bus.subscribe(keys.GANTRY_COMMAND, control.command, latest=False)
     threading.Thread(target=run_every, args=(1 / s.heartbeat_hz, node.stop, control.heartbeat,
                                              "heartbeat"), name="heartbeat", daemon=True).start()
+    log.info("disarmed: the crane moves once an operator arms the gantry (stb gantry arm)")
     try:
         run_every(1 / s.poll_hz, node.stop, control.poll, "crane poll")
     finally:
@@ -72,10 +80,14 @@ class Control:
         self.offload_warned = False
         self.last_tick = time.monotonic()
 
+    def command(self, msg: m.GantryCommand) -> None:
+        self.loop.request(Request(Command(msg.command), msg.operator, msg.reason, msg.id,
+                                  msg.measured_s))
+
     def heartbeat(self) -> None:
-        """Only while the control loop is alive: a stuck or failing loop stops the heartbeat,
-        and the crane's watchdog stops the crane."""
-        if time.monotonic() - self.last_tick > 2.5 / self.s.control_hz:
+        """Only while armed and the control loop is alive: a stuck or failing loop stops the
+        heartbeat, and the crane's watchdog stops the crane."""
+        if not self.loop.armed or time.monotonic() - self.last_tick > 2.5 / self.s.control_hz:
             return
         with contextlib.suppress(CraneError):  # the control loop reports it
             self.loop.crane.heartbeat()
@@ -84,11 +96,22 @@ class Control:
         tick = self.loop.poll(time.time(), time.monotonic())
         if tick is None:
             return
-        if tick.step is None or tick.reading is None:
+        for reply in tick.replies:
+            self._reply(tick.now_s, reply)
+        if tick.reading is None:
             self._unreachable(tick.now_s, str(tick.error))
             return
-        self.last_tick = time.monotonic()
-        self._publish(tick.now_s, tick.step, tick.reading)
+        if tick.step is not None:
+            self.last_tick = time.monotonic()
+            self._publish(tick.now_s, tick.step, tick.reading)
+        elif tick.replies or tick.changes:
+            self._state(tick.now_s, tick.reading, hold=True)
+
+    def _reply(self, now: float, reply: Reply) -> None:
+        r, d = reply.request, reply.decision
+        self.node.bus.publish(keys.GANTRY_COMMAND_REPLY, m.GantryCommandReply(
+            measured_s=now, id=r.id[:64], command=r.command.value, accepted=d.accepted,
+            detail=d.detail[:500], mode=d.mode.value))
 
     def _publish(self, now: float, step: Step, reading: CraneReading) -> None:
         if step.detection is not None and step.frame_s is not None:
@@ -96,15 +119,26 @@ class Control:
             self.node.bus.publish(keys.GANTRY_DETECTIONS, to_message(
                 step.detection, "tracking", step.frame_s, width, height))
             self._estimate(step)
-        self.seq += 1
-        self.node.bus.publish(keys.GANTRY_SETPOINT, m.CraneSetpoint(
-            measured_s=now, seq=self.seq, x_mm=float(step.setpoint[0]),
-            y_mm=float(step.setpoint[1]), hold=step.hold))
-        self.node.set_status("degraded" if step.hold else "ok", step.reason)
-        self._state(now, "holding" if step.hold else "tracking", reading)
-        if step.estimate is not None and not step.hold:
+        armed = self.loop.armed
+        if armed:
+            self.seq += 1
+            self.node.bus.publish(keys.GANTRY_SETPOINT, m.CraneSetpoint(
+                measured_s=now, seq=self.seq, x_mm=float(step.setpoint[0]),
+                y_mm=float(step.setpoint[1]), hold=step.hold))
+        self._status(step)
+        self._state(now, reading, hold=step.hold)
+        if armed and step.estimate is not None and not step.hold:
             crane_xy = np.array([reading.x_mm, reading.y_mm])
             self._offload(now, float(np.hypot(*(step.estimate.position - crane_xy))))
+
+    def _status(self, step: Step) -> None:
+        modes = self.loop.modes
+        if modes.mode is Mode.STOPPED:
+            self.node.set_status("degraded", f"stopped by {modes.by}: {modes.reason}")
+        elif modes.mode is Mode.DISARMED:
+            self.node.set_status("ok", "disarmed")
+        else:
+            self.node.set_status("degraded" if step.hold else "ok", step.reason)
 
     def _estimate(self, step: Step) -> None:
         e, xyz = step.estimate, step.measured_xyz
@@ -129,13 +163,22 @@ class Control:
 
     def _unreachable(self, now: float, error: str) -> None:
         self.node.set_status("degraded", error)
+        modes = self.loop.modes
         self.node.bus.publish(keys.GANTRY_STATE, m.CraneState(
             measured_s=now, status="unreachable", x_mm=0.0, y_mm=0.0, target_x_mm=0.0,
-            target_y_mm=0.0, enabled=False, moving=False, fault_bits=0))
+            target_y_mm=0.0, enabled=False, moving=False, fault_bits=0,
+            mode=modes.mode.value, mode_by=modes.by[:128], mode_reason=modes.reason[:500],
+            mode_since_s=modes.since_s))
 
-    def _state(self, now: float, status: str, reading: CraneReading) -> None:
+    def _state(self, now: float, reading: CraneReading, *, hold: bool) -> None:
+        modes = self.loop.modes
+        status = {Mode.DISARMED: "idle", Mode.STOPPED: "stopped"}.get(
+            modes.mode, "holding" if hold else "tracking")
+        if reading.latched_faults and modes.mode is not Mode.STOPPED:
+            status = "fault"
         self.node.bus.publish(keys.GANTRY_STATE, m.CraneState(
-            measured_s=now, status=status if not reading.faults else "fault",
-            x_mm=reading.x_mm, y_mm=reading.y_mm, target_x_mm=reading.target_x_mm,
-            target_y_mm=reading.target_y_mm, enabled=reading.enabled, moving=reading.moving,
-            fault_bits=reading.faults & 0xFFFF))
+            measured_s=now, status=status, x_mm=reading.x_mm, y_mm=reading.y_mm,
+            target_x_mm=reading.target_x_mm, target_y_mm=reading.target_y_mm,
+            enabled=reading.enabled, moving=reading.moving, fault_bits=reading.faults & 0xFFFF,
+            safety_ok=reading.safety_ok, mode=modes.mode.value, mode_by=modes.by[:128],
+            mode_reason=modes.reason[:500], mode_since_s=modes.since_s))

@@ -6,6 +6,7 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
 
+from common.crane_registers import RegisterMap
 from common.settings import ServiceSettings
 from services.gantry.cycle import AFTER_REPORT_S
 from services.gantry.predict import AlgorithmName, ParticleOptions
@@ -33,6 +34,8 @@ class GantrySettings(ServiceSettings):
     crane_host: str = "127.0.0.1"
     crane_port: int = Field(5020, ge=1, le=65535)
     crane_timeout_s: float = Field(0.3, gt=0, le=5)
+    crane: RegisterMap = Field(RegisterMap(), description="the controller's register map: "
+                               "[gantry.crane] (docs/devices.md)")
     frames: str = Field("bus", description='"bus": stb/gantry/camera/frame; or '
                         '"opencv:0" / "opencv:rtsp://..." for a camera on this host')
     algorithm: AlgorithmName = "default"

@@ -11,6 +11,9 @@
 * Watchdog: while enabled, if neither a setpoint write nor a heartbeat change arrives for
   ``watchdog_s``, the crane brakes to a stop, disables itself and latches a fault. It moves
   again only after a fault reset and a new enable.
+* Safety circuit: an e-stop opens it; the crane brakes to a stop, disables itself and latches
+  a safety fault, which a reset clears only once the circuit is closed again. Enabling is
+  refused while a latched fault or an open circuit remains.
 
 Parameter values and where they come from: docs/experiments.md (identified against the
 paper's Tables 3–4 with ``stb experiment identify``) and docs/devices.md.
@@ -29,9 +32,12 @@ from common.crane_registers import (  # noqa: F401 - its users import the bits f
     CONTROL_RESET,
     ENABLED,
     FAULT_CLAMPED,
+    FAULT_SAFETY,
     FAULT_WATCHDOG,
     FAULTED,
+    LATCHED_FAULTS,
     MOVING,
+    SAFETY_OK,
 )
 
 STEP_S = 0.005
@@ -72,6 +78,7 @@ class CraneModel:
     rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
     """Draws the report's timing jitter."""
     enabled: bool = False
+    safety_ok: bool = True  # the safety circuit is closed (no e-stop pressed)
     faults: int = 0
     heartbeat: int = 0
     setpoints_taken: int = 0
@@ -150,8 +157,8 @@ class CraneModel:
     def write_control(self, now: float, value: int) -> None:
         self.advance_to(now)
         if value & CONTROL_RESET:
-            self.faults = 0
-        if value & CONTROL_ENABLE and not self.faults & FAULT_WATCHDOG:
+            self.faults = 0 if self.safety_ok else FAULT_SAFETY
+        if value & CONTROL_ENABLE and not self.faults & LATCHED_FAULTS and self.safety_ok:
             if not self.enabled:
                 self._last_activity = now
                 self._pending.clear()
@@ -161,6 +168,13 @@ class CraneModel:
         elif not value & CONTROL_ENABLE:
             self.enabled = False
             self._target = list(self._p)
+
+    def set_safety_circuit(self, now: float, closed: bool) -> None:
+        """Open (an e-stop pressed) or close the safety circuit."""
+        self.advance_to(now)
+        if not closed:
+            self._stop_with(FAULT_SAFETY)
+        self.safety_ok = closed
 
     # --- time ----------------------------------------------------------------------------
 
@@ -173,10 +187,7 @@ class CraneModel:
     def _tick(self, t: float) -> None:
         p = self.params
         if self.enabled and t - self._last_activity > p.watchdog_s:
-            self.enabled = False
-            self.faults |= FAULT_WATCHDOG
-            self._pending.clear()
-            self._target = None  # brake to a stop
+            self._stop_with(FAULT_WATCHDOG)
         if self._step >= self._next_cycle_step:
             self._cycle(t)
         while self._pending and self._pending[0][0] <= self._step:
@@ -184,6 +195,12 @@ class CraneModel:
         self._move()
         p, v = self._p, self._v
         self._history[self._step % len(self._history)] = (p[0], p[1], v[0], v[1])
+
+    def _stop_with(self, fault: int) -> None:
+        self.enabled = False
+        self.faults |= fault
+        self._pending.clear()
+        self._target = None  # brake to a stop
 
     def _cycle(self, t: float) -> None:
         p = self.params
@@ -224,7 +241,8 @@ class CraneModel:
         at_target = self._target is not None and all(
             abs(self._target[i] - self._p[i]) < 1.0 for i in (0, 1))
         return ((ENABLED if self.enabled else 0) | (MOVING if moving else 0)
-                | (AT_TARGET if at_target else 0) | (FAULTED if self.faults else 0))
+                | (AT_TARGET if at_target else 0) | (FAULTED if self.faults else 0)
+                | (SAFETY_OK if self.safety_ok else 0))
 
 
 def _desired_speed(error: float, p: CraneParams, dv_max: float) -> float:

@@ -119,7 +119,9 @@ class DeviceLoop:
         source = MocapSource(lab.labels, m_.rate_hz, lab.mocap_frame, clock)
         self.mocap = MocapServer(source, settings.host_of(m_.host), m_.port)
         self.crane = CraneServer(lab.crane, clock, lab.crane_lock,
-                                 settings.host_of(settings.crane.host), settings.crane.port)
+                                 settings.host_of(settings.crane.host), settings.crane.port,
+                                 registers=settings.crane.registers,
+                                 estop_register=settings.crane.estop_register)
         self._loop = asyncio.new_event_loop()
         self._ready = threading.Event()
         self._error: BaseException | None = None

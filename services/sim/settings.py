@@ -11,8 +11,10 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from common.crane_registers import RegisterMap
 from common.settings import ServiceSettings
 from services.sim.crane import CraneParams
+from services.sim.crane_server import ESTOP_REGISTER
 from services.sim.robots import Railway, Walk
 
 
@@ -87,9 +89,14 @@ class CraneSettings(_Section):
     report_jitter_s: float = Field(_CRANE.report_jitter_s, ge=0, le=1,
                                    description="spread (full width) of that age")
     watchdog_s: float = Field(_CRANE.watchdog_s, gt=0)
+    registers: RegisterMap = Field(RegisterMap(), description="the register map it serves: "
+                                   "the lab's [gantry.crane] (docs/devices.md)")
+    estop_register: int = Field(ESTOP_REGISTER, ge=0, le=65535, description="the sim's own "
+                                "e-stop button, a holding register: 1 pressed, 0 released")
 
     def params(self) -> CraneParams:
-        return CraneParams(**self.model_dump(exclude={"host", "port"}))
+        return CraneParams(**self.model_dump(exclude={"host", "port", "registers",
+                                                      "estop_register"}))
 
 
 class TrackingCameraSettings(_Section):

@@ -18,6 +18,7 @@ from services.experiment.gantry import gantry_for, make_lab, run
 from services.gantry.settings import GantrySettings
 from services.sim.robots import MARKER_HEIGHT_MM
 from tests.conftest import free_port, stb_process, wait_for
+from tests.gantry.rig import Operator
 
 pytestmark = pytest.mark.usefixtures("compiled_detector")
 END_S = 40.0  # scenario seconds run
@@ -79,6 +80,8 @@ def test_the_live_service_tracks_as_the_experiment_does(tmp_path: Path, router_e
         sim = stb_process("sim", "--lab", str(lab))
         wait_for(lambda: len(robots) > 0, timeout=20)
         start = robots[0].measured_s  # the sim's clock starts just before its first truth
+        operator = Operator(make_bus())  # arms once the gantry sees the robot, as the
+        wait_for(lambda: operator.send("arm").accepted, timeout=10, period=0.1)  # experiment
         wait_for(lambda: cranes and cranes[-1].measured_s - start > END_S, timeout=END_S + 30)
     finally:
         for proc in (gantry, sim):

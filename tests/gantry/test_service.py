@@ -1,12 +1,12 @@
-"""The gantry service against the sim's Modbus crane controller, with tracking frames put on
-the bus by the test (rendered by the sim's camera model from a robot position it chooses)."""
+"""The armed gantry service tracks against the sim's Modbus crane controller: it follows,
+holds, leaves a stopped crane when it dies, ticks after the controller's reports, rides out a
+router outage (tests/gantry/rig.py)."""
 
 from __future__ import annotations
 
-import asyncio
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -16,101 +16,33 @@ from common import keys
 from common import messages as m
 from common.bus import Bus
 from common.crane_registers import FAULT_WATCHDOG
-from common.heightmap import HeightMap
 from common.node import Node
 from services.gantry.service import run
 from services.gantry.settings import GantrySettings
-from services.sim.crane import CraneModel, CraneParams
-from services.sim.crane_server import CraneServer
-from services.sim.render import Blob, TrackingCamera, draw
 from tests.conftest import free_port, wait_for
+from tests.gantry.rig import MARKER_MM, CraneRig, Operator, feed
 
 pytestmark = pytest.mark.usefixtures("compiled_detector")
-CAMERA = TrackingCamera(focal_mm=8.0, pixel_mm=0.0075, height_mm=3500.0)
-GROUND_MM, MARKER_MM = 100.0, 80.0
-
-
-class CraneRig:
-    """The sim's crane controller on a free port, on real time, in a thread of its own."""
-
-    def __init__(self) -> None:
-        self.port = free_port()
-        t0 = time.monotonic()
-        self.clock = lambda: time.monotonic() - t0
-        self.model = CraneModel(CraneParams(watchdog_s=0.5))
-        self.lock = threading.Lock()
-        self.server = CraneServer(self.model, self.clock, self.lock, "127.0.0.1", self.port)
-        self.loop = asyncio.new_event_loop()
-        self.thread = threading.Thread(target=self._run, daemon=True)
-        self.thread.start()
-        time.sleep(0.3)
-
-    def _run(self) -> None:
-        asyncio.set_event_loop(self.loop)
-        self.loop.run_until_complete(self.server.serve())
-
-    def state(self) -> tuple[np.ndarray, np.ndarray, bool, int]:
-        with self.lock:
-            self.model.advance_to(self.clock())
-            return (self.model.position.copy(), self.model.velocity.copy(), self.model.enabled,
-                    self.model.faults)
-
-    def close(self) -> None:
-        asyncio.run_coroutine_threadsafe(self.server.close(), self.loop).result(5)
-        self.loop.call_soon_threadsafe(self.loop.stop)
-
-
-@pytest.fixture
-def rig(request: pytest.FixtureRequest, tmp_path: Path, make_bus: Callable[..., Bus]
-        ) -> Iterator[dict]:
-    """The gantry service against a CraneRig; ``indirect`` parameters: more settings."""
-    heights = tmp_path / "flat.npz"
-    HeightMap(np.full((3, 3), GROUND_MM, np.float32), -5000, -5000, 5000).save(heights)
-    crane = CraneRig()
-    settings = GantrySettings(crane_port=crane.port, height_map=heights,
-                              marker_height_mm=MARKER_MM, stale_after_s=0.6,
-                              **getattr(request, "param", {}))
-    node = Node("gantry", settings, make_bus())
-    world = make_bus()
-    setpoints: list[m.CraneSetpoint] = []
-    world.subscribe(keys.GANTRY_SETPOINT, setpoints.append, latest=False)
-    thread = threading.Thread(target=run, args=(node,), daemon=True)
-    thread.start()
-    yield {"crane": crane, "node": node, "world": world, "setpoints": setpoints,
-           "thread": thread}
-    node.stop.set()
-    thread.join(5)
-    crane.close()
-
-
-def _frame(world: Bus, robot_xy: np.ndarray | None, crane_xy: np.ndarray, seq: int,
-           rng: np.random.Generator) -> None:
-    blobs = []
-    if robot_xy is not None:
-        u, v, r = CAMERA.pixel_of(np.array([*robot_xy, GROUND_MM + MARKER_MM]), *crane_xy)
-        blobs.append(Blob(u, v, r, r))
-    image = draw(blobs, CAMERA.width_px, CAMERA.height_px, rng)
-    world.publish(keys.GANTRY_FRAME, m.CameraFrame(
-        measured_s=time.time(), camera="tracking", seq=seq, width_px=CAMERA.width_px,
-        height_px=CAMERA.height_px, encoding="mono8", data=image.tobytes()))
 
 
 def _feed(rig: dict, robot: Callable[[float], np.ndarray | None], seconds: float,
           stop: threading.Event | None = None) -> None:
-    rng = np.random.default_rng(0)
-    start = time.monotonic()
-    seq = 0
-    while (elapsed := time.monotonic() - start) < seconds and not (stop and stop.is_set()):
-        crane_xy, _, _, _ = rig["crane"].state()
-        _frame(rig["world"], robot(elapsed), crane_xy, seq, rng)
-        seq += 1
-        time.sleep(0.04)
+    feed(rig["crane"], rig["world"], robot, seconds, stop)
+
+
+def _armed(rig: dict, robot: Callable[[float], np.ndarray | None], seconds: float
+           ) -> threading.Thread:
+    """Frames in the background, and the operator arms once the gantry sees the robot."""
+    feeder = threading.Thread(target=_feed, args=(rig, robot, seconds), daemon=True)
+    feeder.start()
+    operator: Operator = rig["operator"]
+    wait_for(lambda: operator.send("arm").accepted, timeout=5, period=0.2)
+    return feeder
 
 
 def test_follows_then_holds_when_frames_stop_or_the_marker_is_lost(rig: dict) -> None:
     target = np.array([350.0, -250.0])
-    feeder = threading.Thread(target=_feed, args=(rig, lambda _t: target, 8.0))
-    feeder.start()
+    feeder = _armed(rig, lambda _t: target, 8.0)
     wait_for(lambda: np.linalg.norm(rig["crane"].state()[0] - target) < 20.0, timeout=8)
     assert rig["crane"].state()[2] and not rig["setpoints"][-1].hold
     feeder.join()
@@ -129,8 +61,7 @@ def test_follows_then_holds_when_frames_stop_or_the_marker_is_lost(rig: dict) ->
 
 def test_a_dead_gantry_service_leaves_a_stopped_crane(rig: dict) -> None:
     target = np.array([900.0, 0.0])
-    feeder = threading.Thread(target=_feed, args=(rig, lambda _t: target, 3.0))
-    feeder.start()
+    feeder = _armed(rig, lambda _t: target, 4.0)
     wait_for(lambda: np.linalg.norm(rig["crane"].state()[1]) > 100.0, timeout=3)
     rig["node"].stop.set()  # the service ends: no heartbeat, no setpoints
     rig["thread"].join(5)
@@ -147,8 +78,7 @@ def test_offload_figures_follow_the_error(rig: dict) -> None:
     offloads: list[m.GravityOffload] = []
     rig["world"].subscribe(keys.GANTRY_OFFLOAD, offloads.append, latest=False)
     target = np.array([-600.0, 400.0])
-    feeder = threading.Thread(target=_feed, args=(rig, lambda _t: target, 6.0))
-    feeder.start()
+    feeder = _armed(rig, lambda _t: target, 8.0)
     wait_for(lambda: offloads and offloads[-1].horizontal_error_mm > 200.0, timeout=3)
     assert offloads[-1].warning, "far off at the start: more than 5 % sideways"
     wait_for(lambda: np.linalg.norm(rig["crane"].state()[0] - target) < 20.0, timeout=8)
@@ -170,7 +100,7 @@ def test_setpoints_go_out_a_fixed_time_after_the_controller_reports(rig: dict) -
 
     crane.model.write_setpoint = recording  # type: ignore[method-assign]
     start = np.array([-300.0, 0.0])
-    _feed(rig, lambda t: start + [120.0 * t, 0.0], 6.0)
+    _armed(rig, lambda t: start + [120.0 * t, 0.0], 7.0).join()
     settled = np.array(ages[-12:])
     assert len(ages) >= 18, ages
     # polled at 40 Hz: a new report is seen within 25 ms; plus Modbus and the tick's own work
@@ -178,7 +108,7 @@ def test_setpoints_go_out_a_fixed_time_after_the_controller_reports(rig: dict) -
 
 
 def test_the_crane_holds_while_the_router_is_down_and_tracks_again_after(
-        tmp_path: Path) -> None:
+        flat_map: Path) -> None:
     import signal
 
     from tests.conftest import client_settings, stb_process
@@ -186,8 +116,6 @@ def test_the_crane_holds_while_the_router_is_down_and_tracks_again_after(
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     router = stb_process("router", "--listen", endpoint)
-    heights = tmp_path / "flat.npz"
-    HeightMap(np.full((3, 3), GROUND_MM, np.float32), -5000, -5000, 5000).save(heights)
     crane = CraneRig()
     sessions = []
     try:
@@ -196,7 +124,7 @@ def test_the_crane_holds_while_the_router_is_down_and_tracks_again_after(
             sessions.append(session)
             return Bus(session, client_settings(endpoint))
 
-        node = Node("gantry", GantrySettings(crane_port=crane.port, height_map=heights,
+        node = Node("gantry", GantrySettings(crane_port=crane.port, height_map=flat_map,
                                              marker_height_mm=MARKER_MM), bus())
         thread = threading.Thread(target=run, args=(node,), daemon=True)
         thread.start()
@@ -206,6 +134,8 @@ def test_the_crane_holds_while_the_router_is_down_and_tracks_again_after(
         feeder = threading.Thread(target=_feed, args=(rig, lambda t: target + [60.0 * t, 0.0],
                                                       30.0, done), daemon=True)
         feeder.start()
+        operator = Operator(bus())
+        wait_for(lambda: operator.send("arm").accepted, timeout=10, period=0.2)
         wait_for(lambda: np.linalg.norm(crane.state()[1]) > 30.0, timeout=10)
         router.send_signal(signal.SIGKILL)
         router.wait(5)

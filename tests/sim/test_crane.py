@@ -11,6 +11,7 @@ import pytest
 from pymodbus.client import AsyncModbusTcpClient
 
 from common import crane_registers as regs
+from common.crane_registers import DEFAULT_MAP as MAP
 from services.sim.crane import (
     CONTROL_ENABLE,
     CONTROL_RESET,
@@ -57,12 +58,10 @@ def test_a_setpoint_is_taken_at_the_next_cycle_and_acted_on_a_dead_time_later() 
 def test_the_position_loop_lags_a_ramp_by_its_time_constant() -> None:
     crane = _enabled(CraneParams(dead_time_s=0.0, position_time_constant_s=0.2,
                                  cycle_s=0.05, max_speed_mm_s=1000, max_accel_mm_s2=5000))
-    beat = 0
     for k in range(1, 200):  # a setpoint ramp at 200 mm/s for 10 s
         t = 0.05 * k
-        beat += 1
         crane.write_setpoint(t, 200.0 * t, 0.0)
-        crane.write_heartbeat(t, beat)
+        crane.write_heartbeat(t, k)
     # the target is the setpoint written a cycle before (0.05 s) and steps every cycle (half
     # a cycle on average); the loop adds its time constant: speed = distance / τ
     lag = 200.0 * 9.95 - crane.position[0]
@@ -166,21 +165,21 @@ def test_modbus_client_drives_the_crane_over_tcp() -> None:
         client = AsyncModbusTcpClient("127.0.0.1", port=port, timeout=2)
         await client.connect()
         try:
-            await client.write_register(regs.HR_CONTROL, CONTROL_ENABLE)
-            await client.write_registers(regs.HR_SETPOINT_X, regs.int32_to_registers(800)
+            await client.write_register(MAP.control, CONTROL_ENABLE)
+            await client.write_registers(MAP.setpoint_x, regs.int32_to_registers(800)
                                          + regs.int32_to_registers(-300))
             await asyncio.sleep(0.3)
-            early = (await client.read_input_registers(0, count=regs.IR_COUNT)).registers
+            early = (await client.read_input_registers(0, count=MAP.input_count)).registers
             for beat in range(1, 16):
                 await asyncio.sleep(0.1)
-                await client.write_register(regs.HR_HEARTBEAT, beat)
-            moving = (await client.read_input_registers(0, count=regs.IR_COUNT)).registers
-            await client.write_registers(regs.HR_SETPOINT_X, regs.int32_to_registers(9000)
+                await client.write_register(MAP.heartbeat, beat)
+            moving = (await client.read_input_registers(0, count=MAP.input_count)).registers
+            await client.write_registers(MAP.setpoint_x, regs.int32_to_registers(9000)
                                          + regs.int32_to_registers(0))
             await asyncio.sleep(0.3)
-            clamped = (await client.read_input_registers(0, count=regs.IR_COUNT)).registers
+            clamped = (await client.read_input_registers(0, count=MAP.input_count)).registers
             await asyncio.sleep(1.0)  # silence: the watchdog trips
-            silent = (await client.read_input_registers(0, count=regs.IR_COUNT)).registers
+            silent = (await client.read_input_registers(0, count=MAP.input_count)).registers
             bad = await client.read_input_registers(100, count=2)
             return {"early": early, "moving": moving, "clamped": clamped, "silent": silent,
                     "bad": bad}
@@ -191,14 +190,14 @@ def test_modbus_client_drives_the_crane_over_tcp() -> None:
 
     result = asyncio.run(main())
     early, moving, silent = result["early"], result["moving"], result["silent"]
-    assert early[regs.IR_ACTUAL_X: regs.IR_ACTUAL_X + 4] == [0, 0, 0, 0], "0.5 s dead time"
-    x = regs.registers_to_int32(moving[regs.IR_ACTUAL_X], moving[regs.IR_ACTUAL_X + 1])
-    y = regs.registers_to_int32(moving[regs.IR_ACTUAL_Y], moving[regs.IR_ACTUAL_Y + 1])
+    assert early[MAP.actual_x: MAP.actual_x + 4] == [0, 0, 0, 0], "0.5 s dead time"
+    x = regs.registers_to_int32(moving[MAP.actual_x], moving[MAP.actual_x + 1])
+    y = regs.registers_to_int32(moving[MAP.actual_y], moving[MAP.actual_y + 1])
     assert 0 < x < 800 and -300 < y < 0
-    assert moving[regs.IR_STATUS] & ENABLED and moving[regs.IR_HEARTBEAT] == 15
-    assert regs.registers_to_int32(moving[regs.IR_TARGET_X], moving[regs.IR_TARGET_X + 1]) == 800
-    assert result["clamped"][regs.IR_FAULTS] & FAULT_CLAMPED, "outside the workspace: flagged"
-    assert silent[regs.IR_FAULTS] & FAULT_WATCHDOG and not silent[regs.IR_STATUS] & ENABLED
+    assert moving[MAP.status] & ENABLED and moving[MAP.heartbeat_echo] == 15
+    assert regs.registers_to_int32(moving[MAP.target_x], moving[MAP.target_x + 1]) == 800
+    assert result["clamped"][MAP.faults] & FAULT_CLAMPED, "outside the workspace: flagged"
+    assert silent[MAP.faults] & FAULT_WATCHDOG and not silent[MAP.status] & ENABLED
     assert result["bad"].isError(), "an address outside the map is an exception response"
 
 

@@ -1,0 +1,134 @@
+"""Who may move the crane (pure): the gantry's modes, the operator's commands, the stops.
+
+* ``disarmed`` — at start, and after ``disarm`` or ``reset``. The gantry never enables the
+  crane: it measures and estimates, and writes nothing to the controller.
+* ``armed`` — only after an operator's ``arm``: tracking when it has a fresh estimate,
+  holding otherwise.
+* ``stopped`` — after ``stop`` (accepted in every mode), or by itself when the crane stops
+  on its own: a watchdog trip or another latched fault, the safety circuit open (e-stop), or
+  the crane disabled at the controller. The setpoint is frozen where the crane is and the
+  crane is disabled. Only ``reset`` (which clears the controller's latched faults) leads out,
+  to ``disarmed``; then ``arm``. The gantry never resets a fault on its own.
+
+Every change names who asked and why.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import StrEnum
+
+from services.gantry.crane import CraneReading
+
+
+class Mode(StrEnum):
+    DISARMED = "disarmed"
+    ARMED = "armed"
+    STOPPED = "stopped"
+
+
+class Command(StrEnum):
+    ARM = "arm"
+    DISARM = "disarm"
+    STOP = "stop"
+    RESET = "reset"
+
+
+class Action(StrEnum):
+    """What the loop does to the crane controller for a decision."""
+
+    NONE = "none"
+    ENABLE = "enable"
+    DISABLE = "disable"
+    FREEZE_AND_DISABLE = "freeze and disable"  # setpoint := where it is; then disable
+    RESET_FAULTS = "reset faults"
+
+
+@dataclass(frozen=True)
+class Decision:
+    accepted: bool
+    mode: Mode  # the mode after it
+    action: Action
+    detail: str  # why: the refusal's reason, or what changed
+
+
+@dataclass(frozen=True)
+class Facts:
+    """What arming depends on, as the loop sees it now."""
+
+    crane: CraneReading | None  # None: the controller does not answer
+    estimate_age_s: float | None  # None: no estimate of the robot
+    stale_after_s: float
+
+
+class ModeKeeper:
+    def __init__(self, now_s: float, enable_grace_s: float = 1.0) -> None:
+        self.mode = Mode.DISARMED
+        self.by, self.reason, self.since_s = "gantry", "started: disarmed until an operator " \
+            "arms it", now_s
+        self.enable_grace_s = enable_grace_s
+        self._armed_at_s = now_s
+
+    def command(self, command: Command, by: str, reason: str, now_s: float, facts: Facts
+                ) -> Decision:
+        """An operator's command: accepted (and what to do) or refused (and why)."""
+        if command is Command.STOP:
+            return self._change(Mode.STOPPED, Action.FREEZE_AND_DISABLE, by,
+                                reason or "stop", now_s)
+        if command is Command.RESET:
+            if self.mode is Mode.ARMED:
+                return self._refuse("armed: disarm or stop before a reset")
+            return self._change(Mode.DISARMED, Action.RESET_FAULTS, by,
+                                reason or "reset", now_s)
+        if command is Command.DISARM:
+            if self.mode is Mode.STOPPED:
+                return self._refuse("stopped: reset first")
+            if self.mode is Mode.DISARMED:
+                return Decision(True, self.mode, Action.NONE, "already disarmed")
+            return self._change(Mode.DISARMED, Action.DISABLE, by, reason or "disarm", now_s)
+        return self._arm(by, reason, now_s, facts)
+
+    def observe(self, crane: CraneReading, now_s: float) -> Decision | None:
+        """The controller's report while armed: a stop if the crane stopped on its own."""
+        if self.mode is not Mode.ARMED:
+            return None
+        why = stopped_why(crane)
+        if why is None and not crane.enabled and now_s - self._armed_at_s > self.enable_grace_s:
+            why = "crane disabled at the controller"
+        if why is None:
+            return None
+        return self._change(Mode.STOPPED, Action.FREEZE_AND_DISABLE, "crane", why, now_s)
+
+    def _arm(self, by: str, reason: str, now_s: float, facts: Facts) -> Decision:
+        if self.mode is Mode.ARMED:
+            return Decision(True, self.mode, Action.NONE, "already armed")
+        if self.mode is Mode.STOPPED:
+            return self._refuse("stopped: reset first")
+        if facts.crane is None:
+            return self._refuse("the crane controller does not answer")
+        why = stopped_why(facts.crane)
+        if why is not None:
+            return self._refuse(f"{why}: reset first")
+        age = facts.estimate_age_s
+        if age is None or age > facts.stale_after_s:
+            return self._refuse("no fresh estimate of the robot: is its marker in view?")
+        self._armed_at_s = now_s
+        return self._change(Mode.ARMED, Action.ENABLE, by, reason or "arm", now_s)
+
+    def _change(self, mode: Mode, action: Action, by: str, reason: str, now_s: float
+                ) -> Decision:
+        self.mode, self.by, self.reason, self.since_s = mode, by, reason, now_s
+        return Decision(True, mode, action, reason)
+
+    def _refuse(self, why: str) -> Decision:
+        return Decision(False, self.mode, Action.NONE, why)
+
+
+def stopped_why(crane: CraneReading) -> str | None:
+    """Why the controller will not move the crane (latched faults, the safety circuit), or
+    None."""
+    if not crane.safety_ok:
+        return "safety circuit open (e-stop)"
+    if crane.latched_faults:
+        return f"crane fault latched ({crane.fault_names})"
+    return None

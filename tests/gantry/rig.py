@@ -1,0 +1,138 @@
+"""The gantry service against the sim's Modbus crane controller on real time, with tracking
+frames put on the bus by the test (rendered by the sim's camera model from a robot position
+it chooses), and an operator who sends commands."""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+
+import numpy as np
+from pymodbus.client import ModbusTcpClient
+
+from common import keys
+from common import messages as m
+from common.bus import Bus
+from common.crane_registers import DEFAULT_MAP, RegisterMap
+from services.sim.crane import CraneModel, CraneParams
+from services.sim.crane_server import ESTOP_REGISTER, CraneServer
+from services.sim.render import Blob, TrackingCamera, draw
+from tests.conftest import free_port, wait_for
+
+CAMERA = TrackingCamera(focal_mm=8.0, pixel_mm=0.0075, height_mm=3500.0)
+GROUND_MM, MARKER_MM = 100.0, 80.0
+_ids = itertools.count()
+
+
+class CraneRig:
+    """The sim's crane controller on a free port, on real time, in a thread of its own."""
+
+    def __init__(self, registers: RegisterMap = DEFAULT_MAP) -> None:
+        self.port, self.registers = free_port(), registers
+        t0 = time.monotonic()
+        self.clock = lambda: time.monotonic() - t0
+        self.model = CraneModel(CraneParams(watchdog_s=0.5))
+        self.lock = threading.Lock()
+        self.server = CraneServer(self.model, self.clock, self.lock, "127.0.0.1", self.port,
+                                  registers=registers)
+        self.loop = asyncio.new_event_loop()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+        time.sleep(0.3)
+
+    def _run(self) -> None:
+        asyncio.set_event_loop(self.loop)
+        self.loop.run_until_complete(self.server.serve())
+
+    def state(self) -> tuple[np.ndarray, np.ndarray, bool, int]:
+        with self.lock:
+            self.model.advance_to(self.clock())
+            return (self.model.position.copy(), self.model.velocity.copy(), self.model.enabled,
+                    self.model.faults)
+
+    def at_the_panel(self, control: int) -> None:
+        """Someone at the controller writes its control word (0: disable)."""
+        with self.lock:
+            self.model.write_control(self.clock(), control)
+
+    def press_estop(self, pressed: bool = True) -> None:
+        """The sim's e-stop, as ``stb sim estop`` presses it: a Modbus write."""
+        client = ModbusTcpClient("127.0.0.1", port=self.port, timeout=2)
+        assert client.connect()
+        try:
+            reply = client.write_register(ESTOP_REGISTER, int(pressed),
+                                          device_id=self.registers.unit_id)
+            assert not reply.isError()
+        finally:
+            client.close()
+
+    def close(self) -> None:
+        asyncio.run_coroutine_threadsafe(self.server.close(), self.loop).result(5)
+        self.loop.call_soon_threadsafe(self.loop.stop)
+
+
+class Operator:
+    """Sends gantry commands on the bus and waits for their replies."""
+
+    def __init__(self, bus: Bus) -> None:
+        self.bus = bus
+        self.replies: list[m.GantryCommandReply] = []
+        self.states: list[m.CraneState] = []
+        bus.subscribe(keys.GANTRY_COMMAND_REPLY, self.replies.append, latest=False)
+        bus.subscribe(keys.GANTRY_STATE, self.states.append, latest=False)
+
+    def send(self, command: str, timeout: float = 3.0) -> m.GantryCommandReply:
+        wait_for(lambda: self.states, timeout=10)  # the gantry is up (and listening)
+        ident = f"test-{next(_ids)}"
+        self.bus.publish(keys.GANTRY_COMMAND, m.GantryCommand(
+            measured_s=time.time(), command=command, operator="test operator",  # type: ignore[arg-type]
+            reason="test", id=ident))
+        return wait_for(lambda: next((r for r in self.replies if r.id == ident), None),
+                        timeout=timeout)  # type: ignore[return-value]
+
+    def mode(self) -> str | None:
+        return self.states[-1].mode if self.states else None
+
+
+def frame(world: Bus, robot_xy: np.ndarray | None, crane_xy: np.ndarray, seq: int,
+          rng: np.random.Generator) -> None:
+    blobs = []
+    if robot_xy is not None:
+        u, v, r = CAMERA.pixel_of(np.array([*robot_xy, GROUND_MM + MARKER_MM]), *crane_xy)
+        blobs.append(Blob(u, v, r, r))
+    image = draw(blobs, CAMERA.width_px, CAMERA.height_px, rng)
+    world.publish(keys.GANTRY_FRAME, m.CameraFrame(
+        measured_s=time.time(), camera="tracking", seq=seq, width_px=CAMERA.width_px,
+        height_px=CAMERA.height_px, encoding="mono8", data=image.tobytes()))
+
+
+def feed(crane: CraneRig, world: Bus, robot: Callable[[float], np.ndarray | None],
+         seconds: float, stop: threading.Event | None = None) -> None:
+    """Frames at 25 Hz of the robot where ``robot(elapsed)`` says, seen from the crane."""
+    rng = np.random.default_rng(0)
+    start = time.monotonic()
+    seq = 0
+    while (elapsed := time.monotonic() - start) < seconds and not (stop and stop.is_set()):
+        crane_xy, _, _, _ = crane.state()
+        frame(world, robot(elapsed), crane_xy, seq, rng)
+        seq += 1
+        time.sleep(0.04)
+
+
+@contextmanager
+def feeding(crane: CraneRig, world: Bus, robot: Callable[[float], np.ndarray | None],
+            seconds: float = 60.0) -> Iterator[None]:
+    """Frames in the background while the block runs."""
+    stop = threading.Event()
+    thread = threading.Thread(target=feed, args=(crane, world, robot, seconds, stop),
+                              daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join(5)

@@ -1,0 +1,156 @@
+"""The operator in command, against the sim's Modbus crane controller: the gantry starts
+disarmed, moves the crane only once armed, stops within a control period, never clears a
+latched fault by itself, and stops when the crane stops on its own (tests/gantry/rig.py)."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from common.crane_registers import FAULT_SAFETY, FAULT_WATCHDOG, RegisterMap
+from common.node import Node
+from services.gantry.service import run
+from tests.conftest import wait_for
+from tests.gantry.rig import CraneRig, Operator, feeding
+
+TARGET = np.array([600.0, -300.0])
+
+
+def _moving(rig: dict) -> None:
+    operator: Operator = rig["operator"]
+    wait_for(lambda: operator.send("arm").accepted, timeout=5, period=0.2)
+    wait_for(lambda: np.linalg.norm(rig["crane"].state()[1]) > 100.0, timeout=4)
+
+
+def test_it_starts_disarmed_and_moves_the_crane_only_once_armed(rig: dict) -> None:
+    crane: CraneRig = rig["crane"]
+    operator: Operator = rig["operator"]
+    start = crane.state()[0]
+    with feeding(crane, rig["world"], lambda _t: TARGET):
+        wait_for(lambda: operator.mode() == "disarmed", timeout=5)
+        time.sleep(1.5)  # it sees the robot all this while
+        position, _, enabled, _ = crane.state()
+        assert not enabled and np.allclose(position, start), "never enabled, never moved"
+        assert not rig["setpoints"], "no setpoints while disarmed"
+        assert operator.states[-1].status == "idle"
+        reply = operator.send("arm")
+        assert reply.accepted and reply.mode == "armed"
+        wait_for(lambda: np.linalg.norm(crane.state()[0] - TARGET) < 20.0, timeout=8)
+    state = operator.states[-1]
+    assert state.mode == "armed" and state.mode_by == "test operator"
+
+
+def test_arming_needs_a_fresh_estimate(rig: dict) -> None:
+    reply = rig["operator"].send("arm")  # no frames at all
+    assert not reply.accepted and "no fresh estimate" in reply.detail
+    assert reply.mode == "disarmed" and not rig["crane"].state()[2]
+
+
+def test_stop_acts_within_a_control_period_and_only_reset_and_arm_move_again(
+        rig: dict) -> None:
+    crane: CraneRig = rig["crane"]
+    operator: Operator = rig["operator"]
+    with feeding(crane, rig["world"], lambda t: TARGET + [80.0 * t, 0.0]):
+        _moving(rig)
+        sent = time.monotonic()
+        reply = operator.send("stop")
+        wait_for(lambda: not crane.state()[2], timeout=1)
+        assert time.monotonic() - sent < 0.25 + 0.05, "disabled within a control period"
+        assert reply.accepted and reply.mode == "stopped"
+        wait_for(lambda: np.linalg.norm(crane.state()[1]) < 1.0, timeout=3)
+        assert (refused := operator.send("arm")).accepted is False
+        assert "reset first" in refused.detail
+        time.sleep(0.5)
+        assert not crane.state()[2] and operator.states[-1].status == "stopped"
+        assert operator.send("reset").mode == "disarmed"
+        assert operator.send("arm").accepted
+        wait_for(lambda: np.linalg.norm(crane.state()[1]) > 50.0, timeout=4)
+        assert operator.send("disarm").mode == "disarmed"
+        wait_for(lambda: not crane.state()[2], timeout=1)
+
+
+def test_a_restarted_gantry_leaves_a_watchdog_stopped_crane_alone_until_reset_and_arm(
+        rig: dict, make_bus) -> None:  # noqa: ANN001
+    crane: CraneRig = rig["crane"]
+    with feeding(crane, rig["world"], lambda _t: TARGET + [0.0, 400.0]):
+        _moving(rig)
+        rig["node"].stop.set()  # killed mid-motion: no heartbeat, no setpoints
+        rig["thread"].join(5)
+        wait_for(lambda: crane.state()[3] & FAULT_WATCHDOG, timeout=2)
+        wait_for(lambda: np.linalg.norm(crane.state()[1]) < 1.0, timeout=3)
+        node = Node("gantry", rig["settings"], make_bus())  # the gantry restarted
+        thread = threading.Thread(target=run, args=(node,), daemon=True)
+        thread.start()
+        try:
+            operator = Operator(make_bus())
+            wait_for(lambda: operator.states, timeout=5)
+            time.sleep(1.5)
+            _, _, enabled, faults = crane.state()
+            assert not enabled and faults & FAULT_WATCHDOG, "no enable, no reset by itself"
+            assert operator.states[-1].mode == "disarmed"
+            assert operator.states[-1].status == "fault"
+            refused = operator.send("arm")
+            assert not refused.accepted and "watchdog" in refused.detail
+            assert operator.send("reset").accepted
+            wait_for(lambda: not crane.state()[3], timeout=2)
+            assert operator.send("arm").accepted
+            wait_for(lambda: np.linalg.norm(crane.state()[1]) > 50.0, timeout=4)
+        finally:
+            node.stop.set()
+            thread.join(5)
+
+
+def test_a_crane_disabled_at_the_controller_stops_the_gantry(rig: dict) -> None:
+    crane: CraneRig = rig["crane"]
+    operator: Operator = rig["operator"]
+    with feeding(crane, rig["world"], lambda t: TARGET + [60.0 * t, 0.0]):
+        _moving(rig)
+        crane.at_the_panel(0)  # someone disables it at the controller
+        wait_for(lambda: operator.mode() == "stopped", timeout=1)
+        assert operator.states[-1].mode_reason == "crane disabled at the controller"
+        time.sleep(1.5)
+        assert not crane.state()[2], "the gantry does not enable it again"
+
+
+def test_an_e_stop_stops_the_gantry_at_once_and_holds_until_released_and_reset(
+        rig: dict) -> None:
+    crane: CraneRig = rig["crane"]
+    operator: Operator = rig["operator"]
+    with feeding(crane, rig["world"], lambda t: TARGET + [60.0 * t, 0.0]):
+        _moving(rig)
+        crane.press_estop()
+        wait_for(lambda: operator.mode() == "stopped", timeout=0.5)
+        state = operator.states[-1]
+        assert "e-stop" in state.mode_reason and not state.safety_ok
+        assert crane.state()[3] & FAULT_SAFETY
+        operator.send("reset")  # while it is still pressed: the circuit stays open
+        refused = operator.send("arm")
+        assert not refused.accepted and "safety circuit open" in refused.detail
+        crane.press_estop(False)
+        assert operator.send("reset").accepted
+        wait_for(lambda: operator.states[-1].safety_ok and not crane.state()[3], timeout=2)
+        assert operator.send("arm").accepted
+        wait_for(lambda: np.linalg.norm(crane.state()[1]) > 50.0, timeout=4)
+
+
+LAB_MAP = RegisterMap(unit_id=7, word_order="low_first", units_per_mm=10.0,
+                      units_per_mm_s=10.0, setpoint_x=200, setpoint_y=202, control=210,
+                      heartbeat=211, actual_x=300, actual_y=302, velocity_x=304,
+                      velocity_y=306, status=320, faults=321, heartbeat_echo=322,
+                      setpoints_taken=323, target_x=330, target_y=332)
+
+
+@pytest.mark.parametrize("rig", [{"crane": LAB_MAP},
+                                 {"crane": RegisterMap(value_bits=16, unit_id=3)}],
+                         indirect=True)
+def test_the_gantry_drives_a_crane_with_the_labs_register_map(rig: dict) -> None:
+    crane: CraneRig = rig["crane"]
+    with feeding(crane, rig["world"], lambda _t: TARGET):
+        _moving(rig)
+        wait_for(lambda: np.linalg.norm(crane.state()[0] - TARGET) < 20.0, timeout=8)
+        states = rig["operator"].states
+        wait_for(lambda: np.hypot(states[-1].x_mm - TARGET[0], states[-1].y_mm - TARGET[1])
+                 < 25.0, timeout=2)  # and its position read back right
