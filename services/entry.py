@@ -23,7 +23,10 @@ log = logging.getLogger(__name__)
 
 
 def base_parser(prog: str, description: str) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog=prog, description=description)
+    """A command's parser with the common flags; ``description`` (a module docstring) is
+    shown as written, its RST literals as plain text."""
+    parser = argparse.ArgumentParser(prog=prog, description=plain(description),
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--lab", type=Path, metavar="FILE",
                         help="lab config file (TOML); default: $STB_LAB, else built-in defaults")
     parser.add_argument("--instance", help="instance name (default: from config, else 'main')")
@@ -33,6 +36,11 @@ def base_parser(prog: str, description: str) -> argparse.ArgumentParser:
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                         help="override one setting, e.g. --set bus.max_age_s=0.2 (JSON values)")
     return parser
+
+
+def plain(text: str) -> str:
+    """Docstring text for a terminal: ``literal`` → literal."""
+    return text.replace("``", "")
 
 
 def overrides_from(args: argparse.Namespace) -> dict[str, Any]:

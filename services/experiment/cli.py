@@ -20,6 +20,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from common.settings import ConfigError, load_settings
+from services.entry import plain
 from services.experiment.paper import TABLES
 from services.gantry.predict import ALGORITHMS
 from services.gantry.settings import GantrySettings
@@ -49,7 +50,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog=PROG, description=__doc__,
+    parser = argparse.ArgumentParser(prog=PROG, description=plain(__doc__ or ""),
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     commands = parser.add_subparsers(dest="command", metavar="gantry|identify")
     g = commands.add_parser("gantry", help="the gantry experiments: Tables 3 and 4",

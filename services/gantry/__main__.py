@@ -1,5 +1,10 @@
-"""``stb gantry``: the crane follows the robot (paper §3). The paper's experiments on a
-simulated clock: ``stb experiment gantry --help``."""
+"""``stb gantry``: the crane follows the robot (paper §3), once an operator arms it.
+
+``stb gantry arm|disarm|stop|reset [--reason TEXT]``: an operator's command (see its --help).
+The modes: disarmed at start (the crane is never enabled), armed (tracking; holding without a
+fresh estimate), stopped (by stop, a latched fault, the e-stop or the crane disabled at its
+controller: setpoint frozen, crane disabled; only reset, then arm, moves it again).
+The paper's experiments on a simulated clock: ``stb experiment gantry --help``."""
 
 from __future__ import annotations
 
@@ -9,9 +14,15 @@ from collections.abc import Sequence
 from services.entry import service_main
 from services.gantry.settings import GantrySettings
 
+COMMANDS = ("arm", "disarm", "stop", "reset")
+
 
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] and argv[0] in COMMANDS:
+        from services.gantry.command_cli import main as command_main
+
+        return command_main(argv)
     from services.gantry.service import run
 
     return service_main("gantry", GantrySettings, run, argv, __doc__ or "")

@@ -1,4 +1,5 @@
-"""``stb sim [--scenario locomotive|walker|calibration] [--seed N]``: the simulated lab."""
+"""``stb sim [--scenario locomotive|walker|calibration] [--seed N]``: the simulated lab.
+``stb sim estop [--release]``: press or release the simulated crane's e-stop."""
 
 from __future__ import annotations
 
@@ -22,6 +23,11 @@ def _overrides(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["estop"]:
+        from services.sim.estop_cli import main as estop_main
+
+        return estop_main(argv[1:])
     return service_main("sim", SimSettings, run, argv, __doc__ or "", flags=_flags,
                         flag_overrides=_overrides)
 

@@ -101,6 +101,31 @@ def test_only_the_gantry_puts_setpoints_and_only_a_ptz_its_own_camera(lab: dict)
         assert denied not in payloads, denied
 
 
+def test_only_operators_and_the_web_page_command_the_gantry(lab: dict) -> None:
+    operator, web, monitor, gantry, sim, camera = (
+        lab["session"](u) for u in ("operator", "web", "monitor", "gantry", "sim", "camera"))
+    got, _sub = _collect(lab["session"]("tracker"), "stb/gantry/**")
+    time.sleep(0.5)
+    for _ in range(3):
+        operator.put("stb/gantry/command", b"operator arms")
+        web.put("stb/gantry/command", b"web page stops")
+        monitor.put("stb/gantry/command", b"monitor arms")
+        gantry.put("stb/gantry/command", b"gantry arms itself")
+        sim.put("stb/gantry/command", b"sim arms")
+        gantry.put("stb/gantry/command/reply", b"gantry replies")
+        operator.put("stb/gantry/command/reply", b"forged reply")
+        camera.put("stb/gantry/camera/frame", b"camera frame")
+        camera.put("stb/gantry/setpoint", b"camera setpoint")
+        time.sleep(0.05)
+    wait_for(lambda: {p for _, p in got} >= {b"operator arms", b"web page stops",
+                                              b"gantry replies", b"camera frame"})
+    time.sleep(0.5)
+    payloads = {p for _, p in got}
+    for denied in (b"monitor arms", b"gantry arms itself", b"sim arms", b"forged reply",
+                   b"camera setpoint"):
+        assert denied not in payloads, denied
+
+
 def test_liveliness_and_queries_work_under_default_deny(lab: dict) -> None:
     gantry, monitor, calib, ptz1 = (lab["session"](u) for u in ("gantry", "monitor", "calib",
                                                                 "ptz1"))

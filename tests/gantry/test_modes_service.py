@@ -154,3 +154,31 @@ def test_the_gantry_drives_a_crane_with_the_labs_register_map(rig: dict) -> None
         states = rig["operator"].states
         wait_for(lambda: np.hypot(states[-1].x_mm - TARGET[0], states[-1].y_mm - TARGET[1])
                  < 25.0, timeout=2)  # and its position read back right
+
+
+def test_the_command_line_says_what_the_gantry_made_of_a_command(
+        rig: dict, make_bus, capsys) -> None:  # noqa: ANN001
+    from services.gantry.command_cli import send
+
+    wait_for(lambda: rig["operator"].states, timeout=10)  # the gantry is up
+    assert send(make_bus(), "arm", "night shift", "", 3.0) == 1, "refused: nothing in view"
+    assert "arm: refused — no fresh estimate" in capsys.readouterr().out
+    assert send(make_bus(), "stop", "night shift", "coffee", 3.0) == 0
+    assert "stop: done — coffee (gantry stopped)" in capsys.readouterr().out
+    state = wait_for(lambda: rig["operator"].states[-1].mode == "stopped"
+                     and rig["operator"].states[-1])
+    assert state.mode_by == "night shift" and state.mode_reason == "coffee"
+
+
+def test_stb_sim_estop_presses_and_releases_the_sims_e_stop(rig: dict) -> None:
+    from services.sim.estop_cli import main as estop
+
+    crane: CraneRig = rig["crane"]
+    port = ["--set", f"crane.port={crane.port}"]
+    assert estop(port) == 0
+    wait_for(lambda: not crane.model.safety_ok and crane.state()[3] & FAULT_SAFETY, timeout=1)
+    wait_for(lambda: rig["operator"].states and not rig["operator"].states[-1].safety_ok)
+    assert estop([*port, "--release"]) == 0
+    wait_for(lambda: crane.model.safety_ok, timeout=1)
+    assert crane.state()[3] & FAULT_SAFETY, "latched until a reset"
+    assert estop(["--set", "crane.port=1"]) == 3, "nothing listens there"

@@ -1,0 +1,82 @@
+"""``stb gantry arm|disarm|stop|reset``: an operator's command to the gantry service.
+
+    arm     let the gantry move the crane (needs a fault-free crane and the robot in view)
+    disarm  the gantry lets go: the crane is disabled where it stands
+    stop    at once, in any mode: setpoint frozen, crane disabled; latched until reset
+    reset   clear the crane controller's latched faults (watchdog, e-stop); then arm again
+
+Sends the command on the bus (as the lab file's bus identity: the operator's) and prints the
+gantry's answer. Exit status: 0 accepted, 1 refused, 2 bad arguments, 3 no gantry or router.
+"""
+
+from __future__ import annotations
+
+import getpass
+import os
+import queue
+import socket
+import sys
+import time
+from collections.abc import Sequence
+
+from common import keys
+from common import messages as m
+from common.bus import Bus, BusUnreachable, open_session
+from common.node import configure_logging
+from common.settings import ConfigError, load_settings
+from services.entry import EXIT_CONFIG, base_parser, overrides_from
+from services.gantry.__main__ import COMMANDS
+from services.gantry.settings import GantrySettings
+
+EXIT_REFUSED, EXIT_NO_SERVICE = 1, 3
+
+
+def main(argv: Sequence[str]) -> int:
+    parser = base_parser(f"stb gantry {'|'.join(COMMANDS)}", __doc__ or "")
+    parser.add_argument("command", choices=COMMANDS)
+    parser.add_argument("--reason", default="", help="why (shown with the gantry's mode)")
+    parser.add_argument("--operator", default=f"{getpass.getuser()}@{socket.gethostname()}",
+                        help="who asks (default: user@host)")
+    parser.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the "
+                        "gantry's answer")
+    args = parser.parse_args(argv)
+    try:
+        settings = load_settings(GantrySettings, args.lab, overrides_from(args))
+    except ConfigError as err:
+        print(f"stb gantry {args.command}: {err}", file=sys.stderr)
+        return EXIT_CONFIG
+    configure_logging("WARNING")
+    try:
+        session = open_session(settings.zenoh_settings())
+    except BusUnreachable as err:
+        print(f"stb gantry {args.command}: {err}", file=sys.stderr)
+        return EXIT_NO_SERVICE
+    bus = Bus(session, settings.bus)
+    try:
+        return send(bus, args.command, args.operator[:128], args.reason[:500], args.timeout)
+    finally:
+        bus.close()
+        session.close()
+
+
+def send(bus: Bus, command: str, operator: str, reason: str, timeout_s: float) -> int:
+    replies: queue.Queue[m.GantryCommandReply] = queue.Queue()
+    bus.subscribe(keys.GANTRY_COMMAND_REPLY, replies.put, latest=False)
+    ident = f"cli-{os.getpid()}-{time.monotonic_ns() % 10**9}"
+    time.sleep(0.2)  # let the subscription reach the router before the command goes out
+    bus.publish(keys.GANTRY_COMMAND, m.GantryCommand(
+        measured_s=time.time(), command=command, operator=operator,  # type: ignore[arg-type]
+        reason=reason, id=ident))
+    deadline = time.monotonic() + timeout_s
+    while (left := deadline - time.monotonic()) > 0:
+        try:
+            reply = replies.get(timeout=left)
+        except queue.Empty:
+            break
+        if reply.id == ident:
+            verdict = "done" if reply.accepted else "refused"
+            print(f"{command}: {verdict} — {reply.detail} (gantry {reply.mode})")
+            return 0 if reply.accepted else EXIT_REFUSED
+    print(f"stb gantry {command}: no answer within {timeout_s:g} s — is the gantry service "
+          "running, and may this identity send commands (docs/deployment.md)?", file=sys.stderr)
+    return EXIT_NO_SERVICE
