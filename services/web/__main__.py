@@ -7,7 +7,9 @@ figures. The page updates itself from the bus (Server-Sent Events), no reloading
 
 Subscribes: stb/tracker/robot, stb/gantry/{state,estimate,offload}, stb/ptz/*/{state,preview},
             stb/calib/*/pose (also queried at start), stb/health/**, stb/sim/truth/robot/*,
-            liveliness stb/alive/**. Publishes only its own health and liveliness.
+            stb/gantry/command/reply, liveliness stb/alive/**.
+Publishes:  its own health and liveliness; stb/gantry/command when an operator presses one
+            of the page's gantry buttons (arm, disarm, stop, reset).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import zenoh
 from common import keys
 from common.node import Node, StartupError
 from services.entry import service_main
+from services.web.commands import GantryCommander
 from services.web.server import CraterImage, WebServer
 from services.web.settings import WebSettings
 from services.web.state import LiveState
@@ -65,7 +68,8 @@ def run(node: Node) -> None:
         keys.alive_pattern(node.bus.prefix), on_alive, history=True)
     try:
         server = WebServer(settings.host, settings.port, view, preview,
-                           CraterImage(settings.height_map), 1 / settings.push_hz, node.stop)
+                           CraterImage(settings.height_map), 1 / settings.push_hz, node.stop,
+                           GantryCommander(node.bus).send)
     except OSError as err:
         tokens.undeclare()
         raise StartupError(f"cannot listen on {settings.host}:{settings.port}: {err}") from err

@@ -4,6 +4,9 @@ live state as JSON and as a Server-Sent Events stream, and each camera's latest 
     GET /                 the page            GET /events       text/event-stream of the state
     GET /state.json       the state once      GET /map.json     height map extent (mm)
     GET /map.png          the height map      GET /preview/CAMERA.jpg   latest preview
+    POST /gantry/arm|disarm|stop|reset        an operator's command; the gantry's answer as JSON
+                          (needs the header X-STB-Command: 1, which a page from another site
+                          cannot send without this server's consent — it never gives it)
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ STATIC = {"/": ("index.html", "text/html; charset=utf-8"),
           "/app.js": ("app.js", "text/javascript; charset=utf-8")}
 DEFAULT_EXTENT_MM = (-3000.0, 3000.0, -3000.0, 3000.0)
 PREVIEW_PATH = re.compile(r"^/preview/([A-Za-z0-9_.-]{1,64})\.jpg$")
+COMMAND_PATH = re.compile(r"^/gantry/(arm|disarm|stop|reset)$")
 
 
 def map_png(height_map: HeightMap) -> bytes:
@@ -83,8 +87,9 @@ class WebServer:
 
     def __init__(self, host: str, port: int, view: Callable[[], dict[str, Any]],
                  preview: Callable[[str], bytes | None], crater: CraterImage,
-                 push_period_s: float, stop: threading.Event) -> None:
-        self.view, self.preview, self.stop = view, preview, stop
+                 push_period_s: float, stop: threading.Event,
+                 command: Callable[[str, str], dict] | None = None) -> None:
+        self.view, self.preview, self.stop, self.command = view, preview, stop, command
         self.push_period_s = push_period_s
         self.crater = crater
         self.httpd = ThreadingHTTPServer((host, port), self._handler())
@@ -133,6 +138,17 @@ class WebServer:
                         self.send_error(HTTPStatus.NOT_FOUND)
                 except (BrokenPipeError, ConnectionResetError):
                     pass  # the browser went away
+
+            def do_POST(self) -> None:  # noqa: N802 - the http.server API
+                found = COMMAND_PATH.match(self.path.split("?", 1)[0])
+                if not found or server.command is None:
+                    self.send_error(HTTPStatus.NOT_FOUND)
+                    return
+                if self.headers.get("X-STB-Command") != "1":
+                    self.send_error(HTTPStatus.FORBIDDEN, "needs the X-STB-Command: 1 header")
+                    return
+                answer = server.command(found.group(1), self.client_address[0])
+                self._send(json.dumps(answer).encode(), "application/json")
 
             def _send(self, body: bytes, kind: str, cache: bool = False) -> None:
                 self.send_response(HTTPStatus.OK)

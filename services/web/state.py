@@ -95,7 +95,9 @@ class LiveState:
             "crane": None if self.crane is None else {
                 "x_mm": self.crane.x_mm, "y_mm": self.crane.y_mm, "status": self.crane.status,
                 "target_x_mm": self.crane.target_x_mm, "target_y_mm": self.crane.target_y_mm,
-                "enabled": self.crane.enabled, "age_s": now_s - self.crane.measured_s},
+                "enabled": self.crane.enabled, "age_s": now_s - self.crane.measured_s,
+                "mode": self.crane.mode, "mode_by": self.crane.mode_by,
+                "mode_reason": self.crane.mode_reason, "safety_ok": self.crane.safety_ok},
             "estimate": None if self.estimate is None else {
                 "x_mm": self.estimate.x_mm, "y_mm": self.estimate.y_mm,
                 "valid": self.estimate.valid, "algorithm": self.estimate.algorithm},

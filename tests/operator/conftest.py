@@ -19,6 +19,7 @@ from common.bus import Bus
 from services.calib.store import PoseStore
 from tests.calib.test_demo_calibration import MOUNTS
 from tests.conftest import client_settings, free_port, stb_process, wait_for
+from tests.gantry.rig import Operator
 from tests.services.test_processes import _open_when_up, _stop
 from tests.sim.test_sim_service import write_lab
 
@@ -73,6 +74,8 @@ height_map = "{tmp / 'crater.npz'}"
         ptz: dict[str, m.PtzState] = {}
         bus.subscribe(keys.GANTRY_STATE, crane.append, latest=False)
         bus.subscribe(keys.PTZ_STATE, lambda s: ptz.__setitem__(s.camera, s), latest=False)
+        operator = Operator(bus)  # the crane moves once an operator arms the gantry
+        wait_for(lambda: operator.send("arm").accepted, timeout=40, period=0.5)
         wait_for(lambda: crane and crane[-1].status == "tracking", timeout=40, period=0.2)
         wait_for(lambda: all(ptz.get(c) and ptz[c].status == "tracking" for c in MOUNTS),
                  timeout=20, period=0.2)

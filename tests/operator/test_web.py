@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import time
+import urllib.error
 import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
@@ -91,3 +92,22 @@ def test_camera_previews_and_offload_figures_are_shown(page: object) -> None:
         assert "tracking" in caption, caption
     offload = page.locator("#offload").inner_text()  # type: ignore[attr-defined]
     assert "sideways pull" in offload and "%" in offload
+
+
+def test_the_gantry_buttons_stop_reset_and_arm_it(page: object) -> None:
+    mode = page.locator("#gantry-mode")  # type: ignore[attr-defined]
+    answer = page.locator("#gantry-answer")  # type: ignore[attr-defined]
+    wait_for(lambda: mode.inner_text().startswith("mode: armed"), timeout=10)
+    for button, expected in (("stop", "mode: stopped"), ("reset", "mode: disarmed"),
+                             ("arm", "mode: armed")):
+        page.click(f"button[data-command='{button}']")  # type: ignore[attr-defined]
+        wait_for(lambda b=button: answer.inner_text().startswith(f"{b}: done"), timeout=10)
+        wait_for(lambda e=expected: mode.inner_text().startswith(e), timeout=5)
+    assert "(web:127.0.0.1)" in mode.inner_text(), "who armed it"
+
+
+def test_a_command_from_another_site_is_refused(live_lab: LiveLab) -> None:
+    request = urllib.request.Request(f"{live_lab.web_url}/gantry/stop", method="POST")
+    with pytest.raises(urllib.error.HTTPError) as refused:
+        urllib.request.urlopen(request, timeout=5)  # no X-STB-Command header
+    assert refused.value.code == 403

@@ -194,8 +194,33 @@ function drawPreview(canvas, img, p) {
   canvas.dataset.seq = String(p.seq);
 }
 
+function drawGantry(state) {
+  const line = document.getElementById("gantry-mode"), c = state.crane;
+  if (!c) { line.textContent = "mode: —"; line.className = ""; return; }
+  line.textContent = `mode: ${c.mode} — ${c.mode_reason} (${c.mode_by})` +
+    (c.safety_ok ? "" : " — safety circuit OPEN");
+  line.className = c.mode;
+}
+
+async function command(name) {
+  const answer = document.getElementById("gantry-answer");
+  answer.textContent = `${name}…`;
+  try {
+    const reply = await fetch(`gantry/${name}`, {method: "POST", headers: {"X-STB-Command": "1"}});
+    const body = await reply.json();
+    answer.textContent = `${name}: ${body.accepted ? "done" : "refused"} — ${body.detail}`;
+  } catch (err) {
+    answer.textContent = `${name}: no answer (${err})`;
+  }
+}
+
+for (const button of document.querySelectorAll("button[data-command]")) {
+  button.addEventListener("click", () => command(button.dataset.command));
+}
+
 function draw(state) {
   drawMap(state);
+  drawGantry(state);
   drawServices(state);
   drawOffload(state);
   drawCameras(state);

@@ -1,0 +1,47 @@
+"""The page's gantry buttons: each press is an operator's command on the bus
+(stb/gantry/command, as ``web:<browser address>``) and the gantry's answer comes back."""
+
+from __future__ import annotations
+
+import itertools
+import os
+import threading
+import time
+
+from common import keys
+from common import messages as m
+from common.bus import Bus
+
+COMMANDS = ("arm", "disarm", "stop", "reset")
+
+
+class GantryCommander:
+    def __init__(self, bus: Bus, timeout_s: float = 3.0) -> None:
+        self.bus, self.timeout_s = bus, timeout_s
+        self._replies: dict[str, m.GantryCommandReply] = {}
+        self._changed = threading.Condition()
+        self._ids = itertools.count()
+        bus.subscribe(keys.GANTRY_COMMAND_REPLY, self._on_reply, latest=False)
+
+    def _on_reply(self, reply: m.GantryCommandReply) -> None:
+        with self._changed:
+            self._replies[reply.id] = reply
+            while len(self._replies) > 100:  # only the latest matter
+                self._replies.pop(next(iter(self._replies)))
+            self._changed.notify_all()
+
+    def send(self, command: str, client: str) -> dict:
+        """Send ``command`` and wait for the answer: {accepted, detail, mode}."""
+        if command not in COMMANDS:
+            raise ValueError(f"unknown command {command!r}")
+        ident = f"web-{os.getpid()}-{next(self._ids)}"
+        self.bus.publish(keys.GANTRY_COMMAND, m.GantryCommand(
+            measured_s=time.time(), command=command, operator=f"web:{client}"[:128],  # type: ignore[arg-type]
+            reason="from the operator page", id=ident))
+        with self._changed:
+            answered = self._changed.wait_for(lambda: ident in self._replies, self.timeout_s)
+            reply = self._replies.get(ident)
+        if not answered or reply is None:
+            return {"accepted": False, "mode": None,
+                    "detail": f"no answer from the gantry within {self.timeout_s:g} s"}
+        return {"accepted": reply.accepted, "detail": reply.detail, "mode": reply.mode}
