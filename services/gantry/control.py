@@ -5,6 +5,12 @@ detect (§2.1) → pick the marker (the one closest to the last, §3.1) → loca
 crater's height map) → predict (eq. 9–12 or ``default``) → guard (workspace, limits, stale
 hold). The live service and the experiments call the same ``Controller``; neither repeats any
 of these steps.
+
+Two safeguards the paper did not need: a spot farther than ``marker_gate_mm`` from where the
+robot is expected (its last measured position moved on with its last measured velocity, or
+the motion capture's fix) is not the robot — a reflection; and when the marker has been lost
+for ``reacquire_after_s`` while the motion capture has a fresh fix of the robot, the crane
+goes there at ``reacquire_speed_mm_s`` until the tracking camera sees the marker again.
 """
 
 from __future__ import annotations
@@ -14,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from common.heightmap import HeightMap
-from common.markers import Detection, closest, detect
+from common.markers import Detection, Marker, closest, detect
 from services.gantry.frames import Frame
 from services.gantry.locate import TrackingOptics, locate
 from services.gantry.predict import Estimate, make_predictor, prediction_horizon
@@ -22,6 +28,14 @@ from services.gantry.safety import SetpointGuard, Workspace
 from services.gantry.settings import GantrySettings
 
 MAX_MARKERS = 20
+
+
+@dataclass(frozen=True)
+class Fix:
+    """Where the motion capture saw the robot (``stb/tracker/robot``)."""
+
+    t_s: float
+    xy_mm: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -37,6 +51,8 @@ class Step:
     measured_xyz: np.ndarray | None = None  # the robot's marker in the world (eq. 8)
     estimate: Estimate | None = None
     estimate_s: float | None = None  # capture time of the frame the estimate rests on
+    reacquiring: bool = False  # going to the motion capture's fix: the marker is lost
+    rejected_mm: float | None = None  # a spot refused: this far from where the robot should be
 
 
 class Controller:
@@ -57,40 +73,90 @@ class Controller:
         self.estimate: Estimate | None = None
         self.estimate_s: float | None = None
         self.last_pixel: tuple[float, float] | None = None
+        self._seen: list[tuple[float, np.ndarray]] = []  # the last two accepted positions
+        self._fix: Fix | None = None
 
     def restart(self) -> None:
         """The crane stopped on its own (watchdog, link loss, disabled): the next setpoint
         starts from where it stands."""
         self.guard.reset()
 
-    def step(self, now_s: float, frame: Frame | None, crane_xy: np.ndarray) -> Step:
+    def step(self, now_s: float, frame: Frame | None, crane_xy: np.ndarray,
+             fix: Fix | None = None) -> Step:
         """One control period: ``frame`` is the newest frame not used yet (or None),
-        ``crane_xy`` the crane's position as its controller reports it (mm)."""
+        ``crane_xy`` the crane's position as its controller reports it (mm), ``fix`` the
+        motion capture's latest fix of the robot (or None)."""
         crane_xy = np.asarray(crane_xy, dtype=float)
+        s = self.settings
+        self._fix = fix if fix is not None and abs(now_s - fix.t_s) <= s.mocap_max_age_s \
+            else None
         seen: dict = {}
         if frame is not None:
             seen = self._measure(frame, crane_xy)
+        if self._reacquire(now_s):
+            assert self._fix is not None
+            decision = self.guard.decide(now_s, self._fix.xy_mm, self._fix.t_s, crane_xy,
+                                         max_speed_mm_s=s.reacquire_speed_mm_s)
+            return Step(decision.setpoint, decision.hold, decision.reason or "",
+                        estimate=self.estimate, estimate_s=self.estimate_s,
+                        reacquiring=not decision.hold, **seen)
         decision = self.guard.decide(now_s, None if self.estimate is None else
                                      self.estimate.desired, self.estimate_s, crane_xy)
         return Step(decision.setpoint, decision.hold, decision.reason,
                     estimate=self.estimate, estimate_s=self.estimate_s, **seen)
 
+    def _reacquire(self, now_s: float) -> bool:
+        """Lost for long enough, and the motion capture knows where the robot is."""
+        last_seen = self._seen[-1][0] if self._seen else None
+        lost_s = float("inf") if last_seen is None else now_s - last_seen
+        return self._fix is not None and lost_s > self.settings.reacquire_after_s
+
     def _measure(self, frame: Frame, crane_xy: np.ndarray) -> dict:
         captured, image = frame
         found = detect(image, max_markers=MAX_MARKERS)
-        xyz = self._locate(found, crane_xy)
+        xyz, rejected = self._locate(found, crane_xy, captured)
+        if xyz is not None:
+            self._seen = [*self._seen[-1:], (captured, xyz[:2])]
         self.estimate = self.predictor.update(captured, None if xyz is None else xyz[:2])
         self.estimate_s = captured if self.estimate is not None else None
         return {"frame_s": captured, "frame_shape": image.shape, "detection": found,
-                "measured_xyz": xyz}
+                "measured_xyz": xyz, "rejected_mm": rejected}
 
-    def _locate(self, found: Detection, crane_xy: np.ndarray) -> np.ndarray | None:
+    def _locate(self, found: Detection, crane_xy: np.ndarray, captured: float
+                ) -> tuple[np.ndarray | None, float | None]:
+        """The robot's marker in the world, or None; and how far off a refused spot was."""
         if not found.markers:
-            return None
+            return None, None
         ref = self.last_pixel or (self.optics.ref_u, self.optics.ref_v)
-        marker = closest(found.markers, *ref)
-        if marker is None:
-            return None
+        marker = closest(found.markers, *ref)  # the paper's choice (§3.1)
+        assert marker is not None
+        expected = self._expected(captured)
+        xyz = self._world(marker, crane_xy)
+        if expected is None or self.settings.marker_gate_mm <= 0:
+            self.last_pixel = (marker.u, marker.v)
+            return xyz, None
+        off = float(np.hypot(*(xyz[:2] - expected)))
+        if off > self.settings.marker_gate_mm:  # a reflection? the robot may be elsewhere
+            others = [(float(np.hypot(*(w[:2] - expected))), m, w) for m in found.markers
+                      if m is not marker for w in [self._world(m, crane_xy)]]
+            nearest = min(others, key=lambda o: o[0], default=None)
+            if nearest is None or nearest[0] > self.settings.marker_gate_mm:
+                return None, off
+            _, marker, xyz = nearest
         self.last_pixel = (marker.u, marker.v)
+        return xyz, None
+
+    def _world(self, marker: Marker, crane_xy: np.ndarray) -> np.ndarray:
         return locate(marker.u, marker.v, crane_xy, self.optics, self.heights,
                       self.settings.marker_height_mm)
+
+    def _expected(self, captured: float) -> np.ndarray | None:
+        """Where the robot should be at ``captured``: its last measured position moved on
+        with its last measured velocity (eq. 9), if recent; else the motion capture's fix."""
+        if self._seen and captured - self._seen[-1][0] <= self.settings.reacquire_after_s:
+            t1, p1 = self._seen[-1]
+            if len(self._seen) == 2 and t1 > self._seen[0][0]:
+                t0, p0 = self._seen[0]
+                return p1 + (p1 - p0) / (t1 - t0) * (captured - t1)
+            return p1
+        return None if self._fix is None else self._fix.xy_mm

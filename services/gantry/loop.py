@@ -13,11 +13,12 @@ from __future__ import annotations
 import logging
 import threading
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from services.gantry.control import Controller, Step
+from services.gantry.control import Controller, Fix, Step
 from services.gantry.crane import Crane, CraneError, CraneReading
 from services.gantry.cycle import CycleSync
 from services.gantry.frames import FrameSource
@@ -62,9 +63,10 @@ class Tick:
 
 class GantryLoop:
     def __init__(self, settings: GantrySettings, crane: Crane, frames: FrameSource,
-                 controller: Controller, now_s: float) -> None:
+                 controller: Controller, now_s: float,
+                 fix: Callable[[], Fix | None] = lambda: None) -> None:
         self.settings = settings
-        self.crane, self.frames, self.controller = crane, frames, controller
+        self.crane, self.frames, self.controller, self.fix = crane, frames, controller, fix
         self.sync = CycleSync(1 / settings.control_hz, settings.after_report_s)
         self.modes = ModeKeeper(now_s)
         self.reachable = True
@@ -178,7 +180,7 @@ class GantryLoop:
             log.info("crane controller reachable again")
             self.reachable = True
         step = self.controller.step(now_s, self.frames.take(),
-                                    np.array([reading.x_mm, reading.y_mm]))
+                                    np.array([reading.x_mm, reading.y_mm]), self.fix())
         if self.armed:
             try:
                 self.crane.write_setpoint(*step.setpoint)

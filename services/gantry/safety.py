@@ -58,7 +58,8 @@ class SetpointGuard:
         self._step_velocity = np.zeros(2)
 
     def decide(self, now_s: float, desired: np.ndarray | None, measured_s: float | None,
-               crane_xy: np.ndarray) -> Decision:
+               crane_xy: np.ndarray, *, max_speed_mm_s: float | None = None) -> Decision:
+        """The setpoint to send; ``max_speed_mm_s`` lowers the speed limit for this step."""
         crane = self.workspace.clamp(np.nan_to_num(np.asarray(crane_xy, dtype=float)))
         reason = self._why_hold(now_s, desired, measured_s)
         if reason:
@@ -72,11 +73,13 @@ class SetpointGuard:
         target = self.workspace.clamp(np.asarray(desired, dtype=float))
         last = crane if self._last is None else self._last
         dt = 0.25 if self._last_t is None else max(now_s - self._last_t, 1e-3)
+        speed = self.max_speed_mm_s if max_speed_mm_s is None else min(max_speed_mm_s,
+                                                                        self.max_speed_mm_s)
         velocity = (target - last) / dt
-        velocity = _limit(velocity, self.max_speed_mm_s)
+        velocity = _limit(velocity, speed)
         velocity = self._step_velocity + _limit(velocity - self._step_velocity,
                                                 self.max_accel_mm_s2 * dt)
-        velocity = _limit(velocity, self.max_speed_mm_s)
+        velocity = _limit(velocity, speed)
         setpoint = self.workspace.clamp(last + velocity * dt)
         self._step_velocity = (setpoint - last) / dt
         self._last, self._last_t = setpoint, now_s

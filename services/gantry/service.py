@@ -1,6 +1,7 @@
 """Gantry service: the crane keeps itself above the robot (paper §3).
 
 Reads:      tracking-camera frames (stb/gantry/camera/frame, or a camera via OpenCV),
+            the motion capture's robot (stb/tracker/robot: to find a lost marker again),
             operators' commands (stb/gantry/command: arm, disarm, stop, reset),
             the crane controller over Modbus/TCP (position, status, faults, safety circuit)
 Publishes:  stb/gantry/detections, stb/gantry/estimate, stb/gantry/setpoint, stb/gantry/state
@@ -28,7 +29,7 @@ from common import messages as m
 from common.heightmap import HeightMap
 from common.markers import to_message, warm_up
 from common.node import Node, StartupError, run_every
-from services.gantry.control import Controller, Step
+from services.gantry.control import Controller, Fix, Step
 from services.gantry.crane import CraneError, CraneReading, ModbusCrane
 from services.gantry.frames import FrameInbox, FrameSource, OpenCvFrames, decode
 from services.gantry.loop import GantryLoop, Reply, Request
@@ -53,8 +54,10 @@ def run(node: Node) -> None:
         node.bus.subscribe(keys.GANTRY_FRAME, lambda msg: _put(inbox, msg))
     else:
         frames = OpenCvFrames(s.frames.removeprefix("opencv:"), node.stop)
+    fix = LatestFix()
+    node.bus.subscribe(keys.TRACKER_ROBOT, fix.put)
     control = Control(node, s, GantryLoop(s, crane, frames, Controller(s, heights),
-                                          time.time()))
+                                          time.time(), fix))
     node.bus.subscribe(keys.GANTRY_COMMAND, control.command, latest=False)
     threading.Thread(target=run_every, args=(1 / s.heartbeat_hz, node.stop, control.heartbeat,
                                              "heartbeat"), name="heartbeat", daemon=True).start()
@@ -63,6 +66,19 @@ def run(node: Node) -> None:
         run_every(1 / s.poll_hz, node.stop, control.poll, "crane poll")
     finally:
         crane.close()
+
+
+class LatestFix:
+    """The motion capture's latest fix of the robot (stb/tracker/robot)."""
+
+    def __init__(self) -> None:
+        self._fix: Fix | None = None
+
+    def put(self, msg: m.RobotPosition) -> None:
+        self._fix = Fix(msg.measured_s, np.array([msg.x_mm, msg.y_mm]))
+
+    def __call__(self) -> Fix | None:
+        return self._fix
 
 
 def _put(inbox: FrameInbox, msg: m.CameraFrame) -> None:

@@ -62,6 +62,12 @@ class GantrySettings(ServiceSettings):
     workspace_margin_mm: float = Field(50.0, ge=0)
     max_speed_mm_s: float = Field(450.0, gt=0, description="setpoint motion limit")
     max_accel_mm_s2: float = Field(550.0, gt=0)
+    marker_gate_mm: float = Field(300.0, ge=0, description="a spot farther than this from "
+                                  "where the robot should be is not it (0: no gate)")
+    reacquire_after_s: float = Field(1.0, gt=0, le=60, description="marker lost this long: "
+                                     "go to the motion capture's fix of the robot, if fresh")
+    reacquire_speed_mm_s: float = Field(150.0, gt=0, description="... at this speed at most")
+    mocap_max_age_s: float = Field(0.5, gt=0, le=5, description="an older fix is not used")
     seed: int = 0
     particle_filter: ParticleFilterSettings = ParticleFilterSettings()
     cable_length_mm: float = Field(2000.0, gt=0, description="gravity-offload cable")

@@ -111,25 +111,34 @@ def frame(world: Bus, robot_xy: np.ndarray | None, crane_xy: np.ndarray, seq: in
 
 
 def feed(crane: CraneRig, world: Bus, robot: Callable[[float], np.ndarray | None],
-         seconds: float, stop: threading.Event | None = None) -> None:
-    """Frames at 25 Hz of the robot where ``robot(elapsed)`` says, seen from the crane."""
+         seconds: float, stop: threading.Event | None = None, *, mocap: bool = False,
+         paused: Callable[[float], bool] = lambda _t: False) -> None:
+    """Frames at 25 Hz of the robot where ``robot(elapsed)`` says, seen from the crane (and
+    its motion-capture fix on stb/tracker/robot if ``mocap``); nothing while ``paused``."""
     rng = np.random.default_rng(0)
     start = time.monotonic()
     seq = 0
     while (elapsed := time.monotonic() - start) < seconds and not (stop and stop.is_set()):
         crane_xy, _, _, _ = crane.state()
-        frame(world, robot(elapsed), crane_xy, seq, rng)
+        xy = robot(elapsed)
+        if not paused(elapsed):
+            frame(world, xy, crane_xy, seq, rng)
+            if mocap and xy is not None:
+                world.publish(keys.TRACKER_ROBOT, m.RobotPosition(
+                    measured_s=time.time(), label="robot", x_mm=float(xy[0]),
+                    y_mm=float(xy[1]), z_mm=GROUND_MM + MARKER_MM, vx_mm_s=0.0, vy_mm_s=0.0,
+                    vz_mm_s=0.0))
         seq += 1
         time.sleep(0.04)
 
 
 @contextmanager
 def feeding(crane: CraneRig, world: Bus, robot: Callable[[float], np.ndarray | None],
-            seconds: float = 60.0) -> Iterator[None]:
-    """Frames in the background while the block runs."""
+            seconds: float = 60.0, **options: object) -> Iterator[None]:
+    """Frames in the background while the block runs (``options``: those of ``feed``)."""
     stop = threading.Event()
     thread = threading.Thread(target=feed, args=(crane, world, robot, seconds, stop),
-                              daemon=True)
+                              kwargs=options, daemon=True)
     thread.start()
     try:
         yield

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from common.heightmap import HeightMap
-from services.gantry.control import Controller
+from services.gantry.control import Controller, Fix
 from services.gantry.settings import GantrySettings
 from services.sim.render import Blob, TrackingCamera, draw
 
@@ -77,3 +77,37 @@ def test_after_a_restart_the_setpoint_starts_from_where_the_crane_stands() -> No
     stood = np.array([-200.0, 0.0])
     step = control.step(1.75, None, stood)
     assert np.hypot(*(step.setpoint - stood)) <= SETTINGS.max_speed_mm_s * 0.25 + 1e-6
+
+
+def test_a_spot_far_from_where_the_robot_should_be_is_not_the_robot() -> None:
+    control = Controller(SETTINGS.model_copy(update={"marker_gate_mm": 150.0}), FLAT)
+    crane = np.array([0.0, 0.0])
+    control.step(1.0, (0.96, _frame([(0.0, 0.0)], crane)), crane)
+    control.step(1.25, (1.21, _frame([(100.0, 0.0)], crane)), crane)  # 400 mm/s along x
+    # the robot is gone from view; a reflection lies 500 mm from where it should be
+    lost = control.step(1.5, (1.46, _frame([(-300.0, 0.0)], crane)), crane)
+    assert lost.measured_xyz is None and lost.rejected_mm == pytest.approx(500.0, abs=5.0)
+    # a reflection nearer the last pixel than the robot (now 200 mm on) is passed over
+    control = Controller(SETTINGS.model_copy(update={"marker_gate_mm": 150.0}), FLAT)
+    control.step(1.0, (0.96, _frame([(0.0, 0.0)], crane)), crane)
+    control.step(1.25, (1.21, _frame([(100.0, 0.0)], crane)), crane)
+    step = control.step(1.5, (1.46, _frame([(200.0, 0.0), (20.0, 0.0)], crane)), crane)
+    assert step.measured_xyz is not None
+    np.testing.assert_allclose(step.measured_xyz[:2], [200.0, 0.0], atol=1.5)
+
+
+def test_a_lost_marker_is_looked_for_where_the_motion_capture_sees_the_robot() -> None:
+    s = SETTINGS.model_copy(update={"reacquire_after_s": 1.0, "reacquire_speed_mm_s": 100.0})
+    control = Controller(s, FLAT)
+    crane = np.array([0.0, 0.0])
+    control.step(1.0, (0.96, _frame([(50.0, 0.0)], crane)), crane)
+    fix = Fix(1.9, np.array([1500.0, 0.0]))  # out of view: 1.5 m away
+    early = control.step(1.5, (1.46, _frame([], crane)), crane, fix)
+    assert early.hold and not early.reacquiring, "lost only 0.5 s: hold"
+    steps = [control.step(2.0 + 0.25 * k, (1.96 + 0.25 * k, _frame([], crane)), crane,
+                          Fix(1.95 + 0.25 * k, fix.xy_mm)) for k in range(6)]
+    assert all(st.reacquiring and not st.hold for st in steps)
+    moved = np.diff([st.setpoint[0] for st in steps])
+    assert np.all(moved > 0) and np.all(moved <= 100.0 * 0.25 + 1e-6), "towards it, slowly"
+    stale_fix = control.step(3.75, (3.71, _frame([], crane)), crane, Fix(2.0, fix.xy_mm))
+    assert stale_fix.hold and not stale_fix.reacquiring, "an old fix is not followed"

@@ -182,3 +182,31 @@ def test_stb_sim_estop_presses_and_releases_the_sims_e_stop(rig: dict) -> None:
     wait_for(lambda: crane.model.safety_ok, timeout=1)
     assert crane.state()[3] & FAULT_SAFETY, "latched until a reset"
     assert estop(["--set", "crane.port=1"]) == 3, "nothing listens there"
+
+
+def test_the_robot_is_found_again_from_the_motion_capture_after_it_left_the_view(
+        rig: dict) -> None:
+    """Frames and mocap stop for 4 s (as in a bus outage) while the robot drives on at
+    290 mm/s, out of the tracking camera's view (±1 m); when they are back the gantry goes to
+    the motion capture's fix at its reduced speed until the marker is in view, then tracks."""
+    crane: CraneRig = rig["crane"]
+    start = np.array([-700.0, 0.0])
+
+    def robot(t: float) -> np.ndarray:  # stands 2 s, drives 5 s at 290 mm/s, then 50 mm/s
+        return start + [290.0 * min(max(t - 2.0, 0.0), 5.0) + 50.0 * max(t - 7.0, 0.0), 0.0]
+
+    def outage(t: float) -> bool:
+        return 3.0 <= t < 7.0
+
+    began = time.monotonic()
+    with feeding(crane, rig["world"], robot, mocap=True, paused=outage):
+        wait_for(lambda: rig["operator"].send("arm").accepted, timeout=2, period=0.1)
+        time.sleep(max(6.8 - (time.monotonic() - began), 0.0))
+        held = crane.state()
+        assert np.linalg.norm(held[1]) < 1.0, "it holds through the outage"
+        assert np.linalg.norm(robot(6.8) - held[0]) > 1100.0, "the robot is out of view"
+        wait_for(lambda: np.linalg.norm(crane.state()[1]) > 50.0, timeout=3)  # reacquiring
+        assert np.linalg.norm(crane.state()[1]) <= rig["settings"].reacquire_speed_mm_s + 5
+        wait_for(lambda: np.linalg.norm(crane.state()[0]
+                                        - robot(time.monotonic() - began)) < 60.0, timeout=20)
+    assert rig["operator"].mode() == "armed"
