@@ -48,20 +48,26 @@ def identify(args: argparse.Namespace, gantry: GantrySettings, sim: SimSettings)
                 print(f"  {done:4d}/{args.evaluations}  cost {latest.cost:7.3f}  worst "
                       f"{latest.worst:5.0%}   best so far: cost {best.cost:.3f}, worst "
                       f"{best.worst:.0%}   ({elapsed(started)})", file=out, flush=True)
+                if args.out and best is latest:  # kept as it goes: a long fit may be cut short
+                    _write(args.out, _report(best, gantry, sim, time.monotonic() - started))
 
             result = fit(evaluator, start, evaluations=args.evaluations, progress=progress)
     finally:
         evaluator.close()
     report = _report(result, gantry, sim, time.monotonic() - started)
     if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(report, indent=1) + "\n")
+        _write(args.out, report)
     if args.json:
         print(json.dumps(report))
     else:
         print(_table(result), flush=True)
         print("\nas lab-file settings:\n" + _toml(result, gantry, sim))
     return 0 if result.worst <= TOLERANCE else 1
+
+
+def _write(path: Path, report: dict) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(report, indent=1) + "\n")
 
 
 def parse_seeds(text: str) -> tuple[int, ...]:

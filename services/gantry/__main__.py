@@ -1,6 +1,7 @@
 """``stb gantry``: the crane follows the robot (paper §3), once an operator arms it.
 
 ``stb gantry arm|disarm|stop|reset [--reason TEXT]``: an operator's command (see its --help).
+``stb gantry identify [--box MM]``: measure the crane that is there (commissioning).
 The modes: disarmed at start (the crane is never enabled), armed (tracking; holding without a
 fresh estimate), stopped (by stop, a latched fault, the e-stop or the crane disabled at its
 controller: setpoint frozen, crane disabled; only reset, then arm, moves it again).
@@ -23,6 +24,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         from services.gantry.command_cli import main as command_main
 
         return command_main(argv)
+    if argv[:1] == ["identify"]:
+        from services.gantry.commission_cli import main as identify_main
+
+        return identify_main(argv[1:])
     from services.gantry.service import run
 
     return service_main("gantry", GantrySettings, run, argv, __doc__ or "")

@@ -43,6 +43,7 @@ class CraneReading:
     faults: int
     target_x_mm: float
     target_y_mm: float
+    setpoints_taken: int = 0  # the controller's count of setpoints it took (wraps at 65536)
 
     @property
     def enabled(self) -> bool:
@@ -77,7 +78,7 @@ def reading_from(block: list[int], start: int, registers: RegisterMap = DEFAULT_
 
     return CraneReading(value("actual_x"), value("actual_y"), value("velocity_x"),
                         value("velocity_y"), word("status"), word("faults"), value("target_x"),
-                        value("target_y"))
+                        value("target_y"), word("setpoints_taken"))
 
 
 def setpoint_writes(registers: RegisterMap, x_mm: float, y_mm: float

@@ -1,4 +1,4 @@
-"""``stb sim [--scenario locomotive|walker|calibration] [--seed N]``: the simulated lab.
+"""``stb sim [--scenario locomotive|walker|calibration|parked] [--seed N]``: the simulated lab.
 ``stb sim estop [--release]``: press or release the simulated crane's e-stop."""
 
 from __future__ import annotations
@@ -9,12 +9,13 @@ from collections.abc import Sequence
 from typing import Any
 
 from services.entry import service_main
+from services.sim.robots import SCENARIOS
 from services.sim.service import run
 from services.sim.settings import SimSettings
 
 
 def _flags(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--scenario", choices=["locomotive", "walker", "calibration"])
+    parser.add_argument("--scenario", choices=SCENARIOS)
     parser.add_argument("--seed", type=int)
 
 

@@ -14,7 +14,8 @@ import numpy as np
 
 from services.sim.world import CraterMap
 
-Scenario = Literal["locomotive", "walker", "calibration"]
+Scenario = Literal["locomotive", "walker", "calibration", "parked"]
+SCENARIOS: tuple[Scenario, ...] = ("locomotive", "walker", "calibration", "parked")
 SAMPLE_HZ = 100.0
 MARKER_DIAMETER_MM = 19.0
 MARKER_HEIGHT_MM = {"locomotive": 80.0, "walker": 350.0}
@@ -223,12 +224,23 @@ def calibration(world: CraterMap, rng: np.random.Generator, *, points: int = 150
     return Trajectory("calibration", tt, xyz)
 
 
+def parked(world: CraterMap, *, at_mm: tuple[float, float] = (0.0, 0.0),
+           marker_height_mm: float = MARKER_HEIGHT_MM["locomotive"],
+           duration_s: float = 3600.0) -> Trajectory:
+    """The robot parked: its marker stands still (for commissioning the crane)."""
+    z = float(world.height_at(*at_mm)) + marker_height_mm
+    return Trajectory("parked", np.array([0.0, duration_s]),
+                      np.array([[*at_mm, z], [*at_mm, z]]))
+
+
 def make_trajectory(scenario: Scenario, world: CraterMap, rng: np.random.Generator, *,
                     railway: Railway = Railway(), walk: Walk = Walk()) -> Trajectory:
     if scenario == "locomotive":
         return locomotive(world, railway)
     if scenario == "walker":
         return walker(world, rng, walk)
+    if scenario == "parked":
+        return parked(world)
     return calibration(world, rng)
 
 

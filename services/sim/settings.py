@@ -15,7 +15,7 @@ from common.crane_registers import RegisterMap
 from common.settings import ServiceSettings
 from services.sim.crane import CraneParams
 from services.sim.crane_server import ESTOP_REGISTER
-from services.sim.robots import Railway, Walk
+from services.sim.robots import Railway, Scenario, Walk
 
 
 class _Section(BaseModel):
@@ -150,7 +150,8 @@ class LocomotiveSettings(_Section):
 class SimSettings(ServiceSettings):
     section = "sim"
 
-    scenario: Literal["locomotive", "walker", "calibration"] = "locomotive"
+    scenario: Scenario = Field("locomotive", description="parked: the robot stands still "
+                               "(commissioning: stb gantry identify)")
     loop: bool = Field(True, description="start the scenario again when it ends")
     seed: int = 1
     crater_file: Path = Field(Path("run/sim/crater.npz"),

@@ -26,16 +26,18 @@ from tests.conftest import free_port, wait_for
 CAMERA = TrackingCamera(focal_mm=8.0, pixel_mm=0.0075, height_mm=3500.0)
 GROUND_MM, MARKER_MM = 100.0, 80.0
 _ids = itertools.count()
+RIG_PARAMS = CraneParams(watchdog_s=0.5)
 
 
 class CraneRig:
     """The sim's crane controller on a free port, on real time, in a thread of its own."""
 
-    def __init__(self, registers: RegisterMap = DEFAULT_MAP) -> None:
+    def __init__(self, registers: RegisterMap = DEFAULT_MAP,
+                 params: CraneParams = RIG_PARAMS) -> None:
         self.port, self.registers = free_port(), registers
         t0 = time.monotonic()
         self.clock = lambda: time.monotonic() - t0
-        self.model = CraneModel(CraneParams(watchdog_s=0.5))
+        self.model = CraneModel(params)
         self.lock = threading.Lock()
         self.server = CraneServer(self.model, self.clock, self.lock, "127.0.0.1", self.port,
                                   registers=registers)
@@ -99,14 +101,17 @@ class Operator:
 
 
 def frame(world: Bus, robot_xy: np.ndarray | None, crane_xy: np.ndarray, seq: int,
-          rng: np.random.Generator) -> None:
+          rng: np.random.Generator, captured_s: float | None = None) -> None:
+    """A frame of the robot seen from the crane at ``crane_xy``, stamped ``captured_s`` (the
+    moment the crane was there; default now)."""
     blobs = []
     if robot_xy is not None:
         u, v, r = CAMERA.pixel_of(np.array([*robot_xy, GROUND_MM + MARKER_MM]), *crane_xy)
         blobs.append(Blob(u, v, r, r))
     image = draw(blobs, CAMERA.width_px, CAMERA.height_px, rng)
     world.publish(keys.GANTRY_FRAME, m.CameraFrame(
-        measured_s=time.time(), camera="tracking", seq=seq, width_px=CAMERA.width_px,
+        measured_s=captured_s or time.time(), camera="tracking", seq=seq,
+        width_px=CAMERA.width_px,
         height_px=CAMERA.height_px, encoding="mono8", data=image.tobytes()))
 
 
@@ -119,10 +124,11 @@ def feed(crane: CraneRig, world: Bus, robot: Callable[[float], np.ndarray | None
     start = time.monotonic()
     seq = 0
     while (elapsed := time.monotonic() - start) < seconds and not (stop and stop.is_set()):
+        captured = time.time()
         crane_xy, _, _, _ = crane.state()
         xy = robot(elapsed)
         if not paused(elapsed):
-            frame(world, xy, crane_xy, seq, rng)
+            frame(world, xy, crane_xy, seq, rng, captured)
             if mocap and xy is not None:
                 world.publish(keys.TRACKER_ROBOT, m.RobotPosition(
                     measured_s=time.time(), label="robot", x_mm=float(xy[0]),

@@ -1,0 +1,110 @@
+"""What commissioning measures on the crane that is there (pure: recorded series in, figures
+out; ``stb gantry identify`` records them).
+
+The crane's true position comes from the tracking camera looking at a marker that stands
+still below it (eq. 5–8 turned round: the marker's pixel offset is the crane's displacement);
+the controller's report, sampling counter and velocity come over Modbus. From them:
+
+* sampling period — how often the controller takes a setpoint (its ``setpoints_taken``
+  counter);
+* dead time — from the controller taking a step setpoint to the crane starting to move;
+  total reaction — from writing it to motion (half a sampling period more, on average);
+* report age — how old the reported position is when the controller publishes it: the time
+  shift that lays the reported positions onto the camera's;
+* top speed and acceleration — from long moves (the reported velocity's plateau; a
+  constant-acceleration fit to the camera's positions as the crane sets off).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+MOTION_MM = 2.0
+"""Displacement that counts as moving (the camera's crane position is good to ~0.1 mm)."""
+
+
+@dataclass(frozen=True)
+class Series:
+    """Times (s) and values, increasing in time."""
+
+    t_s: np.ndarray
+    values: np.ndarray
+
+    def at(self, t_s: np.ndarray | float) -> np.ndarray:
+        return np.interp(t_s, self.t_s, self.values)
+
+
+@dataclass(frozen=True)
+class Figure:
+    """A measured quantity: its median and spread (interquartile range) over ``n``."""
+
+    median: float
+    spread: float
+    n: int
+
+    @classmethod
+    def of(cls, samples: list[float] | np.ndarray) -> Figure:
+        x = np.asarray(samples, dtype=float)
+        if not len(x):
+            return cls(float("nan"), float("nan"), 0)
+        q1, q2, q3 = np.percentile(x, [25, 50, 75])
+        return cls(float(q2), float(q3 - q1), len(x))
+
+
+def sampling_period(taken_at: np.ndarray) -> Figure:
+    """From the times the ``setpoints_taken`` counter went up."""
+    return Figure.of(np.diff(np.sort(taken_at)))
+
+
+@dataclass(frozen=True)
+class SetOff:
+    """How a move began: when the crane left its rest, and how hard it accelerated."""
+
+    t_s: float
+    accel_mm_s2: float
+
+
+def set_off(camera: Series, written_s: float, until_s: float, top_speed_mm_s: float
+            ) -> SetOff | None:
+    """The start of the move written at ``written_s`` (the crane at rest then): from rest at
+    constant acceleration, √|x − x0| grows linearly in time, so a line through the camera's
+    positions while it speeds up (below 80 % of ``top_speed_mm_s`` and 40 % of the way) gives
+    the start (where it crosses zero) and the acceleration (2 · slope²)."""
+    t, x = camera.t_s, camera.values
+    before = (t > written_s - 0.3) & (t <= written_s)
+    after = np.flatnonzero((t > written_s) & (t <= until_s))
+    if before.sum() < 2 or len(after) < 4:
+        return None
+    rest = float(np.median(x[before]))
+    travel = np.abs(x[after] - rest)
+    if travel.max() < 4 * MOTION_MM:
+        return None
+    speed = np.abs(np.gradient(x[after], t[after]))
+    fast = np.flatnonzero((speed >= 0.8 * top_speed_mm_s) | (travel > 0.4 * travel.max()))
+    use = after[:int(fast[0]) if len(fast) else len(after)]
+    use = use[np.abs(x[use] - rest) > MOTION_MM / 2]
+    if len(use) < 3:
+        return None
+    slope, intercept = np.polyfit(t[use], np.sqrt(np.abs(x[use] - rest)), 1)
+    if slope <= 0:
+        return None
+    return SetOff(float(-intercept / slope), float(2 * slope ** 2))
+
+
+def report_age(reported: Series, camera: Series, *, max_s: float = 1.0,
+               step_s: float = 0.002) -> float:
+    """The shift τ that best lays ``reported`` (position at publication) onto the camera's
+    position τ earlier; both in the same units, over the camera's time span."""
+    t = reported.t_s
+    best, best_cost = 0.0, np.inf
+    for tau in np.arange(0.0, max_s, step_s):
+        inside = (t - tau >= camera.t_s[0]) & (t - tau <= camera.t_s[-1])
+        if inside.sum() < 5:
+            continue
+        offset = reported.values[inside] - camera.at(t[inside] - tau)
+        cost = float(np.var(offset))  # the camera's zero is arbitrary: only the spread counts
+        if cost < best_cost:
+            best, best_cost = float(tau), cost
+    return best

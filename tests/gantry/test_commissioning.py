@@ -1,0 +1,70 @@
+"""``stb gantry identify`` against the sim's Modbus crane controller, its tracking camera
+looking at a marker that stands still: the crane's configured figures come back within 10 %."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from common.bus import Bus
+from services.gantry.commission_cli import main
+from services.sim.crane import CraneParams
+from tests.gantry.rig import MARKER_MM, CraneRig, feeding
+
+pytestmark = pytest.mark.usefixtures("compiled_detector")
+CONFIGURED = CraneParams(max_speed_mm_s=400.0, max_accel_mm_s2=1500.0, cycle_s=0.25,
+                         dead_time_s=0.15, report_latency_s=0.08, watchdog_s=0.5)
+MARKER = np.array([120.0, -60.0])  # stands still below the crane
+
+
+def _lab(tmp_path: Path, router: str, crane: CraneRig, flat_map: Path) -> Path:
+    lab = tmp_path / "lab.toml"
+    lab.write_text(f"""
+[bus.zenoh]
+connect = ["{router}"]
+[gantry]
+crane_port = {crane.port}
+height_map = "{flat_map}"
+marker_height_mm = {MARKER_MM}
+""")
+    return lab
+
+
+def test_commissioning_measures_the_crane_that_is_there(
+        tmp_path: Path, router_endpoint: str, flat_map: Path, make_bus: Callable[..., Bus],
+        capsys) -> None:  # noqa: ANN001
+    crane = CraneRig(params=CONFIGURED)
+    try:
+        lab = _lab(tmp_path, router_endpoint, crane, flat_map)
+        with feeding(crane, make_bus(), lambda _t: MARKER, seconds=120.0):
+            code = main(["--lab", str(lab), "--box", "300", "--steps", "8", "--yes", "--json"])
+        out = capsys.readouterr().out
+        assert code == 0, out
+        measured = json.loads(out)
+    finally:
+        crane.close()
+    c = CONFIGURED
+    expected = {"sampling_s": c.cycle_s, "dead_s": c.dead_time_s,
+                "reaction_s": c.dead_time_s + c.cycle_s / 2,
+                "report_age_s": c.report_latency_s, "top_speed_mm_s": c.max_speed_mm_s,
+                "accel_mm_s2": c.max_accel_mm_s2}
+    for name, value in expected.items():
+        assert measured[name]["median"] == pytest.approx(value, rel=0.10), (name, measured)
+
+
+def test_it_will_not_move_an_enabled_crane_nor_without_a_marker(
+        tmp_path: Path, router_endpoint: str, flat_map: Path, capsys) -> None:  # noqa: ANN001
+    crane = CraneRig(params=CraneParams(watchdog_s=60.0))  # whoever enabled it keeps it so
+    try:
+        lab = _lab(tmp_path, router_endpoint, crane, flat_map)
+        assert main(["--lab", str(lab), "--yes"]) == 3
+        assert "no marker" in capsys.readouterr().err
+        crane.at_the_panel(1)  # enabled: someone else drives it
+        assert main(["--lab", str(lab), "--yes"]) == 1
+        assert "the crane is enabled" in capsys.readouterr().err
+    finally:
+        crane.close()
