@@ -33,6 +33,8 @@ SERVICES: dict[str, ServiceInfo] = {
                           "services.gantry.settings:GantrySettings"),
     "web": ServiceInfo("the operator's live page: crater, robot, crane, cameras, health "
                        "(http://127.0.0.1:8080)", "services.web.settings:WebSettings"),
+    "camera": ServiceInfo("the tracking camera's frames on the bus, from a camera on this host",
+                          "services.camera.settings:CameraSettings"),
     "sim": ServiceInfo("the simulated lab: QTM RT mocap, VAPIX cameras, Modbus crane, frames",
                        "services.sim.settings:SimSettings"),
 }

@@ -6,16 +6,15 @@ from __future__ import annotations
 
 import logging
 import threading
-import time
 from typing import Protocol
 
 import cv2
 import numpy as np
 
 from common import messages as m
+from common.capture import Frame, capture
 
 log = logging.getLogger(__name__)
-Frame = tuple[float, np.ndarray]  # (capture time, gray uint8 image)
 
 
 class FrameSource(Protocol):
@@ -64,25 +63,6 @@ class OpenCvFrames(FrameInbox):
 
     def __init__(self, source: str, stop: threading.Event) -> None:
         super().__init__()
-        self.source = int(source) if source.isdigit() else source
-        threading.Thread(target=self._read, args=(stop,), name="camera", daemon=True).start()
-
-    def _read(self, stop: threading.Event) -> None:
-        capture = None
-        while not stop.is_set():
-            if capture is None or not capture.isOpened():
-                capture = cv2.VideoCapture(self.source)
-                if not capture.isOpened():
-                    log.warning("camera %s cannot be opened; retrying", self.source)
-                    stop.wait(2.0)
-                    continue
-            ok, image = capture.read()
-            if not ok:
-                capture.release()
-                capture = None
-                continue
-            if image.ndim == 3:
-                image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-            self.put((time.time(), image))
-        if capture is not None:
-            capture.release()
+        self.source = source
+        threading.Thread(target=capture, args=(source, stop, self.put), name="camera",
+                         daemon=True).start()

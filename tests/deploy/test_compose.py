@@ -22,8 +22,8 @@ def _config(path: Path, *args: str) -> subprocess.CompletedProcess:
 
 def _config_with_sim(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([str(COMPOSE), "-f", str(ROOT / "docker-compose.yml"), "--profile",
-                           "sim", "config", *args], cwd=ROOT, capture_output=True, text=True,
-                          timeout=60)
+                           "sim", "--profile", "camera", "config", *args], cwd=ROOT,
+                          capture_output=True, text=True, timeout=60)
 
 
 def _services() -> dict:
@@ -35,8 +35,9 @@ def _services() -> dict:
 def test_compose_file_is_valid_and_every_service_restarts() -> None:
     services = _services()
     assert set(services) == {"router", "tracker", "ptz-1", "ptz-2", "calib", "gantry", "monitor",
-                             "web", "sim"}
+                             "web", "sim", "camera"}
     assert services["sim"]["profiles"] == ["sim"], "the sim only with --profile sim"
+    assert services["camera"]["profiles"] == ["camera"], "a camera only where there is one"
     for name, service in services.items():
         assert service["restart"] == "unless-stopped", name
 
@@ -76,3 +77,9 @@ def test_validator_catches_a_broken_file(tmp_path: Path) -> None:
     (tmp_path / "Dockerfile").write_text("FROM scratch\n")
     result = _config(broken, "-q")
     assert result.returncode != 0 and "depnds_on" in result.stderr
+
+
+def test_the_sims_crane_controller_is_not_published_beyond_the_compose_network() -> None:
+    """Modbus/TCP has no authentication: whoever reaches the port can move the crane."""
+    published = {int(p["target"]) for p in _services()["sim"].get("ports", [])}
+    assert 5020 not in published and published, published

@@ -1,0 +1,23 @@
+"""Camera settings: which camera, how its frames travel."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field
+
+from common.settings import ServiceSettings
+
+
+class CameraSettings(ServiceSettings):
+    section = "camera"
+
+    source: str = Field("0", description='OpenCV source: a device number ("0") or a stream '
+                        'URL ("rtsp://…", a video file)')
+    name: str = Field("tracking", pattern=r"^[A-Za-z0-9_.-]{1,64}$",
+                      description="the camera's name in each frame")
+    encoding: Literal["mono8", "jpeg"] = Field(
+        "mono8", description="mono8: raw gray pixels (640×480: 300 kB a frame, what the "
+        "detector was measured on); jpeg: about a tenth of that")
+    jpeg_quality: int = Field(95, ge=50, le=100)
+    max_rate_hz: float = Field(30.0, gt=0, le=200, description="frames a second at most")

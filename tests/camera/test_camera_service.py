@@ -1,0 +1,76 @@
+"""``stb camera``: frames from an OpenCV source (a video file here) on the bus, stamped when
+grabbed, raw or JPEG, and the gantry reads either."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from common import keys
+from common import messages as m
+from common.bus import Bus
+from common.markers import detect
+from common.node import Node
+from services.camera.service import run
+from services.camera.settings import CameraSettings
+from services.gantry.frames import decode
+from tests.conftest import wait_for
+
+
+@pytest.fixture
+def video(tmp_path: Path) -> Path:
+    path = tmp_path / "tracking.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 25, (320, 240))
+    for i in range(50):
+        frame = np.full((240, 320, 3), 12, np.uint8)
+        cv2.circle(frame, (60 + 4 * i, 120), 6, (255, 255, 255), -1)
+        writer.write(frame)
+    writer.release()
+    return path
+
+
+@pytest.mark.parametrize("encoding", ["mono8", "jpeg"])
+def test_frames_reach_the_bus_stamped_when_grabbed(video: Path, encoding: str,
+                                                   make_bus: Callable[..., Bus]) -> None:
+    frames: list[m.CameraFrame] = []
+    make_bus().subscribe(keys.GANTRY_FRAME, frames.append, latest=False)
+    settings = CameraSettings(source=str(video), encoding=encoding, max_rate_hz=100.0)
+    node = Node("camera", settings, make_bus())
+    thread = threading.Thread(target=run, args=(node,), daemon=True)
+    started = time.time()
+    thread.start()
+    try:
+        wait_for(lambda: len(frames) >= 20, timeout=15)
+    finally:
+        node.stop.set()
+        thread.join(5)
+    assert all(f.encoding == encoding and f.camera == "tracking" for f in frames)
+    stamps = [f.measured_s for f in frames]
+    assert started - 1 < stamps[0] and stamps == sorted(stamps)
+    assert [f.seq for f in frames[:5]] == list(range(5))
+    decoded = decode(frames[10])
+    assert decoded is not None
+    captured, image = decoded
+    assert image.shape == (240, 320) and captured == frames[10].measured_s
+    found = detect(image)
+    assert len(found.markers) == 1, "the gantry finds the marker in it"
+
+
+def test_a_camera_that_cannot_be_opened_is_reported_not_fatal(
+        make_bus: Callable[..., Bus], tmp_path: Path) -> None:
+    node = Node("camera", CameraSettings(source=str(tmp_path / "missing.avi")), make_bus())
+    thread = threading.Thread(target=run, args=(node,), daemon=True)
+    thread.start()
+    try:
+        wait_for(lambda: node.health().status == "degraded", timeout=6)
+        assert "no frames from" in node.health().detail
+        assert thread.is_alive()
+    finally:
+        node.stop.set()
+        thread.join(5)
