@@ -11,6 +11,7 @@ gantry's answer. Exit status: 0 accepted, 1 refused, 2 bad arguments, 3 no gantr
 
 from __future__ import annotations
 
+import argparse
 import getpass
 import os
 import queue
@@ -21,10 +22,8 @@ from collections.abc import Sequence
 
 from common import keys
 from common import messages as m
-from common.bus import Bus, BusUnreachable, open_session
-from common.node import configure_logging
-from common.settings import ConfigError, load_settings
-from services.entry import EXIT_CONFIG, base_parser, overrides_from
+from common.bus import Bus
+from services.entry import base_parser, tool_main, tool_session, tool_settings
 from services.gantry.__main__ import COMMANDS
 from services.gantry.settings import GantrySettings
 
@@ -40,17 +39,12 @@ def main(argv: Sequence[str]) -> int:
     parser.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the "
                         "gantry's answer")
     args = parser.parse_args(argv)
-    try:
-        settings = load_settings(GantrySettings, args.lab, overrides_from(args))
-    except ConfigError as err:
-        print(f"stb gantry {args.command}: {err}", file=sys.stderr)
-        return EXIT_CONFIG
-    configure_logging("WARNING")
-    try:
-        session = open_session(settings.zenoh_settings())
-    except BusUnreachable as err:
-        print(f"stb gantry {args.command}: {err}", file=sys.stderr)
-        return EXIT_NO_SERVICE
+    return tool_main(f"gantry {args.command}", lambda: _send(args))
+
+
+def _send(args: argparse.Namespace) -> int:
+    settings = tool_settings(GantrySettings, args)
+    session = tool_session(settings)
     bus = Bus(session, settings.bus)
     try:
         return send(bus, args.command, args.operator[:128], args.reason[:500], args.timeout)

@@ -10,14 +10,12 @@ Exit status: 0 done, 2 bad arguments, 3 the sim's crane controller does not answ
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Sequence
 
 from pymodbus.client import ModbusTcpClient
 from pymodbus.exceptions import ModbusException
 
-from common.settings import ConfigError, load_settings
-from services.entry import EXIT_CONFIG, base_parser, overrides_from
+from services.entry import ToolError, base_parser, tool_main, tool_settings
 from services.sim.settings import SimSettings
 
 EXIT_UNREACHABLE = 3
@@ -27,26 +25,24 @@ def main(argv: Sequence[str]) -> int:
     parser = base_parser("stb sim estop", __doc__ or "")
     parser.add_argument("--release", action="store_true", help="release it (close the circuit)")
     args = parser.parse_args(argv)
-    try:
-        settings = load_settings(SimSettings, args.lab, overrides_from(args))
-    except ConfigError as err:
-        print(f"stb sim estop: {err}", file=sys.stderr)
-        return EXIT_CONFIG
+    return tool_main("sim estop", lambda: _press(args.release, tool_settings(SimSettings, args)))
+
+
+def _press(release: bool, settings: SimSettings) -> int:
     crane = settings.crane
     client = ModbusTcpClient(crane.host, port=crane.port, timeout=2, retries=0)
     try:
         if not client.connect():
             raise ModbusException(f"no connection to {crane.host}:{crane.port}")
-        reply = client.write_register(crane.estop_register, 0 if args.release else 1,
+        reply = client.write_register(crane.estop_register, 0 if release else 1,
                                       device_id=crane.registers.unit_id)
         if reply.isError():
             raise ModbusException(str(reply))
     except (ModbusException, OSError) as err:
-        print(f"stb sim estop: the sim's crane controller does not take it: {err}",
-              file=sys.stderr)
-        return EXIT_UNREACHABLE
+        raise ToolError(f"the sim's crane controller does not take it: {err}",
+                        EXIT_UNREACHABLE) from err
     finally:
         client.close()
     print("e-stop released: the safety circuit is closed (the fault stays until a reset)"
-          if args.release else "e-stop pressed: the safety circuit is open")
+          if release else "e-stop pressed: the safety circuit is open")
     return 0
