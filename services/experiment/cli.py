@@ -62,7 +62,11 @@ def _parser() -> argparse.ArgumentParser:
     path.add_argument("--recording", type=Path, metavar="RUN.mcap",
                       help="the robot's path from a recording (stb record): the sim's truth "
                       "if recorded, else the tracker's robot position")
-    g.add_argument("--algorithm", choices=[*ALGORITHMS, "all"], default="all")
+    g.add_argument("--algorithm", choices=[*ALGORITHMS, "all", "oracle"], default="all",
+                   help="oracle: not an algorithm but the bound — the robot's true path "
+                   "--ahead seconds after each frame (no causal predictor can beat it)")
+    g.add_argument("--ahead", type=float, nargs="+", default=[0.2, 0.3, 0.4, 0.5, 0.6, 0.8],
+                   metavar="S", help="the oracle's look-ahead(s) (default: a sweep)")
     g.add_argument("--seed", type=int, default=1)
     g.add_argument("--plot", type=Path, metavar="DIR", help="error-over-time plots")
     g.add_argument("--json", action="store_true", help="one JSON document on stdout")
@@ -95,11 +99,14 @@ def _gantry(args: argparse.Namespace, gantry: GantrySettings, sim: SimSettings) 
     except ValueError as err:
         print(f"{PROG} gantry: {err}", file=sys.stderr)
         return EXIT_USAGE
-    names = ALGORITHMS if args.algorithm == "all" else (args.algorithm,)
+    oracle = args.algorithm == "oracle"
+    names = ALGORITHMS if args.algorithm == "all" else ("default",) * len(args.ahead) \
+        if oracle else (args.algorithm,)
     runs = []
-    for name in names:
+    for i, name in enumerate(names):
         runs.append(run_scenario(args.scenario, name, seed=args.seed, crater_file=args.crater,
-                                 gantry=gantry, sim=sim, path=path))
+                                 gantry=gantry, sim=sim, path=path,
+                                 oracle_ahead_s=args.ahead[i] if oracle else None))
         if not args.json:
             print(_line(runs[-1].summary(), None if path else args.scenario), flush=True)
     if args.plot:

@@ -12,6 +12,7 @@ the wire and the waiting are left out. The crane-to-robot error is sampled at 20
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -22,7 +23,7 @@ from services.experiment.devices import ModelCrane, SimClock, SimFrames
 from services.gantry.control import Controller
 from services.gantry.loop import GantryLoop, Request
 from services.gantry.modes import Command
-from services.gantry.predict import AlgorithmName
+from services.gantry.predict import AlgorithmName, Estimate
 from services.gantry.settings import GantrySettings
 from services.sim.lab import Lab, load_or_make_crater
 from services.sim.robots import MARKER_HEIGHT_MM, SAMPLE_HZ, Trajectory
@@ -82,17 +83,38 @@ def gantry_for(base: GantrySettings, algorithm: AlgorithmName, *, seed: int,
                                    "marker_height_mm": marker_height_mm})
 
 
-def run(lab: Lab, settings: GantrySettings, *, end_s: float | None = None) -> Run:
-    """One experiment; ``lab`` is used up (its crane moves)."""
+@dataclass
+class Oracle:
+    """Not an algorithm: each frame's desired position is where the robot truly will be
+    ``ahead_s`` after the frame was taken — what no causal predictor can beat, a bound on
+    what the crane's delays and limits allow."""
+
+    truth: Callable[[float], np.ndarray]
+    ahead_s: float
+    name: str = "oracle"
+
+    def update(self, t_s: float, measured: np.ndarray | None) -> Estimate:
+        now, then = self.truth(t_s)[:2], self.truth(t_s + self.ahead_s)[:2]
+        return Estimate(now, (then - now) / self.ahead_s, then)
+
+
+def run(lab: Lab, settings: GantrySettings, *, end_s: float | None = None,
+        oracle_ahead_s: float | None = None) -> Run:
+    """One experiment; ``lab`` is used up (its crane moves). With ``oracle_ahead_s`` the
+    predictor is the ``Oracle`` (the bound), not ``settings.algorithm``."""
     warm_up()  # load the compiled detector before the clock starts
     started = time.perf_counter()
     clock = SimClock(START_S)
+    controller = Controller(settings, lab.crater)
+    if oracle_ahead_s is not None:
+        controller.predictor = Oracle(lab.robot, oracle_ahead_s)  # type: ignore[assignment]
     loop = GantryLoop(settings, ModelCrane(lab, clock, settings.crane),
                       SimFrames(lab, clock, np.random.default_rng((settings.seed, 2))),
-                      Controller(settings, lab.crater), START_S)
+                      controller, START_S)
     arm_asked = False
     end = lab.trajectory.duration_s if end_s is None else end_s
-    result = Run(settings.algorithm, np.array([]), np.zeros((0, 2)))
+    name = settings.algorithm if oracle_ahead_s is None else f"oracle {oracle_ahead_s:.2f} s"
+    result = Run(name, np.array([]), np.zeros((0, 2)))
     samples_t: list[float] = []
     errors: list[np.ndarray] = []
     poll_s = 1 / settings.poll_hz
@@ -123,9 +145,9 @@ def run(lab: Lab, settings: GantrySettings, *, end_s: float | None = None) -> Ru
 
 def run_scenario(scenario: str, algorithm: AlgorithmName, *, seed: int, crater_file: Path,
                  gantry: GantrySettings | None = None, sim: SimSettings | None = None,
-                 path: Trajectory | None = None) -> Run:
-    """One algorithm on one scenario, or on ``path`` (a recorded or CSV path: the walker's
-    marker height if ``scenario`` is the walker, else the locomotive's)."""
+                 path: Trajectory | None = None, oracle_ahead_s: float | None = None) -> Run:
+    """One algorithm (or the oracle) on one scenario, or on ``path`` (a recorded or CSV
+    path: the walker's marker height if ``scenario`` is the walker, else the locomotive's)."""
     lab = make_lab("locomotive" if path is not None else scenario, seed, crater_file, sim)
     height = MARKER_HEIGHT_MM.get(scenario, MARKER_HEIGHT_MM["locomotive"])
     if path is not None:
@@ -133,7 +155,7 @@ def run_scenario(scenario: str, algorithm: AlgorithmName, *, seed: int, crater_f
         lab.crane.place(*lab.trajectory.position(0.0)[:2])
     settings = gantry_for(gantry or GantrySettings(), algorithm, seed=seed,
                           marker_height_mm=height)
-    return run(lab, settings)
+    return run(lab, settings, oracle_ahead_s=oracle_ahead_s)
 
 
 def on_crater(path: Trajectory, lab: Lab, marker_height_mm: float) -> Trajectory:

@@ -185,3 +185,15 @@ def test_opencv_frames_from_a_video_file(tmp_path: Path) -> None:
         assert abs(captured - time.time()) < 5
     finally:
         stop.set()
+
+
+def test_the_oracle_bound_runs_beside_the_algorithms(tmp_path: Path, crater_file: Path,
+                                                     capsys) -> None:  # noqa: ANN001
+    path = _path_csv(tmp_path)
+    args = ["gantry", "--trajectory", str(path), "--crater", str(crater_file), "--json"]
+    assert main([*args, "--algorithm", "oracle", "--ahead", "0.3", "0.5"]) == 0
+    oracles = json.loads(capsys.readouterr().out)["results"]
+    assert [r["algorithm"] for r in oracles] == ["oracle 0.30 s", "oracle 0.50 s"]
+    assert main([*args, "--algorithm", "basic"]) == 0
+    basic = json.loads(capsys.readouterr().out)["results"][0]
+    assert min(r["rms_mm"] for r in oracles) < basic["rms_mm"], "knowing the path helps"
