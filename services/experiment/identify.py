@@ -32,8 +32,8 @@ TOLERANCE = 0.30
 
 @dataclass(frozen=True)
 class Parameter:
-    name: str  # "<section>.<field>": a field of [sim.crane], [sim.walker], [sim.locomotive]
-    # or [gantry.particle_filter]
+    name: str  # "<section>.<field>": a field of [sim.crane], [sim.walker], [sim.locomotive],
+    # [gantry.pf_position] or [gantry.pf_velocity]
     low: float
     high: float
     why: str
@@ -61,9 +61,12 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("locomotive.straight_mm", 0.0, 2000.0, "a model railway oval in an 8 × 8 m "
               "crater (the paper gives no plan)"),
     Parameter("locomotive.radius_mm", 500.0, 1500.0, "garden-railway curves: R 0.6–1.5 m"),
-    Parameter("particle_filter.velocity_noise_mm_s", 10.0, 200.0,
-              "eq. 11's v_n: the paper gives none"),
-    Parameter("particle_filter.diff_max_mm", 100.0, 1000.0, "eq. 12's diff_max: none given"),
+    Parameter("pf_position.velocity_noise_mm_s", 1.0, 300.0,
+              "eq. 11's v_n for the position filter: the paper gives none"),
+    Parameter("pf_position.diff_max_mm", 30.0, 1000.0, "eq. 12's diff_max: none given"),
+    Parameter("pf_velocity.velocity_noise_mm_s", 1.0, 300.0, "the same for the velocity "
+              "filter (the paper tuned each algorithm's parameters on the locomotive)"),
+    Parameter("pf_velocity.diff_max_mm", 30.0, 1000.0, "eq. 12's diff_max: none given"),
 )
 BY_NAME = {p.name: p for p in PARAMETERS}
 
@@ -71,7 +74,7 @@ BY_NAME = {p.name: p for p in PARAMETERS}
 def current_values(gantry: GantrySettings, sim: SimSettings) -> dict[str, float]:
     """The parameters as the given settings have them."""
     sections = {"crane": sim.crane, "walker": sim.walker, "locomotive": sim.locomotive,
-                "particle_filter": gantry.particle_filter}
+                "pf_position": gantry.pf_position, "pf_velocity": gantry.pf_velocity}
     return {p.name: float(getattr(sections[p.name.split(".")[0]], p.name.split(".")[1]))
             for p in PARAMETERS}
 
@@ -89,8 +92,8 @@ def apply(values: Mapping[str, float], gantry: GantrySettings, sim: SimSettings
         "walker": sim.walker.model_copy(update=updates.get("walker", {})),
         "locomotive": sim.locomotive.model_copy(update=updates.get("locomotive", {}))})
     gantry = gantry.model_copy(update={
-        "particle_filter": gantry.particle_filter.model_copy(
-            update=updates.get("particle_filter", {})),
+        "pf_position": gantry.pf_position.model_copy(update=updates.get("pf_position", {})),
+        "pf_velocity": gantry.pf_velocity.model_copy(update=updates.get("pf_velocity", {})),
         **commissioned(sim)})
     return gantry, sim
 
@@ -99,7 +102,8 @@ def commissioned(sim: SimSettings) -> dict[str, float]:
     """What commissioning (``stb gantry identify``) sets the gantry to for the sim's crane."""
     params = sim.crane.params()
     return {"max_speed_mm_s": params.max_speed_mm_s, "max_accel_mm_s2": params.max_accel_mm_s2,
-            "reaction_s": round(params.dead_time_s + params.position_time_constant_s, 3)}
+            "reaction_s": round(params.dead_time_s + params.position_time_constant_s, 3),
+            "report_age_s": round(params.report_latency_s, 3)}
 
 
 @dataclass(frozen=True)

@@ -133,7 +133,7 @@ def _toml(result: Evaluation, gantry: GantrySettings, sim: SimSettings) -> str:
     sections: dict[str, list[str]] = {}
     for name, value in result.values.items():
         section, field_name = name.split(".")
-        table = f"gantry.{section}" if section == "particle_filter" else f"sim.{section}"
+        table = f"gantry.{section}" if section.startswith("pf_") else f"sim.{section}"
         sections.setdefault(table, []).append(f"{field_name} = {value:g}")
     sections["gantry"] = [f"{k} = {getattr(fitted_gantry, k):g}"
                           for k in ("max_speed_mm_s", "max_accel_mm_s2", "reaction_s")]

@@ -39,6 +39,14 @@ class Fix:
 
 
 @dataclass(frozen=True)
+class Timing:
+    """Where this control step stands in the crane controller's cycle."""
+
+    taken_in_s: float  # until the controller takes the setpoint
+    report_age_s: float  # how old the crane position it reported is now
+
+
+@dataclass(frozen=True)
 class Step:
     """What one control step saw, believed and decided."""
 
@@ -66,7 +74,7 @@ class Controller:
                                      s.lens_height_mm)
         self.predictor = make_predictor(s.algorithm, seed=s.seed, horizon_s=min(
             prediction_horizon(s.reaction_s, 1 / s.control_hz), s.max_horizon_s),
-            particle=s.particle_filter.options())
+            particle=(s.pf_velocity if s.algorithm == "pf-velocity" else s.pf_position).options())
         self.guard = SetpointGuard(
             Workspace(s.x_min_mm, s.x_max_mm, s.y_min_mm, s.y_max_mm, s.workspace_margin_mm),
             s.max_speed_mm_s, s.max_accel_mm_s2, s.stale_after_s)
@@ -82,17 +90,18 @@ class Controller:
         self.guard.reset()
 
     def step(self, now_s: float, frame: Frame | None, crane_xy: np.ndarray,
-             fix: Fix | None = None) -> Step:
+             fix: Fix | None = None, timing: Timing | None = None) -> Step:
         """One control period: ``frame`` is the newest frame not used yet (or None),
         ``crane_xy`` the crane's position as its controller reports it (mm), ``fix`` the
-        motion capture's latest fix of the robot (or None)."""
+        motion capture's latest fix of the robot (or None), ``timing`` where the step
+        stands in the controller's cycle (None: not known yet)."""
         crane_xy = np.asarray(crane_xy, dtype=float)
         s = self.settings
         self._fix = fix if fix is not None and abs(now_s - fix.t_s) <= s.mocap_max_age_s \
             else None
         seen: dict = {}
         if frame is not None:
-            seen = self._measure(frame, crane_xy)
+            seen = self._measure(frame, crane_xy, self._horizon(timing))
         if self._reacquire(now_s):
             assert self._fix is not None
             decision = self.guard.decide(now_s, self._fix.xy_mm, self._fix.t_s, crane_xy,
@@ -111,13 +120,25 @@ class Controller:
         lost_s = float("inf") if last_seen is None else now_s - last_seen
         return self._fix is not None and lost_s > self.settings.reacquire_after_s
 
-    def _measure(self, frame: Frame, crane_xy: np.ndarray) -> dict:
+    def _horizon(self, timing: Timing | None) -> float | None:
+        """How far ahead ``default`` aims: from when the crane was where its report says (the
+        measured robot position is as old as that, whatever the frame's age, while the crane
+        follows the robot) until it acts on this step's setpoint — the wait until the
+        controller takes it, its reaction — and half a period (the setpoint stands for one)."""
+        if timing is None:
+            return None
+        period = 1 / self.settings.control_hz
+        return (timing.report_age_s + timing.taken_in_s + self.settings.reaction_s
+                + 0.5 * period)
+
+    def _measure(self, frame: Frame, crane_xy: np.ndarray, horizon_s: float | None) -> dict:
         captured, image = frame
         found = detect(image, max_markers=MAX_MARKERS)
         xyz, rejected = self._locate(found, crane_xy, captured)
         if xyz is not None:
             self._seen = [*self._seen[-1:], (captured, xyz[:2])]
-        self.estimate = self.predictor.update(captured, None if xyz is None else xyz[:2])
+        self.estimate = self.predictor.update(captured, None if xyz is None else xyz[:2],
+                                              horizon_s)
         self.estimate_s = captured if self.estimate is not None else None
         return {"frame_s": captured, "frame_shape": image.shape, "detection": found,
                 "measured_xyz": xyz, "rejected_mm": rejected}

@@ -28,6 +28,8 @@ class CycleSync:
     _report_phases: deque[float] = field(init=False)
     _last_poll: tuple[float, tuple[float, float]] | None = None
     _next_tick_s: float | None = None
+    last_report_s: float | None = None
+    """When the report last changed (between the two polls that saw it)."""
 
     def __post_init__(self) -> None:
         if not 0 <= self.offset_s < self.period_s:
@@ -39,6 +41,7 @@ class CycleSync:
         if self._last_poll is not None and reported_xy != self._last_poll[1]:
             changed_s = 0.5 * (self._last_poll[0] + now_s)  # between the two polls
             self._report_phases.append(changed_s % self.period_s)
+            self.last_report_s = changed_s
         self._last_poll = (now_s, reported_xy)
 
     @property
@@ -49,6 +52,14 @@ class CycleSync:
         angles = [2 * math.pi * p / self.period_s for p in self._report_phases]
         mean = math.atan2(sum(map(math.sin, angles)), sum(map(math.cos, angles)))
         return (mean / (2 * math.pi) * self.period_s) % self.period_s
+
+    def next_report_s(self, now_s: float) -> float | None:
+        """When the controller reports (and takes setpoints) next after ``now_s``, or None
+        before the phase is known."""
+        phase = self.report_phase_s
+        if phase is None:
+            return None
+        return phase + math.ceil((now_s - phase) / self.period_s + 1e-9) * self.period_s
 
     def due(self, now_s: float) -> bool:
         """Whether to tick now; if so, the next tick is scheduled (never sooner than half a

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from services.gantry.control import Controller, Fix, Step
+from services.gantry.control import Controller, Fix, Step, Timing
 from services.gantry.crane import Crane, CraneError, CraneReading
 from services.gantry.cycle import CycleSync
 from services.gantry.frames import FrameSource
@@ -104,7 +104,7 @@ class GantryLoop:
         if self.reading is None:
             assert error is not None
             return Tick(now_s, None, None, self._unreachable(error), replies, changes)
-        step = self._tick(now_s, self.reading) if due else None
+        step = self._tick(now_s, mono, self.reading) if due else None
         return Tick(now_s, self.reading, step, self._error, replies, changes)
 
     # --- commands and stops ----------------------------------------------------------------
@@ -173,20 +173,30 @@ class GantryLoop:
 
     # --- the control tick ------------------------------------------------------------------
 
-    def _tick(self, now_s: float, reading: CraneReading) -> Step:
+    def _tick(self, now_s: float, mono_s: float, reading: CraneReading) -> Step:
         """Measure and estimate always; drive the crane only while armed."""
         self._error = None
         if not self.reachable:
             log.info("crane controller reachable again")
             self.reachable = True
         step = self.controller.step(now_s, self.frames.take(),
-                                    np.array([reading.x_mm, reading.y_mm]), self.fix())
+                                    np.array([reading.x_mm, reading.y_mm]), self.fix(),
+                                    self._timing(mono_s))
         if self.armed:
             try:
                 self.crane.write_setpoint(*step.setpoint)
             except CraneError as err:
                 self._error = self._unreachable(err)
         return step
+
+    def _timing(self, mono_s: float) -> Timing | None:
+        """The controller takes setpoints when it reports (one cycle); its report is
+        ``report_age_s`` (commissioned) old when it comes, and older since."""
+        next_report, last_report = self.sync.next_report_s(mono_s), self.sync.last_report_s
+        if next_report is None or last_report is None:
+            return None
+        return Timing(next_report - mono_s,
+                      self.settings.report_age_s + (mono_s - last_report))
 
     def _unreachable(self, err: CraneError) -> CraneError:
         self.controller.restart()  # the crane may have stopped meanwhile: start afresh

@@ -39,7 +39,10 @@ class Estimate:
 class Predictor(Protocol):
     name: AlgorithmName
 
-    def update(self, t_s: float, measured: np.ndarray | None) -> Estimate | None: ...
+    def update(self, t_s: float, measured: np.ndarray | None, horizon_s: float | None = None
+               ) -> Estimate | None:
+        """The estimate after a frame taken at ``t_s``; ``horizon_s``: how far ahead of it the
+        crane will act on this setpoint (only ``default`` uses it)."""
 
 
 @dataclass
@@ -49,7 +52,8 @@ class Basic:
     name: AlgorithmName = "basic"
     _last: tuple[float, np.ndarray] | None = None
 
-    def update(self, t_s: float, measured: np.ndarray | None) -> Estimate | None:
+    def update(self, t_s: float, measured: np.ndarray | None, horizon_s: float | None = None
+               ) -> Estimate | None:
         if measured is None:
             self._last = None
             return None
@@ -88,7 +92,8 @@ class ParticleFilter:
     def __post_init__(self) -> None:
         self._rng = np.random.default_rng(self.seed)
 
-    def update(self, t_s: float, measured: np.ndarray | None) -> Estimate | None:
+    def update(self, t_s: float, measured: np.ndarray | None, horizon_s: float | None = None
+               ) -> Estimate | None:
         if measured is None:
             self._pos = self._last = None
             return None
@@ -160,7 +165,8 @@ class KalmanPredictor:
     _imm: IMMEstimator | None = None
     _t: float = 0.0
 
-    def update(self, t_s: float, measured: np.ndarray | None) -> Estimate | None:
+    def update(self, t_s: float, measured: np.ndarray | None, horizon_s: float | None = None
+               ) -> Estimate | None:
         if measured is None:
             return None
         z = np.asarray(measured, dtype=float)
@@ -181,7 +187,7 @@ class KalmanPredictor:
         self._imm.predict()
         self._imm.update(z)
         position, velocity = self._imm.x[:2].copy(), self._imm.x[2:].copy()
-        horizon = min(self.horizon_s, self.max_horizon_s)
+        horizon = min(self.horizon_s if horizon_s is None else horizon_s, self.max_horizon_s)
         return Estimate(position, velocity, position + velocity * horizon)
 
     def _new_filter(self, z: np.ndarray, accel: float) -> KalmanFilter:

@@ -15,8 +15,8 @@ _PF = ParticleOptions()
 
 
 class ParticleFilterSettings(BaseModel):
-    """The paper's particle filters (``pf-*``, eq. 11–12): their own parameters, which the
-    paper does not give (docs/experiments.md: identified with the sim)."""
+    """One of the paper's particle filters (eq. 11–12): its own parameters, which the paper
+    does not give (docs/experiments.md: identified with the sim)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
     particles: int = Field(_PF.particles, ge=10, le=100_000)
@@ -46,7 +46,10 @@ class GantrySettings(ServiceSettings):
     after_report_s: float = Field(AFTER_REPORT_S, ge=0, description="ticks this long after "
                                   "the controller reports its position")
     stale_after_s: float = Field(0.6, gt=0, le=5, description="older estimate → hold")
-    reaction_s: float = Field(0.5, ge=0, le=3, description="crane's reaction time (predicted)")
+    reaction_s: float = Field(0.5, ge=0, le=3, description="from the controller taking a "
+                              "setpoint to the crane following it (stb gantry identify)")
+    report_age_s: float = Field(0.0, ge=0, le=2, description="how old the position the "
+                                "controller reports is when it reports it (stb gantry identify)")
     max_horizon_s: float = Field(1.0, gt=0, le=3, description="never extrapolate further")
     height_map: Path = Field(Path("run/sim/crater.npz"), description="laser scan (.npz)")
     marker_height_mm: float = Field(80.0, ge=0, description="marker above the ground")
@@ -69,7 +72,10 @@ class GantrySettings(ServiceSettings):
     reacquire_speed_mm_s: float = Field(150.0, gt=0, description="... at this speed at most")
     mocap_max_age_s: float = Field(0.5, gt=0, le=5, description="an older fix is not used")
     seed: int = 0
-    particle_filter: ParticleFilterSettings = ParticleFilterSettings()
+    pf_position: ParticleFilterSettings = Field(
+        ParticleFilterSettings(), description="pf-position and pf-position-gauss")
+    pf_velocity: ParticleFilterSettings = Field(ParticleFilterSettings(),
+                                                description="pf-velocity")
     cable_length_mm: float = Field(2000.0, gt=0, description="gravity-offload cable")
     offload_warn_pct: float = Field(5.0, gt=0, le=100, description="warn above this sideways "
                                     "share of the cable's pull")

@@ -38,10 +38,10 @@ def test_applied_values_reach_the_sim_and_commission_the_gantry() -> None:
     gantry, sim = apply({"crane.max_accel_mm_s2": 1234.0, "crane.dead_time_s": 0.07,
                          "crane.position_time_constant_s": 0.05, "walker.sway_mm": 7.0,
                          "locomotive.radius_mm": 800.0,
-                         "particle_filter.diff_max_mm": 222.0}, GantrySettings(), SimSettings())
+                         "pf_velocity.diff_max_mm": 222.0}, GantrySettings(), SimSettings())
     assert sim.crane.max_accel_mm_s2 == 1234.0 and sim.walker.sway_mm == 7.0
     assert sim.locomotive.radius_mm == 800.0
-    assert gantry.particle_filter.diff_max_mm == 222.0
+    assert gantry.pf_velocity.diff_max_mm == 222.0 and gantry.pf_position.diff_max_mm == 300
     assert gantry.max_accel_mm_s2 == 1234.0, "the guard at the crane's limit"
     assert gantry.reaction_s == pytest.approx(0.12)
 

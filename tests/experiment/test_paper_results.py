@@ -1,0 +1,57 @@
+"""The gantry's evidence, held: on the identified sim (shortened runs, fixed seeds, simulated
+clock) the paper's three algorithms stay within ±30 % of Tables 3 and 4, the paper's orders
+hold, and ``default`` keeps its margin over the best of them (docs/experiments.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from services.experiment.gantry import Run, gantry_for, make_lab, run
+from services.experiment.paper import ORDERS, PAPER_ALGORITHMS, TABLES
+from services.gantry.settings import GantrySettings
+from services.sim.robots import MARKER_HEIGHT_MM
+from services.sim.settings import SimSettings
+
+pytestmark = pytest.mark.usefixtures("compiled_detector")
+SEED = 1
+SHORT = {"locomotive": {"rounds": 3}, "walker": {"duration_s": 150.0}}
+"""Shortened from 5 rounds and 240 s; the figures move by a few per cent (measured in
+docs/experiments.md)."""
+TOLERANCE = 0.30
+MARGIN = {"locomotive": 0.40, "walker": 0.0}
+"""default's margin over the best of the paper's three (rms): what the identified sim
+allows — docs/experiments.md says why the walker's 40 % is out of any predictor's reach."""
+
+
+def _runs(scenario: str, crater_file: Path) -> dict[str, Run]:
+    sim = SimSettings()
+    sim = sim.model_copy(update={scenario: getattr(sim, scenario).model_copy(
+        update=SHORT[scenario])})
+    out = {}
+    for algorithm in (*PAPER_ALGORITHMS, "default"):
+        settings = gantry_for(GantrySettings(), algorithm, seed=SEED,  # type: ignore[arg-type]
+                              marker_height_mm=MARKER_HEIGHT_MM[scenario])
+        out[algorithm] = run(make_lab(scenario, SEED, crater_file, sim), settings)
+    return out
+
+
+def _rms(r: Run) -> float:
+    return float(np.sqrt(np.mean(np.sum(r.error_mm ** 2, axis=1))))
+
+
+@pytest.mark.parametrize("scenario", ["locomotive", "walker"])
+def test_the_paper_is_reproduced_and_default_keeps_its_margin(scenario: str,
+                                                              crater_file: Path) -> None:
+    runs = _runs(scenario, crater_file)
+    for algorithm, (px, py) in TABLES[scenario].items():
+        s = runs[algorithm].summary()
+        assert s["std_x_mm"] == pytest.approx(px, rel=TOLERANCE), (algorithm, s)
+        assert s["std_y_mm"] == pytest.approx(py, rel=TOLERANCE), (algorithm, s)
+    rms = {a: _rms(r) for a, r in runs.items()}
+    order = ORDERS[scenario]
+    assert [rms[a] for a in order] == sorted(rms[a] for a in order), (order, rms)
+    best = min(rms[a] for a in PAPER_ALGORITHMS)
+    assert rms["default"] <= (1 - MARGIN[scenario]) * best, (rms, MARGIN[scenario])
