@@ -54,6 +54,10 @@ class CraneReading:
         return bool(self.status & r.MOVING)
 
     @property
+    def watchdog_tripped(self) -> bool:
+        return bool(self.faults & r.FAULT_WATCHDOG)
+
+    @property
     def safety_ok(self) -> bool:
         """The controller's safety circuit is closed (no e-stop pressed)."""
         return bool(self.status & r.SAFETY_OK)

@@ -24,6 +24,7 @@ from services.sim.settings import SimSettings
 from tests.conftest import ROOT, open_when_up, wait_for
 from tests.deploy import netns
 from tests.deploy.lab_secrets import ROUTER_CONFIG, identity, identity_env, make_secrets
+from tests.gantry.rig import Operator
 
 WHY_NOT = netns.why_not()
 pytestmark = pytest.mark.skipif(WHY_NOT is not None, reason=f"no several hosts: {WHY_NOT}")
@@ -153,6 +154,8 @@ def test_the_chain_across_hosts_survives_cut_links_and_a_router_restart(lab: dic
     monitor.subscribe(keys.GANTRY_SETPOINT, setpoints.append, latest=False)
     monitor.subscribe(keys.PTZ_STATE, ptz.append, latest=False)
     monitor.subscribe(keys.HEALTH, health.append, latest=False)
+    operator = Operator(lab["bus"]("operator"))  # the crane moves once an operator arms it
+    wait_for(lambda: operator.send("arm").accepted, timeout=60, period=0.5)
     wait_for(lambda: any(s.status == "tracking" for s in states), timeout=60, period=0.2)
     _publish_true_pose(calib)
     wait_for(lambda: ptz and ptz[-1].status == "tracking" and ptz[-1].aim_error_deg < 3.0,
@@ -172,10 +175,19 @@ def test_the_chain_across_hosts_survives_cut_links_and_a_router_restart(lab: dic
     reading = _read(crane)
     assert reading is not None and not reading.enabled and not reading.moving
 
-    # --- plugged back in: tracking resumes, never with a setpoint from before ------------------
+    # --- plugged back in: the gantry is stopped (the watchdog's fault is latched) and leaves
+    # the crane alone until an operator resets and arms; then tracking resumes, never with a
+    # setpoint from before
     before = _read(crane)
     assert before is not None
     lab["lan"].plug("gantry")
+    wait_for(lambda: any(s.mode == "stopped" and "watchdog" in s.mode_reason
+                         for s in states), timeout=5, period=0.1)
+    time.sleep(1.0)
+    reading = _read(crane)
+    assert reading is not None and not reading.enabled and reading.watchdog_tripped
+    assert operator.send("reset").accepted
+    assert wait_for(lambda: operator.send("arm").accepted, timeout=5, period=0.2)
     plugged_at = time.time()
     targets: list[tuple[float, float, float]] = []
     last = (before.target_x_mm, before.target_y_mm)
@@ -190,7 +202,7 @@ def test_the_chain_across_hosts_survives_cut_links_and_a_router_restart(lab: dic
             resumed_at = time.time()
         time.sleep(0.02)
     assert resumed_at is not None, "tracking did not resume"
-    print(f"tracking again {resumed_at - plugged_at:.2f} s after the link came back")
+    print(f"tracking again {resumed_at - plugged_at:.2f} s after the operator armed it")
     assert resumed_at - plugged_at <= 3.0
     assert targets, "the crane took no setpoint after the link came back"
     for seen_at, x, y in targets:
