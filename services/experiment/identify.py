@@ -6,7 +6,8 @@ their error standard deviations (std x, std y; 3 algorithms × 2 scenarios = 12 
 averaged over seeds) match the paper's. ``default`` plays no part.
 
 Every parameter has a range fixed before the fit, each physically plausible for a lab gantry
-and its robots (``PARAMETERS``: the reason is stated beside each). The gantry's own settings
+and its robots (``PARAMETERS``: the reason is stated beside each), and a candidate whose walker
+swings its body harder than ``GAIT_ACCEL_MM_S2`` is not run. The gantry's own settings
 follow the crane as its commissioning would set them: the setpoint guard's speed and
 acceleration limits are the crane's, its reaction time the crane's.
 """
@@ -69,6 +70,18 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("pf_velocity.diff_max_mm", 30.0, 1000.0, "eq. 12's diff_max: none given"),
 )
 BY_NAME = {p.name: p for p in PARAMETERS}
+GAIT_ACCEL_MM_S2 = 1000.0
+"""A slow walking robot's body does not swing harder than 0.1 g: its sway (once per gait
+cycle) and surge (twice) together stay below this peak acceleration."""
+
+
+def implausible(values: Mapping[str, float]) -> float:
+    """How far ``values`` break the plausibility limits (0: they do not), in units of the
+    limit: the walker's gait acceleration."""
+    omega = 2 * math.pi * values.get("walker.step_hz", 1.0)
+    accel = (values.get("walker.sway_mm", 0.0) * omega ** 2
+             + values.get("walker.surge_mm", 0.0) * (2 * omega) ** 2)
+    return max(0.0, accel / GAIT_ACCEL_MM_S2 - 1.0)
 
 
 def current_values(gantry: GantrySettings, sim: SimSettings) -> dict[str, float]:
@@ -111,6 +124,7 @@ class Evaluation:
     values: dict[str, float]
     std_mm: dict[str, dict[str, tuple[float, float]]]  # scenario → algorithm → (x, y), mean
     seeds: tuple[int, ...]
+    broken: float = 0.0  # how far the values break the plausibility limits (then not run)
 
     @property
     def ratios(self) -> dict[str, dict[str, tuple[float, float]]]:
@@ -121,12 +135,17 @@ class Evaluation:
     @property
     def worst(self) -> float:
         """The largest relative deviation from the paper's value (0.3 = 30 %)."""
+        if self.broken:
+            return float("inf")
         return max(abs(r - 1.0) for algs in self.ratios.values() for pair in algs.values()
                    for r in pair)
 
     @property
     def cost(self) -> float:
-        """Mean squared log ratio, plus a steep price for every value outside ±30 %."""
+        """Mean squared log ratio, plus a steep price for every value outside ±30 %; an
+        implausible candidate costs more than any plausible one."""
+        if self.broken:
+            return 1000.0 * (1.0 + self.broken)
         logs = [math.log(r) for algs in self.ratios.values() for pair in algs.values()
                 for r in pair]
         outside = [max(0.0, abs(v) - math.log(1 + TOLERANCE)) for v in logs]
@@ -165,14 +184,18 @@ class Evaluator:
         return self.many([values])[0]
 
     def many(self, candidates: list[Mapping[str, float]]) -> list[Evaluation]:
-        jobs: list[Job] = [(dict(v), sc, a, seed, self.gantry, self.sim, self.crater)
-                           for v in candidates for sc in SCENARIOS for a in PAPER_ALGORITHMS
+        """Each candidate's evaluation; an implausible one is not run (``Evaluation.broken``)."""
+        runnable = [dict(v) for v in candidates if not implausible(v)]
+        jobs: list[Job] = [(v, sc, a, seed, self.gantry, self.sim, self.crater)
+                           for v in runnable for sc in SCENARIOS for a in PAPER_ALGORITHMS
                            for seed in self.seeds]
         results = self._pool.map(_run_job, jobs) if self._pool else list(map(_run_job, jobs))
         per = len(SCENARIOS) * len(PAPER_ALGORITHMS) * len(self.seeds)
-        return [self._evaluation(dict(v), jobs[i * per:(i + 1) * per],
-                                 results[i * per:(i + 1) * per])
-                for i, v in enumerate(candidates)]
+        done = iter(self._evaluation(v, jobs[i * per:(i + 1) * per],
+                                     results[i * per:(i + 1) * per])
+                    for i, v in enumerate(runnable))
+        return [Evaluation(dict(v), {}, self.seeds, implausible(v)) if implausible(v)
+                else next(done) for v in candidates]
 
     def _evaluation(self, values: dict[str, float], jobs: list[Job],
                     results: list[tuple[float, float]]) -> Evaluation:

@@ -119,9 +119,9 @@ class GantryLoop:
         if request.command is not Command.STOP and abs(age) > COMMAND_MAX_AGE_S:
             return Decision(False, self.modes.mode, Action.NONE,
                             f"sent {age:.1f} s ago: too old to act on, send it again")
-        estimate_s = self.controller.estimate_s
+        estimate_s, fix = self.controller.estimate_s, self.fix()
         facts = Facts(self.reading, None if estimate_s is None else now_s - estimate_s,
-                      self.settings.stale_after_s)
+                      self.settings.stale_after_s, None if fix is None else now_s - fix.t_s)
         before = (self.modes.mode, self.modes.by, self.modes.reason, self.modes.since_s)
         decision = self.modes.command(request.command, request.by, request.reason, now_s, facts)
         if not decision.accepted:

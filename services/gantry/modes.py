@@ -2,8 +2,9 @@
 
 * ``disarmed`` — at start, and after ``disarm`` or ``reset``. The gantry never enables the
   crane: it measures and estimates, and writes nothing to the controller.
-* ``armed`` — only after an operator's ``arm``: tracking when it has a fresh estimate,
-  holding otherwise.
+* ``armed`` — only after an operator's ``arm`` (which needs a fresh estimate of the robot:
+  its marker in view, or the motion capture's fix, from which the gantry finds it): tracking
+  when it has a fresh estimate, holding otherwise.
 * ``stopped`` — after ``stop`` (accepted in every mode), or by itself when the crane stops
   on its own: a watchdog trip or another latched fault, the safety circuit open (e-stop), or
   the crane disabled at the controller. The setpoint is frozen where the crane is and the
@@ -57,8 +58,9 @@ class Facts:
     """What arming depends on, as the loop sees it now."""
 
     crane: CraneReading | None  # None: the controller does not answer
-    estimate_age_s: float | None  # None: no estimate of the robot
+    estimate_age_s: float | None  # None: no estimate of the robot from the tracking camera
     stale_after_s: float
+    fix_age_s: float | None = None  # the motion capture's fix of the robot (None: none)
 
 
 class ModeKeeper:
@@ -109,9 +111,10 @@ class ModeKeeper:
         why = stopped_why(facts.crane)
         if why is not None:
             return self._refuse(f"{why}: reset first")
-        age = facts.estimate_age_s
-        if age is None or age > facts.stale_after_s:
-            return self._refuse("no fresh estimate of the robot: is its marker in view?")
+        if not any(age is not None and age <= facts.stale_after_s
+                   for age in (facts.estimate_age_s, facts.fix_age_s)):
+            return self._refuse("no fresh estimate of the robot: its marker is not in the "
+                                "tracking camera's view and the motion capture has no fix")
         self._armed_at_s = now_s
         return self._change(Mode.ARMED, Action.ENABLE, by, reason or "arm", now_s)
 

@@ -211,11 +211,12 @@ def systematic_resample(weights: np.ndarray, rng: np.random.Generator) -> np.nda
 
 @dataclass(frozen=True)
 class ParticleOptions:
-    """The paper's particle filters' own parameters (not given in the paper)."""
+    """The paper's particle filters' own parameters (not given in the paper; the defaults are
+    identified with the sim, docs/experiments.md)."""
 
     particles: int = 500
-    velocity_noise_mm_s: float = 40.0
-    diff_max_mm: float = 300.0
+    velocity_noise_mm_s: float = 13.8
+    diff_max_mm: float = 103.0
 
 
 def make_predictor(name: AlgorithmName, *, seed: int = 0, horizon_s: float = PAPER_HORIZON_S,

@@ -46,9 +46,9 @@ class GantrySettings(ServiceSettings):
     after_report_s: float = Field(AFTER_REPORT_S, ge=0, description="ticks this long after "
                                   "the controller reports its position")
     stale_after_s: float = Field(0.6, gt=0, le=5, description="older estimate → hold")
-    reaction_s: float = Field(0.5, ge=0, le=3, description="from the controller taking a "
+    reaction_s: float = Field(0.033, ge=0, le=3, description="from the controller taking a "
                               "setpoint to the crane following it (stb gantry identify)")
-    report_age_s: float = Field(0.0, ge=0, le=2, description="how old the position the "
+    report_age_s: float = Field(0.05, ge=0, le=2, description="how old the position the "
                                 "controller reports is when it reports it (stb gantry identify)")
     max_horizon_s: float = Field(1.0, gt=0, le=3, description="never extrapolate further")
     height_map: Path = Field(Path("run/sim/crater.npz"), description="laser scan (.npz)")
@@ -63,8 +63,9 @@ class GantrySettings(ServiceSettings):
     y_min_mm: float = -3000.0
     y_max_mm: float = 3000.0
     workspace_margin_mm: float = Field(50.0, ge=0)
-    max_speed_mm_s: float = Field(450.0, gt=0, description="setpoint motion limit")
-    max_accel_mm_s2: float = Field(550.0, gt=0)
+    max_speed_mm_s: float = Field(520.0, gt=0, description="setpoint motion limit: the "
+                                  "crane's (stb gantry identify)")
+    max_accel_mm_s2: float = Field(2080.0, gt=0)
     marker_gate_mm: float = Field(300.0, ge=0, description="a spot farther than this from "
                                   "where the robot should be is not it (0: no gate)")
     reacquire_after_s: float = Field(1.0, gt=0, le=60, description="marker lost this long: "

@@ -95,8 +95,8 @@ class Railway:
 
     speed_mm_s: float = 290.0
     rounds: int = 5
-    straight_mm: float = 1500.0
-    radius_mm: float = 500.0
+    straight_mm: float = 446.0
+    radius_mm: float = 969.0
 
     @property
     def oval(self) -> Oval:
@@ -133,12 +133,12 @@ class Walk:
     sliding "a little faster downhill"). The paper gives no figures: identified
     (docs/experiments.md)."""
 
-    speed_mm_s: float = 60.0
-    step_hz: float = 0.8
-    sway_mm: float = 20.0
-    surge_mm: float = 0.0
-    slide_per_s: float = 0.04
-    slide_speed_mm_s: float = 325.0
+    speed_mm_s: float = 29.8
+    step_hz: float = 1.3
+    sway_mm: float = 11.0
+    surge_mm: float = 0.5
+    slide_per_s: float = 0.0022
+    slide_speed_mm_s: float = 331.0
     duration_s: float = 240.0
 
 

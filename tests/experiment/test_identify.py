@@ -41,7 +41,8 @@ def test_applied_values_reach_the_sim_and_commission_the_gantry() -> None:
                          "pf_velocity.diff_max_mm": 222.0}, GantrySettings(), SimSettings())
     assert sim.crane.max_accel_mm_s2 == 1234.0 and sim.walker.sway_mm == 7.0
     assert sim.locomotive.radius_mm == 800.0
-    assert gantry.pf_velocity.diff_max_mm == 222.0 and gantry.pf_position.diff_max_mm == 300
+    assert gantry.pf_velocity.diff_max_mm == 222.0
+    assert gantry.pf_position.diff_max_mm == GantrySettings().pf_position.diff_max_mm
     assert gantry.max_accel_mm_s2 == 1234.0, "the guard at the crane's limit"
     assert gantry.reaction_s == pytest.approx(0.12)
 
@@ -113,3 +114,15 @@ def test_the_command_evaluates_the_sim_against_the_tables(tmp_path: Path, crater
     for scenario, algs in TABLES.items():
         assert set(report["std_mm"][scenario]) == set(algs)
     assert set(report["values"]) == set(BY_NAME)
+
+
+def test_a_walker_that_swings_harder_than_a_tenth_of_g_is_not_run() -> None:
+    from services.experiment.identify import GAIT_ACCEL_MM_S2, implausible
+
+    calm = {"walker.step_hz": 1.0, "walker.sway_mm": 10.0, "walker.surge_mm": 1.0}
+    assert implausible(calm) == 0.0  # 10·(2π)² + 1·(4π)² ≈ 553 mm/s²
+    wild = {"walker.step_hz": 1.3, "walker.sway_mm": 11.2, "walker.surge_mm": 25.5}
+    accel = 11.2 * (2 * math.pi * 1.3) ** 2 + 25.5 * (4 * math.pi * 1.3) ** 2
+    assert implausible(wild) == pytest.approx(accel / GAIT_ACCEL_MM_S2 - 1)
+    evaluation = Evaluation(wild, {}, (1,), implausible(wild))
+    assert evaluation.cost > 1000 and evaluation.worst == float("inf")

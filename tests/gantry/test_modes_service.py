@@ -210,3 +210,13 @@ def test_the_robot_is_found_again_from_the_motion_capture_after_it_left_the_view
         wait_for(lambda: np.linalg.norm(crane.state()[0]
                                         - robot(time.monotonic() - began)) < 60.0, timeout=20)
     assert rig["operator"].mode() == "armed"
+
+
+@pytest.mark.parametrize("rig", [{"reacquire_speed_mm_s": 400.0}], indirect=True)
+def test_arming_with_the_robot_out_of_view_goes_by_the_motion_capture(rig: dict) -> None:
+    crane: CraneRig = rig["crane"]
+    robot = np.array([1400.0, 300.0])  # 1.4 m away: not in the tracking camera's view
+    with feeding(crane, rig["world"], lambda _t: robot, mocap=True):
+        reply = rig["operator"].send("arm")
+        assert reply.accepted, reply.detail
+        wait_for(lambda: np.linalg.norm(crane.state()[0] - robot) < 30.0, timeout=15)

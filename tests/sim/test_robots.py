@@ -42,13 +42,14 @@ def test_marker_follows_the_surface(crater: CraterMap, rng: np.random.Generator)
 def test_walker_is_slow_sways_and_sometimes_slides_downhill(crater: CraterMap) -> None:
     track = walker(crater, np.random.default_rng(2))
     speeds = _speeds(track.xyz_mm)
-    assert 40 < np.median(speeds) < 150, "slow"
-    slides = speeds > 200
-    assert slides.any(), "slides now and then"
-    assert slides.mean() < 0.05, "but rarely"
-    # Sideways sway: the marker's path wiggles around the walking line.
+    assert 10 < np.median(speeds) < 100, "slow"
+    # Its gait: the marker's path wiggles about the walking line.
     x = track.xyz_mm[:2000, 0]
     assert np.std(x - np.convolve(x, np.ones(250) / 250, mode="same")[:2000]) > 3.0
+    sliding = walker(crater, np.random.default_rng(2), Walk(slide_per_s=0.05))
+    slides = _speeds(sliding.xyz_mm) > 200
+    assert slides.any(), "slides now and then"
+    assert slides.mean() < 0.05, "but rarely"
 
 
 def test_walker_is_deterministic_under_a_seed(crater: CraterMap) -> None:
