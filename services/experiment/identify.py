@@ -6,8 +6,9 @@ their error standard deviations (std x, std y; 3 algorithms × 2 scenarios = 12 
 averaged over seeds) match the paper's. ``default`` plays no part.
 
 Every parameter has a range fixed before the fit, each physically plausible for a lab gantry
-and its robots (``PARAMETERS``: the reason is stated beside each), and a candidate whose walker
-swings its body harder than ``GAIT_ACCEL_MM_S2`` is not run. The gantry's own settings
+and its robots (``PARAMETERS``: the reason is stated beside each), and no candidate's walker
+swings its body harder than ``GAIT_ACCEL_MM_S2`` (the fit scales its sway and surge down to
+that; the evaluation of given values refuses to run them). The gantry's own settings
 follow the crane as its commissioning would set them: the setpoint guard's speed and
 acceleration limits are the crane's, its reaction time the crane's.
 """
@@ -73,6 +74,18 @@ BY_NAME = {p.name: p for p in PARAMETERS}
 GAIT_ACCEL_MM_S2 = 1000.0
 """A slow walking robot's body does not swing harder than 0.1 g: its sway (once per gait
 cycle) and surge (twice) together stay below this peak acceleration."""
+
+
+def plausible(values: dict[str, float]) -> dict[str, float]:
+    """``values`` with the walker's sway and surge scaled down together until its gait is
+    within ``GAIT_ACCEL_MM_S2`` (the fit's candidates are repaired, not thrown away)."""
+    excess = implausible(values)
+    if not excess:
+        return values
+    scale = 1.0 / (1.0 + excess) * 0.999
+    return {**values, **{k: round(values[k] * scale, 4) for k in ("walker.sway_mm",
+                                                                  "walker.surge_mm")
+                         if k in values}}
 
 
 def implausible(values: Mapping[str, float]) -> float:
@@ -219,8 +232,8 @@ def fit(evaluate: Evaluator, start: Mapping[str, float], *, evaluations: int, se
     span = np.array([BY_NAME[n].high for n in names]) - low
 
     def values_of(u: np.ndarray) -> dict[str, float]:
-        return {n: round(float(v), 4) for n, v in zip(names, low + span * np.clip(u, 0, 1),
-                                                      strict=True)}
+        return plausible({n: round(float(v), 4) for n, v in zip(
+            names, low + span * np.clip(u, 0, 1), strict=True)})
 
     x0 = np.clip((np.array([start[n] for n in names]) - low) / span, 0, 1)
     best = evaluate(values_of(x0))

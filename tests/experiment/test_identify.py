@@ -126,3 +126,14 @@ def test_a_walker_that_swings_harder_than_a_tenth_of_g_is_not_run() -> None:
     assert implausible(wild) == pytest.approx(accel / GAIT_ACCEL_MM_S2 - 1)
     evaluation = Evaluation(wild, {}, (1,), implausible(wild))
     assert evaluation.cost > 1000 and evaluation.worst == float("inf")
+
+
+def test_the_fits_candidates_are_repaired_to_a_plausible_gait() -> None:
+    from services.experiment.identify import implausible, plausible
+
+    wild = {"walker.step_hz": 1.3, "walker.sway_mm": 11.2, "walker.surge_mm": 25.5,
+            "walker.speed_mm_s": 30.0}
+    repaired = plausible(wild)
+    assert implausible(repaired) == 0.0 and repaired["walker.speed_mm_s"] == 30.0
+    assert repaired["walker.sway_mm"] / repaired["walker.surge_mm"] == pytest.approx(
+        11.2 / 25.5, rel=1e-3), "scaled together"
