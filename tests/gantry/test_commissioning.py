@@ -17,7 +17,8 @@ from tests.gantry.rig import MARKER_MM, CraneRig, feeding
 
 pytestmark = pytest.mark.usefixtures("compiled_detector")
 CONFIGURED = CraneParams(max_speed_mm_s=400.0, max_accel_mm_s2=1500.0, cycle_s=0.25,
-                         dead_time_s=0.15, report_latency_s=0.08, watchdog_s=0.5)
+                         dead_time_s=0.15, report_latency_s=0.08, report_jitter_s=0.0,
+                         watchdog_s=0.5)
 MARKER = np.array([120.0, -60.0])  # stands still below the crane
 
 

@@ -95,7 +95,7 @@ def test_setpoints_go_out_a_fixed_time_after_the_controller_reports(rig: dict) -
     write = crane.model.write_setpoint
 
     def recording(now: float, x_mm: float, y_mm: float) -> None:
-        ages.append(now - crane.model.reported_s)
+        ages.append(now - crane.model.published_s)
         write(now, x_mm, y_mm)
 
     crane.model.write_setpoint = recording  # type: ignore[method-assign]
