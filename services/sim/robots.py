@@ -137,7 +137,7 @@ class Walk:
     step_hz: float = 1.3
     sway_mm: float = 11.0
     surge_mm: float = 0.5
-    slide_per_s: float = 0.0022
+    slide_per_s: float = 0.04
     slide_speed_mm_s: float = 331.0
     duration_s: float = 240.0
 
