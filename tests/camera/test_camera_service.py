@@ -8,8 +8,6 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-import cv2
-import numpy as np
 import pytest
 
 from common import keys
@@ -21,18 +19,12 @@ from services.camera.service import run
 from services.camera.settings import CameraSettings
 from services.gantry.frames import decode
 from tests.conftest import wait_for
+from tests.video import marker_video
 
 
 @pytest.fixture
 def video(tmp_path: Path) -> Path:
-    path = tmp_path / "tracking.avi"
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 25, (320, 240))
-    for i in range(50):
-        frame = np.full((240, 320, 3), 12, np.uint8)
-        cv2.circle(frame, (60 + 4 * i, 120), 6, (255, 255, 255), -1)
-        writer.write(frame)
-    writer.release()
-    return path
+    return marker_video(tmp_path / "tracking.avi", 50, (320, 240), (60, 120), 6)
 
 
 @pytest.mark.parametrize("encoding", ["mono8", "jpeg"])

@@ -8,7 +8,6 @@ import threading
 import time
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pytest
 
@@ -20,6 +19,7 @@ from services.gantry.cycle import AFTER_REPORT_S
 from services.gantry.frames import OpenCvFrames
 from services.gantry.settings import GantrySettings
 from services.recording.mcap_file import RecordWriter
+from tests.video import marker_video
 
 pytestmark = pytest.mark.usefixtures("compiled_detector")
 
@@ -164,13 +164,7 @@ def test_the_gantry_ticks_a_fixed_time_after_the_crane_reports(crater_file: Path
 
 
 def test_opencv_frames_from_a_video_file(tmp_path: Path) -> None:
-    video = tmp_path / "clip.avi"
-    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 25, (64, 48))
-    for i in range(10):
-        frame = np.full((48, 64, 3), 10, np.uint8)
-        cv2.circle(frame, (10 + 4 * i, 20), 3, (255, 255, 255), -1)
-        writer.write(frame)
-    writer.release()
+    video = marker_video(tmp_path / "clip.avi", 10, (64, 48), (10, 20), 3)
     stop = threading.Event()
     source = OpenCvFrames(str(video), stop)
     try:
