@@ -10,7 +10,8 @@ and its robots (``PARAMETERS``: the reason is stated beside each), and no candid
 swings its body harder than ``GAIT_ACCEL_MM_S2`` (the fit scales its sway and surge down to
 that; the evaluation of given values refuses to run them). The gantry's own settings
 follow the crane as its commissioning would set them: the setpoint guard's speed and
-acceleration limits are the crane's, its reaction time the crane's.
+acceleration limits are the crane's, its reaction time what ``stb gantry identify``
+measures on it (``ramp_following_s``).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import numpy as np
 
 from services.experiment.paper import PAPER_ALGORITHMS, SCENARIOS, TABLES
 from services.gantry.settings import GantrySettings
+from services.sim.crane import ramp_following_s
 from services.sim.settings import SimSettings
 
 TOLERANCE = 0.30
@@ -128,7 +130,7 @@ def commissioned(sim: SimSettings) -> dict[str, float]:
     """What commissioning (``stb gantry identify``) sets the gantry to for the sim's crane."""
     params = sim.crane.params()
     return {"max_speed_mm_s": params.max_speed_mm_s, "max_accel_mm_s2": params.max_accel_mm_s2,
-            "reaction_s": round(params.dead_time_s + params.position_time_constant_s, 3),
+            "reaction_s": round(ramp_following_s(params), 3),
             "report_age_s": round(params.report_latency_s, 3)}
 
 

@@ -11,6 +11,9 @@ the controller's report, sampling counter and velocity come over Modbus. From th
   total reaction — from writing it to motion (half a sampling period more, on average);
 * report age — how old the reported position is when the controller publishes it: the time
   shift that lays the reported positions onto the camera's;
+* following — from the controller taking a setpoint to the crane following it, on a ramp:
+  how long the crane trails the written ramp less half a sampling period (the dead time and
+  the position loop's lag); the gantry's ``reaction_s``;
 * top speed and acceleration — from long moves (the reported velocity's plateau; a
   constant-acceleration fit to the camera's positions as the crane sets off).
 """
@@ -93,18 +96,38 @@ def set_off(camera: Series, written_s: float, until_s: float, top_speed_mm_s: fl
     return SetOff(float(-intercept / slope), float(2 * slope ** 2))
 
 
-def report_age(reported: Series, camera: Series, *, max_s: float = 1.0,
-               step_s: float = 0.002) -> float:
-    """The shift τ that best lays ``reported`` (position at publication) onto the camera's
-    position τ earlier; both in the same units, over the camera's time span."""
-    t = reported.t_s
+def lag(follower: Series, leader: Series, *, max_s: float = 1.0, step_s: float = 0.002
+        ) -> float:
+    """The shift τ that best lays ``follower`` onto ``leader`` τ earlier (``follower(t)`` ≈
+    ``leader(t − τ)`` plus a constant), over the leader's time span."""
+    t = follower.t_s
     best, best_cost = 0.0, np.inf
     for tau in np.arange(0.0, max_s, step_s):
-        inside = (t - tau >= camera.t_s[0]) & (t - tau <= camera.t_s[-1])
+        inside = (t - tau >= leader.t_s[0]) & (t - tau <= leader.t_s[-1])
         if inside.sum() < 5:
             continue
-        offset = reported.values[inside] - camera.at(t[inside] - tau)
+        offset = follower.values[inside] - leader.at(t[inside] - tau)
         cost = float(np.var(offset))  # the camera's zero is arbitrary: only the spread counts
         if cost < best_cost:
             best, best_cost = float(tau), cost
     return best
+
+
+def report_age(reported: Series, camera: Series, *, max_s: float = 1.0) -> float:
+    """How old the reported position is when published: the reports (at publication) laid
+    onto the camera's true position."""
+    return lag(reported, camera, max_s=max_s)
+
+
+def ramp_lag(camera: Series, ramp_s: tuple[float, float], start_mm: float, speed_mm_s: float,
+             *, settle_s: float = 1.5) -> float | None:
+    """How long the crane trails a setpoint ramp written continuously (from ``start_mm`` at
+    ``speed_mm_s`` over ``ramp_s``), on average once it has caught up (``settle_s`` after the
+    start): the wait until the controller samples a setpoint (half a period on average), its
+    dead time and the position loop's lag."""
+    t0, t1 = ramp_s
+    inside = (camera.t_s >= t0 + settle_s) & (camera.t_s <= t1)
+    if inside.sum() < 5:
+        return None
+    written = start_mm + speed_mm_s * (camera.t_s[inside] - t0)
+    return float(np.mean((written - camera.values[inside]) / speed_mm_s))

@@ -15,7 +15,14 @@ from common import keys
 from common.bus import Bus
 from common.heightmap import HeightMap
 from common.markers import closest, detect
-from services.gantry.commission import Figure, Series, report_age, sampling_period, set_off
+from services.gantry.commission import (
+    Figure,
+    Series,
+    ramp_lag,
+    report_age,
+    sampling_period,
+    set_off,
+)
 from services.gantry.crane import CraneError, CraneReading, RegisterCrane
 from services.gantry.frames import FrameInbox, FrameSource, OpenCvFrames, decode
 from services.gantry.locate import TrackingOptics, offset_mm
@@ -39,6 +46,7 @@ class Plan:
     steps_s: list[float] = field(default_factory=list)
     moves_s: list[float] = field(default_factory=list)
     ramp_s: tuple[float, float] = (0.0, 0.0)
+    ramp_from_mm: float = 0.0  # x where the ramp starts
 
 
 class Recorder:
@@ -201,9 +209,9 @@ def run_moves(recorder: Recorder, start: np.ndarray, box: float, steps: int,
         time.sleep(2.5)
     progress(f"a ramp at {RAMP_MM_S:.0f} mm/s")
     t0 = time.time()
-    plan.ramp_s = (t0, t0 + box / RAMP_MM_S)
+    plan.ramp_s, plan.ramp_from_mm = (t0, t0 + box / RAMP_MM_S), float(start[0] - box / 2)
     while (now := time.time()) < plan.ramp_s[1]:
-        crane.write_setpoint(*(start + [-box / 2 + RAMP_MM_S * (now - t0), 0.0]))
+        crane.write_setpoint(plan.ramp_from_mm + RAMP_MM_S * (now - t0), float(start[1]))
         time.sleep(0.05)
     crane.write_setpoint(*start)
     time.sleep(3.0)
@@ -216,6 +224,7 @@ class Measurements:
     sampling_s: Figure
     dead_s: Figure
     reaction_s: Figure
+    following_s: Figure
     report_age_s: Figure
     top_speed_mm_s: Figure
     accel_mm_s2: Figure
@@ -241,12 +250,16 @@ class Measurements:
             recorder.reported(0).t_s <= plan.ramp_s[1] + 1.0)
         reported = recorder.reported(0)
         age = report_age(Series(reported.t_s[ramp], reported.values[ramp]), camera)
-        return cls(sampling_period(taken), Figure.of(dead), Figure.of(reaction),
+        sampling = sampling_period(taken)
+        trails = ramp_lag(camera, plan.ramp_s, plan.ramp_from_mm, RAMP_MM_S)
+        follows = [] if trails is None else [trails - sampling.median / 2]
+        return cls(sampling, Figure.of(dead), Figure.of(reaction), Figure.of(follows),
                    Figure.of([age]), top_figure, accel)
 
     def table(self) -> str:
         rows = [("sampling period", self.sampling_s, "s"), ("dead time", self.dead_s, "s"),
                 ("reaction (write → motion)", self.reaction_s, "s"),
+                ("following (taken → follows)", self.following_s, "s"),
                 ("report age", self.report_age_s, "s"),
                 ("top speed", self.top_speed_mm_s, "mm/s"),
                 ("acceleration", self.accel_mm_s2, "mm/s²")]
@@ -255,9 +268,9 @@ class Measurements:
 
     def toml(self) -> str:
         return (f"[gantry]\ncontrol_hz = {1 / self.sampling_s.median:.3g}\n"
-                f"reaction_s = {self.dead_s.median:.3f}  # after the controller takes a "
-                "setpoint\n"
+                f"reaction_s = {max(self.following_s.median, 0.0):.3f}  # setpoint taken → "
+                "crane follows\n"
+                f"report_age_s = {self.report_age_s.median:.3f}\n"
                 f"max_speed_mm_s = {self.top_speed_mm_s.median:.0f}\n"
                 f"max_accel_mm_s2 = {self.accel_mm_s2.median:.0f}\n"
-                f"# report age {self.report_age_s.median:.3f} s; total reaction "
-                f"{self.reaction_s.median:.3f} s\n")
+                f"# total reaction (write → motion) {self.reaction_s.median:.3f} s\n")

@@ -46,7 +46,7 @@ class GantrySettings(ServiceSettings):
     after_report_s: float = Field(AFTER_REPORT_S, ge=0, description="ticks this long after "
                                   "the controller reports its position")
     stale_after_s: float = Field(0.6, gt=0, le=5, description="older estimate → hold")
-    reaction_s: float = Field(0.033, ge=0, le=3, description="from the controller taking a "
+    reaction_s: float = Field(0.114, ge=0, le=3, description="from the controller taking a "
                               "setpoint to the crane following it (stb gantry identify)")
     report_age_s: float = Field(0.05, ge=0, le=2, description="how old the position the "
                                 "controller reports is when it reports it (stb gantry identify)")

@@ -22,7 +22,7 @@ paper's Tables 3–4 with ``stb experiment identify``) and docs/devices.md.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -257,3 +257,23 @@ def _desired_speed(error: float, p: CraneParams, dv_max: float) -> float:
     tau = p.position_time_constant_s
     speed = abs(error) / tau if tau > 0 else limit
     return math.copysign(min(speed, limit), error)
+
+
+def ramp_following_s(params: CraneParams, speed_mm_s: float = 100.0, write_every_s: float = 0.05,
+                     settle_s: float = 1.5, ramp_s: float = 4.0) -> float:
+    """How long after the controller takes a setpoint this crane follows a ramp — what
+    ``stb gantry identify`` measures and sets as ``[gantry] reaction_s``: the crane's mean lag
+    behind a ramp written every ``write_every_s``, once it has caught up, less half a cycle
+    (the mean wait until a written setpoint is taken). More than the dead time and the
+    position loop's time constant wherever the acceleration limit shapes each cycle's step."""
+    model = CraneModel(replace(params, report_jitter_s=0.0, watchdog_s=3600.0))
+    model.write_control(0.0, CONTROL_ENABLE)
+    lags, t = [], 0.0
+    while t < settle_s + ramp_s:
+        written = speed_mm_s * t
+        model.write_setpoint(t, written, 0.0)
+        model.advance_to(t)
+        if t >= settle_s:
+            lags.append((written - float(model.position[0])) / speed_mm_s)
+        t += write_every_s
+    return float(np.mean(lags)) - params.cycle_s / 2

@@ -17,12 +17,14 @@ from services.experiment.identify import (
     PARAMETERS,
     Evaluation,
     apply,
+    commissioned,
     current_values,
     fit,
 )
 from services.experiment.identify_cli import parse_seeds
 from services.experiment.paper import TABLES
 from services.gantry.settings import GantrySettings
+from services.sim.crane import ramp_following_s
 from services.sim.settings import SimSettings
 
 
@@ -44,7 +46,8 @@ def test_applied_values_reach_the_sim_and_commission_the_gantry() -> None:
     assert gantry.pf_velocity.diff_max_mm == 222.0
     assert gantry.pf_position.diff_max_mm == GantrySettings().pf_position.diff_max_mm
     assert gantry.max_accel_mm_s2 == 1234.0, "the guard at the crane's limit"
-    assert gantry.reaction_s == pytest.approx(0.12)
+    assert gantry.reaction_s == pytest.approx(ramp_following_s(sim.crane.params()), abs=0.001)
+    assert gantry.reaction_s > 0.12, "dead time and position loop, and the acceleration limit"
 
 
 def _evaluation(scale: Mapping[str, float], values: Mapping[str, float] | None = None
@@ -137,3 +140,9 @@ def test_the_fits_candidates_are_repaired_to_a_plausible_gait() -> None:
     assert implausible(repaired) == 0.0 and repaired["walker.speed_mm_s"] == 30.0
     assert repaired["walker.sway_mm"] / repaired["walker.surge_mm"] == pytest.approx(
         11.2 / 25.5, rel=1e-3), "scaled together"
+
+
+def test_the_gantrys_defaults_are_the_identified_crane_as_commissioning_measures_it() -> None:
+    gantry = GantrySettings()
+    for name, value in commissioned(SimSettings()).items():
+        assert getattr(gantry, name) == pytest.approx(value, abs=0.001), name

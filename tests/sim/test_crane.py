@@ -20,6 +20,7 @@ from services.sim.crane import (
     FAULT_WATCHDOG,
     CraneModel,
     CraneParams,
+    ramp_following_s,
 )
 from services.sim.crane_server import CraneServer
 from tests.conftest import free_port
@@ -204,3 +205,15 @@ def test_modbus_client_drives_the_crane_over_tcp() -> None:
 def test_register_encoding_round_trips_negative_values() -> None:
     for value in (0, 1, -1, 123456, -98765, 2**31 - 1, -(2**31)):
         assert regs.registers_to_int32(*regs.int32_to_registers(value)) == value
+
+
+def test_the_ramp_following_time_is_dead_time_and_loop_lag_unless_acceleration_shapes_it(
+        ) -> None:
+    """What ``stb gantry identify`` measures as the reaction (setpoint taken → the crane
+    follows): the dead time and at most the first-order loop's time constant where the
+    acceleration limit does not matter; more where each cycle's step is acceleration-limited."""
+    free = CraneParams(dead_time_s=0.1, position_time_constant_s=0.05, max_accel_mm_s2=1e6)
+    assert 0.1 <= ramp_following_s(free) <= 0.1 + 0.05 + 0.01
+    limited = CraneParams(dead_time_s=0.1, position_time_constant_s=0.05,
+                          max_accel_mm_s2=800.0)
+    assert ramp_following_s(limited) > ramp_following_s(free) + 0.05
