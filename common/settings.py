@@ -21,6 +21,7 @@ from pydantic import (
     Field,
     SecretStr,
     ValidationError,
+    ValidationInfo,
     field_validator,
     model_validator,
 )
@@ -182,6 +183,20 @@ def read_lab_file(path: Path) -> dict[str, Any]:
         raise ConfigError(f"cannot read lab config {path}: {err.strerror}") from None
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"lab config {path} is not valid TOML: {err}") from None
+    except UnicodeDecodeError as err:
+        raise ConfigError(f"lab config {path} is not valid TOML: not UTF-8 text (byte "
+                          f"{err.start})") from None
+
+
+def above_its_minimum(value: float, info: ValidationInfo) -> float:
+    """A field validator for an interval's upper end ``*_max*``: it must lie above the
+    matching ``*_min*`` field (declared before it)."""
+    assert info.field_name is not None
+    lower = info.field_name.replace("_max", "_min")
+    low = info.data.get(lower)
+    if low is not None and not value > low:
+        raise ValueError(f"must be greater than {lower} ({low:g})")
+    return value
 
 
 def describe_errors(err: ValidationError, section: str, config_file: Path | None) -> str:

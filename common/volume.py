@@ -18,6 +18,13 @@ class Volume:
     z_min_mm: float = -1000.0
     z_max_mm: float = 4000.0
 
+    def __post_init__(self) -> None:
+        for axis in "xyz":
+            low, high = getattr(self, f"{axis}_min_mm"), getattr(self, f"{axis}_max_mm")
+            if not high > low:
+                raise ValueError(f"{axis}_max_mm ({high:g}) must be greater than "
+                                 f"{axis}_min_mm ({low:g})")
+
     def contains(self, xyz: np.ndarray) -> bool:
         x, y, z = xyz
         return bool(np.all(np.isfinite(xyz)) and self.x_min_mm <= x <= self.x_max_mm

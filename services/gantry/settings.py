@@ -7,7 +7,7 @@ from pathlib import Path
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
 
 from common.crane_registers import RegisterMap
-from common.settings import ServiceSettings
+from common.settings import ServiceSettings, above_its_minimum
 from services.gantry.cycle import AFTER_REPORT_S
 from services.gantry.predict import AlgorithmName, ParticleOptions
 
@@ -80,6 +80,17 @@ class GantrySettings(ServiceSettings):
     cable_length_mm: float = Field(2000.0, gt=0, description="gravity-offload cable")
     offload_warn_pct: float = Field(5.0, gt=0, le=100, description="warn above this sideways "
                                     "share of the cable's pull")
+
+    _intervals = field_validator("x_max_mm", "y_max_mm")(above_its_minimum)
+
+    @field_validator("workspace_margin_mm")
+    @classmethod
+    def _margin_leaves_a_workspace(cls, margin: float, info: ValidationInfo) -> float:
+        for axis in ("x", "y"):
+            low, high = info.data.get(f"{axis}_min_mm"), info.data.get(f"{axis}_max_mm")
+            if low is not None and high is not None and 2 * margin >= high - low:
+                raise ValueError(f"leaves no workspace along {axis} ({low:g}…{high:g} mm)")
+        return margin
 
     @field_validator("poll_hz")
     @classmethod

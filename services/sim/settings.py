@@ -9,10 +9,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from common.crane_registers import RegisterMap
-from common.settings import ServiceSettings
+from common.settings import ServiceSettings, above_its_minimum
 from services.sim.crane import CraneParams
 from services.sim.crane_server import ESTOP_REGISTER
 from services.sim.robots import Railway, Scenario, Walk
@@ -93,6 +93,7 @@ class CraneSettings(_Section):
                                    "the lab's [gantry.crane] (docs/devices.md)")
     estop_register: int = Field(ESTOP_REGISTER, ge=0, le=65535, description="the sim's own "
                                 "e-stop button, a holding register: 1 pressed, 0 released")
+    _intervals = field_validator("x_max_mm", "y_max_mm")(above_its_minimum)
 
     def params(self) -> CraneParams:
         return CraneParams(**self.model_dump(exclude={"host", "port", "registers",

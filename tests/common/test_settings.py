@@ -88,3 +88,29 @@ def test_example_lab_file_is_valid_for_every_service() -> None:
     for info in [*SERVICES.values(), *TOOLS.values()]:
         if info.settings:
             load_settings(settings_class(info), example, environ={})
+
+
+@pytest.mark.parametrize(("text", "field", "why"), [
+    ("[gantry]\nx_min_mm = 3000\nx_max_mm = -3000\n", "gantry.x_max_mm", "greater than x_min_mm"),
+    ("[gantry]\ny_max_mm = -3000\n", "gantry.y_max_mm", "greater than y_min_mm"),
+    ("[gantry]\nx_min_mm = -40\nx_max_mm = 40\n", "gantry.workspace_margin_mm", "no workspace"),
+    ("[sim.crane]\nx_max_mm = -3500\n", "sim.crane.x_max_mm", "greater than x_min_mm"),
+    ("[tracker.volume]\nz_min_mm = 5000\n", "tracker.volume", "z_max_mm (4000) must be greater"),
+])
+def test_an_interval_upside_down_is_refused_naming_the_field(tmp_path: Path, text: str,
+                                                             field: str, why: str) -> None:
+    """An inverted workspace used to pass, and its clamp then sent every setpoint to
+    −3050 mm, beyond the crane's travel."""
+    from services.registry import SERVICES, settings_class
+
+    section = field.split(".")[0]
+    with pytest.raises(ConfigError) as err:
+        load_settings(settings_class(SERVICES[section]), _lab(tmp_path, text), environ={})
+    assert field in str(err.value) and why in str(err.value), str(err.value)
+
+
+def test_a_binary_lab_file_is_named_not_a_traceback(tmp_path: Path) -> None:
+    path = tmp_path / "lab.toml"
+    path.write_bytes(b"\x89PNG\r\n\x1a\n\x00\xff\xfe")
+    with pytest.raises(ConfigError, match=f"lab config {path} is not valid TOML: not UTF-8"):
+        load_settings(RouterSettings, path, environ={})
