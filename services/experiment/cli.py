@@ -91,11 +91,14 @@ def _parser() -> argparse.ArgumentParser:
 
 def _gantry(args: argparse.Namespace, gantry: GantrySettings, sim: SimSettings) -> int:
     from services.experiment.gantry import run_scenario
-    from services.experiment.paths import read_csv, read_recording
+    from services.experiment.paths import check_workspace, read_csv, read_recording
 
     try:
         path = (read_csv(args.trajectory) if args.trajectory else
                 read_recording(args.recording) if args.recording else None)
+        if path is not None:
+            check_workspace(path, args.trajectory or args.recording,
+                            (gantry.x_min_mm, gantry.x_max_mm), (gantry.y_min_mm, gantry.y_max_mm))
     except ValueError as err:
         print(f"{PROG} gantry: {err}", file=sys.stderr)
         return EXIT_USAGE

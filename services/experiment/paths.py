@@ -20,6 +20,8 @@ MIN_SAMPLES = 2
 def read_csv(path: Path) -> Trajectory:
     """A robot path from CSV ``t,x,y`` (s, mm)."""
     try:
+        if not path.read_bytes().strip():
+            raise ValueError(f"{path}: empty (expected a header t,x,y and rows)")
         data = np.genfromtxt(path, delimiter=",", names=True)
     except (OSError, ValueError) as err:
         raise ValueError(f"cannot read {path}: {err}") from err
@@ -60,3 +62,17 @@ def _checked(path: Path, t: np.ndarray, x: np.ndarray, y: np.ndarray) -> Traject
     if len(t) < MIN_SAMPLES or not np.all(np.isfinite([t, x, y])) or np.any(np.diff(t) <= 0):
         raise ValueError(f"{path}: needs ≥ 2 rows of finite numbers with increasing t")
     return Trajectory(path.stem, t, np.column_stack([x, y, np.zeros_like(x)]))
+
+
+def check_workspace(path: Trajectory, source: Path, x_mm: tuple[float, float],
+                    y_mm: tuple[float, float]) -> None:
+    """ValueError naming the first point of ``path`` outside the crane's workspace: the crane
+    cannot follow a robot there."""
+    xy = path.xyz_mm[:, :2]
+    outside = np.flatnonzero((xy[:, 0] < x_mm[0]) | (xy[:, 0] > x_mm[1])
+                             | (xy[:, 1] < y_mm[0]) | (xy[:, 1] > y_mm[1]))
+    if len(outside):
+        i = int(outside[0])
+        raise ValueError(f"{source}: the path leaves the gantry's workspace (x {x_mm[0]:g}…"
+                         f"{x_mm[1]:g}, y {y_mm[0]:g}…{y_mm[1]:g} mm) at t = {path.t_s[i]:g} s: "
+                         f"({xy[i, 0]:g}, {xy[i, 1]:g}) mm")

@@ -93,6 +93,9 @@ def test_a_recording_without_a_robot_is_named(tmp_path: Path, crater_file: Path,
     ("t,x\n0,1\n1,2\n", "header must be t,x,y"),
     ("t,x,y\n0,1,2\n", "≥ 2 rows"),
     ("t,x,y\n0,1,2\n0,3,4\n", "increasing t"),
+    ("", "empty"),
+    ("t,x,y\n", "≥ 2 rows"),
+    ("t,x,y\n0,1e12,0\n1,-1e12,0\n", "leaves the gantry's workspace (x -3000…3000"),
 ])
 def test_a_bad_trajectory_file_is_named(tmp_path: Path, crater_file: Path, capsys,  # noqa: ANN001
                                         content: str, message: str) -> None:
@@ -100,7 +103,8 @@ def test_a_bad_trajectory_file_is_named(tmp_path: Path, crater_file: Path, capsy
     path.write_text(content)
     assert main(["gantry", "--trajectory", str(path), "--algorithm", "basic",
                  "--crater", str(crater_file)]) == 2
-    assert message in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert message in err and str(path) in err, err
 
 
 def test_the_lab_files_gantry_settings_are_the_ones_run(tmp_path: Path, crater_file: Path,
