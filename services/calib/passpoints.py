@@ -96,6 +96,9 @@ def _read_table(path: Path, columns: tuple[str, ...], optional: tuple[str, ...] 
         text = path.read_text()
     except OSError as err:
         raise CalibrationError(f"cannot read {path}: {err.strerror or err}") from err
+    except UnicodeDecodeError as err:
+        raise CalibrationError(f"{path}: not a CSV text file (byte {err.start} is not UTF-8)"
+                               ) from err
     reader = csv.reader(io.StringIO(text))
     header = [h.strip() for h in next(reader, [])]
     missing = [c for c in columns if c not in header]

@@ -128,3 +128,11 @@ def test_collector_skips_a_marker_that_has_not_moved() -> None:
     assert collector.on_detections(_detections(1.5, [(300.0, 300.0)])) == "not moved"
     assert collector.on_detections(_detections(2.5, [(300.0, 310.0)])) is None
     assert collector.skipped == {"not moved": 1}
+
+
+def test_a_binary_passpoint_file_is_named(tmp_path: Path, capsys) -> None:  # noqa: ANN001
+    path = tmp_path / "pp.csv"
+    path.write_bytes(b"\x89PNG\r\n\x1a\n\x00\xff\xfe")
+    assert main([str(path)]) == 2
+    err = capsys.readouterr().err
+    assert str(path) in err and "not a CSV text file" in err and "Traceback" not in err
