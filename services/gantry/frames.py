@@ -8,11 +8,11 @@ import logging
 import threading
 from typing import Protocol
 
-import cv2
 import numpy as np
 
 from common import messages as m
 from common.capture import Frame, capture
+from common.jpeg import JpegError, decode_gray
 
 log = logging.getLogger(__name__)
 
@@ -51,9 +51,10 @@ def decode(msg: m.CameraFrame) -> Frame | None:
             return None
         image = np.frombuffer(msg.data, np.uint8).reshape(msg.height_px, msg.width_px)
     else:
-        image = cv2.imdecode(np.frombuffer(msg.data, np.uint8), cv2.IMREAD_GRAYSCALE)
-        if image is None:
-            log.warning("frame %d: JPEG does not decode", msg.seq)
+        try:
+            image = decode_gray(msg.data, (msg.width_px, msg.height_px))
+        except JpegError as err:
+            log.warning("frame %d: %s", msg.seq, err)
             return None
     return msg.measured_s, image
 

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from typing import Protocol
 
-import cv2
 import httpx
 import numpy as np
 
+from common.jpeg import JpegError, decode_gray
 from services.ptz import vapix
 from services.ptz.aim import Limits
 
@@ -107,10 +107,10 @@ class AxisPtzCamera:
 
 def decode_jpeg(data: bytes, name: str) -> np.ndarray:
     """A camera's JPEG as a gray uint8 array; PtzRejected if it does not decode."""
-    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
-    if image is None:
-        raise PtzRejected(f"{name}: snapshot JPEG does not decode")
-    return image
+    try:
+        return decode_gray(data)
+    except JpegError as err:
+        raise PtzRejected(f"{name}: snapshot: {err}") from err
 
 
 def http_client(url: str, user: str, password: str, auth: str = "digest",
