@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 from common import messages as m
 from common.markers import detect, to_message
+from services.ptz.aim import Limits
 from services.ptz.camera import PtzCamera, decode_jpeg
 
 log = logging.getLogger(__name__)
@@ -25,6 +26,17 @@ AT_TARGET_DEG = 0.05
 
 def _wrap(angle_deg: float) -> float:
     return (angle_deg + 180.0) % 360.0 - 180.0
+
+
+def _within(msg: m.CalibrationMode, limits: Limits) -> m.CalibrationMode:
+    """The request with its pan, tilt and zoom inside the camera's limits."""
+    pan, tilt, zoom = limits.clamp(msg.pan_deg if msg.pan_deg is not None else 0.0,
+                                   msg.tilt_deg if msg.tilt_deg is not None else 0.0,
+                                   msg.zoom if msg.zoom is not None else limits.min_zoom)
+    return msg.model_copy(update={
+        "pan_deg": None if msg.pan_deg is None else pan,
+        "tilt_deg": None if msg.tilt_deg is None else tilt,
+        "zoom": None if msg.zoom is None else int(zoom)})
 
 
 @dataclass
@@ -41,12 +53,15 @@ class CalibrationMode:
     def active(self, now: float) -> bool:
         return self.request is not None and now < self.expires_at
 
-    def on_request(self, msg: m.CalibrationMode, now: float) -> None:
-        """Enter, renew or leave the mode. Camera errors propagate (PtzError)."""
+    def on_request(self, msg: m.CalibrationMode, now: float, limits: Limits
+                   ) -> None:
+        """Enter, renew or leave the mode; where it holds the camera is clamped to the
+        camera's ``limits``. Camera errors propagate (PtzError)."""
         if not msg.active:
             if self.request is not None:
                 self.leave()
             return
+        msg = _within(msg, limits)
         entering = not self.active(now)
         self.request, self.expires_at = msg, now + msg.lease_s
         if entering:

@@ -52,7 +52,8 @@ def run(node: Node, camera: PtzCamera | None = None) -> None:
     for pose in node.bus.query_latest(keys.CALIB_POSE, timeout_s=1.0, camera=name):
         loop.on_pose(pose)
     node.bus.subscribe(keys.TRACKER_ROBOT, loop.on_robot)
-    node.bus.subscribe(keys.PTZ_CALIBRATION, loop.on_calibration, latest=False, camera=name)
+    # latest wins: a burst of requests is not queued up to move the camera for seconds after
+    node.bus.subscribe(keys.PTZ_CALIBRATION, loop.on_calibration, latest=True, camera=name)
     preview = None
     if settings.preview_hz > 0:
         preview = PreviewLoop(
@@ -104,7 +105,7 @@ class _Loop:
         with self.lock:
             now = time.time()
             try:
-                self.calibration.on_request(msg, now)
+                self.calibration.on_request(msg, now, self.limits or Limits())
             except PtzError as err:
                 self._unreachable(now, err)
             if not self.calibration.active(now):

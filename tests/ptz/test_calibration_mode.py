@@ -1,0 +1,79 @@
+"""Calibration mode's requests: held inside the camera's limits (853 moves with |pan| 170–180°
+against a ±170° limit before), and a burst of them does not queue up moves."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from common import keys
+from common import messages as m
+from services.ptz.aim import Limits
+from services.ptz.calibration import CalibrationMode
+from tests.conftest import wait_for
+from tests.ptz.test_service import _camera_server
+
+
+class RecordingCamera:
+    name = "ptz1"
+
+    def __init__(self) -> None:
+        self.moves: list[tuple] = []
+        self.ir_cut: list[str] = []
+
+    def move_to(self, pan: float | None, tilt: float | None, zoom: float | None,
+                *_args: object, **_kwargs: object) -> None:
+        self.moves.append((pan, tilt, zoom))
+
+    def set_ir_cut_filter(self, mode: str) -> None:
+        self.ir_cut.append(mode)
+
+
+def _request(pan: float | None, tilt: float | None, zoom: int | None = None,
+             active: bool = True) -> m.CalibrationMode:
+    return m.CalibrationMode(measured_s=time.time(), camera="ptz1", active=active,
+                             pan_deg=pan, tilt_deg=tilt, zoom=zoom, lease_s=1.0)
+
+
+@pytest.mark.parametrize(("asked", "held"), [
+    ((175.0, 10.0, 5), (170.0, 10.0, 5)),
+    ((-180.0, -90.0, 20000 - 1), (-170.0, -80.0, 9999)),
+    ((None, 95.0 - 10, None), (None, 80.0, None)),
+    ((12.0, 3.0, 1), (12.0, 3.0, 1)),
+])
+def test_a_request_outside_the_cameras_limits_is_held_at_them(asked: tuple, held: tuple) -> None:
+    camera = RecordingCamera()
+    mode = CalibrationMode(camera, lambda _d: None, lambda _f: None)  # type: ignore[arg-type]
+    limits = Limits(min_tilt=-80.0, max_tilt=80.0)
+    mode.on_request(_request(*asked), 100.0, limits)
+    assert camera.moves == [held]
+    assert mode.request is not None
+    assert (mode.request.pan_deg, mode.request.tilt_deg, mode.request.zoom) == held
+
+
+def test_a_burst_of_requests_is_coalesced_not_queued(service: dict) -> None:
+    """200 requests that alternate between ending and starting the mode (each start moves
+    the camera): the service takes the newest, and the camera stops moving at once after."""
+    server = _camera_server(service["port"])
+    service["servers"].append(server)
+    moves: list[float] = []  # when the camera got an absolute move over VAPIX
+    absolute = server.camera.head.absolute
+
+    def recorded(*args: object, **kwargs: object) -> None:
+        moves.append(time.monotonic())
+        absolute(*args, **kwargs)  # type: ignore[arg-type]
+
+    server.camera.head.absolute = recorded  # type: ignore[method-assign]
+    service["thread"].start()
+    world, states = service["world"], service["states"]
+    wait_for(lambda: states)
+    for k in range(200):
+        world.publish(keys.PTZ_CALIBRATION, _request(-4.0 + (k % 7), 3.0, 1,
+                                                     active=k % 2 == 1), camera="ptz1")
+    sent = time.monotonic()
+    time.sleep(1.5)
+    assert len(moves) < 50, len(moves)
+    late = [t - sent for t in moves if t > sent + 0.5]
+    assert not late, f"the camera still moved {max(late):.1f} s after the last request"
+
