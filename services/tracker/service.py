@@ -3,13 +3,17 @@
 Reads:      Qualisys QTM over the RT protocol (qtm_host:qtm_port)
 Publishes:  stb/tracker/markers (MarkerFrame), every frame
             stb/tracker/robot   (RobotPosition), every frame in which the robot is seen
+A frame captured longer than ``bus.max_age_s`` ago (a backlog after a stall) is dropped,
+counted as stale on stb/tracker/markers in the service's health.
 """
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
-from common import keys
+from common import codec, keys
 from common import messages as m
 from common.node import Node
 from services.tracker.mocap import MocapSource, QualisysMocap
@@ -32,7 +36,14 @@ def run(node: Node, mocap: MocapSource | None = None) -> None:
     mocap = mocap or make_mocap(settings)
     picker = make_picker(settings)
 
+    markers_key = keys.TRACKER_MARKERS.key(node.bus.prefix)
+
     def on_frame(frame: m.MarkerFrame) -> None:
+        age = time.time() - frame.measured_s  # since capture (QTM's stamp on our clock)
+        if age > settings.bus.max_age_s:  # a backlog (the tracker stalled): never as fresh
+            node.bus.count_drop(markers_key, codec.STALE, f"frame {frame.frame} captured "
+                                f"{age:.3f} s ago > {settings.bus.max_age_s} s")
+            return
         seen = [Seen(mk.label, mk.id, np.array([mk.x_mm, mk.y_mm, mk.z_mm]))
                 for mk in frame.markers]
         robot = picker.update(frame.measured_s, seen)

@@ -143,3 +143,52 @@ def test_service_publishes_markers_and_the_robot(lab: Lab, qtm: QtmThread,
     finally:
         node.stop.set()
         thread.join(5)
+
+
+class BacklogMocap:
+    """Fresh frames, then a backlog as after a 2 s stall (captured 2.0 … 0.6 s ago, arriving
+    at once), then fresh frames again."""
+
+    def __init__(self) -> None:
+        self.stale = 0
+
+    def run(self, on_frame: Callable[[m.MarkerFrame], None], stop: threading.Event,
+            on_state: Callable[[bool, str], None]) -> None:
+        on_state(True, "backlog")
+
+        def frame(k: int, captured_s: float) -> m.MarkerFrame:
+            return m.MarkerFrame(measured_s=captured_s, frame=k, markers=[
+                m.Marker(label="robot", x_mm=float(k), y_mm=0.0, z_mm=100.0)])
+
+        for k in range(20):
+            on_frame(frame(k, time.time()))
+            time.sleep(0.01)
+        now = time.time()
+        for k in range(20, 160):
+            self.stale += 1
+            on_frame(frame(k, now - 2.0 + (k - 20) * 0.01))
+        for k in range(160, 180):
+            on_frame(frame(k, time.time()))
+            time.sleep(0.01)
+        stop.wait(5)
+
+
+def test_a_stale_backlog_is_dropped_and_counted_not_sent_as_fresh(
+        make_bus: Callable[..., Bus]) -> None:
+    service_bus, watcher = make_bus(), make_bus()
+    node = Node("tracker", TrackerSettings(), service_bus)
+    robots: list[m.RobotPosition] = []
+    watcher.subscribe(keys.TRACKER_ROBOT, robots.append, latest=False)
+    mocap = BacklogMocap()
+    thread = threading.Thread(target=run, args=(node, mocap))
+    thread.start()
+    try:
+        wait_for(lambda: any(r.x_mm >= 179 for r in robots), timeout=10)
+        ages = [r.sent_s - r.measured_s for r in robots]
+        assert max(ages) < node.settings.bus.max_age_s, max(ages)
+        assert not any(20 <= r.x_mm < 160 for r in robots), "nothing of the backlog went out"
+        dropped = node.health().keys[keys.TRACKER_MARKERS.key(service_bus.prefix)].dropped
+        assert dropped.get("stale") == mocap.stale
+    finally:
+        node.stop.set()
+        thread.join(10)
