@@ -96,8 +96,15 @@ def open_session(z: ZenohSettings) -> zenoh.Session:
         raise BusUnreachable(f"cannot open a Zenoh {z.mode} session on {where}: {err}") from err
 
 
+OTHER_KEYS = "(other keys)"
+"""Where the counts and log lines of keys beyond ``MAX_KEYS`` go: a flood of distinct keys
+(4,000 garbage keys grew a health message to 131 KB, past the bus's limit) stays bounded."""
+MAX_KEYS = 64
+
+
 class _RateLimitedLog:
-    """Logs the first event of a kind at once, then at most one summary per ``period_s``."""
+    """Logs the first event of a kind at once, then at most one summary per ``period_s``; at
+    most ``MAX_KEYS`` keys have their own, the rest share one."""
 
     def __init__(self, period_s: float = 10.0) -> None:
         self._period_s = period_s
@@ -107,6 +114,8 @@ class _RateLimitedLog:
     def warning(self, key: str, reason: str, detail: str, *, exc_info: bool = False) -> None:
         now = time.monotonic()
         with self._lock:
+            if (key, reason) not in self._last and len(self._last) >= MAX_KEYS:
+                key = OTHER_KEYS
             last, suppressed = self._last.get((key, reason), (-1e18, 0))
             if now - last < self._period_s:
                 self._last[(key, reason)] = (last, suppressed + 1)
@@ -121,6 +130,29 @@ class _Stats:
     received: int = 0
     published: int = 0
     dropped: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def total(self) -> int:
+        return self.received + self.published + sum(self.dropped.values())
+
+    def merge(self, other: _Stats) -> None:
+        self.received += other.received
+        self.published += other.published
+        for reason, n in other.dropped.items():
+            self.dropped[reason] = self.dropped.get(reason, 0) + n
+
+
+def _stats_of(table: dict[str, _Stats], key: str) -> _Stats:
+    """``key``'s counters; when ``MAX_KEYS`` keys are kept already, the least busy of them
+    is summed into ``OTHER_KEYS`` to make room (the busiest keep their own)."""
+    stats = table.get(key)
+    if stats is not None:
+        return stats
+    named = [k for k in table if k != OTHER_KEYS]
+    if len(named) >= MAX_KEYS:
+        quietest = min(named, key=lambda k: table[k].total)
+        table.setdefault(OTHER_KEYS, _Stats()).merge(table.pop(quietest))
+    return table.setdefault(key, _Stats())
 
 
 class Subscription:
@@ -215,7 +247,7 @@ class Bus:
             self._publishers[key] = publisher
         publisher.put(codec.encode(msg, sent_s=self._clock()))
         with self._stats_lock:
-            self._stats.setdefault(key, _Stats()).published += 1
+            _stats_of(self._stats, key).published += 1
 
     # --- subscribing ------------------------------------------------------------------------
 
@@ -285,12 +317,12 @@ class Bus:
 
     def count_received(self, key: str) -> None:
         with self._stats_lock:
-            self._stats.setdefault(key, _Stats()).received += 1
+            _stats_of(self._stats, key).received += 1
 
     def count_drop(self, key: str, reason: str, detail: str, *, exc_info: bool = False,
                    log_it: bool = True) -> None:
         with self._stats_lock:
-            dropped = self._stats.setdefault(key, _Stats()).dropped
+            dropped = _stats_of(self._stats, key).dropped
             dropped[reason] = dropped.get(reason, 0) + 1
         if log_it:
             self._log.warning(key, reason, detail, exc_info=exc_info)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import queue
 import threading
 import time
@@ -12,7 +13,7 @@ import pytest
 
 from common import codec, keys
 from common import messages as m
-from common.bus import Bus
+from common.bus import MAX_KEYS, OTHER_KEYS, Bus
 from common.node import Node
 from common.settings import ServiceSettings
 from common.wiredoc import EXAMPLES
@@ -259,3 +260,24 @@ def test_backlog_after_a_network_stall_never_reaches_the_handler(
         producer.close()
         session.close()
         proxy.close()
+
+
+def test_a_flood_of_distinct_keys_keeps_health_bounded_and_the_busiest_keys_their_own(
+        make_bus: Callable[..., Bus], caplog: pytest.LogCaptureFixture) -> None:
+    """One garbage sample on each of 4,000 keys grew a health message to 131 KB (past the
+    64 KiB limit, so it was dropped everywhere) and wrote 4,000 log lines."""
+    bus = make_bus()
+    for _ in range(50):
+        bus.count_received("stb/tracker/robot")  # the service's real traffic
+    with caplog.at_level(logging.WARNING, logger="common.bus"):
+        for k in range(4000):
+            bus.count_drop(f"stb/fuzz/{k}", "not_msgpack", "garbage")
+    stats = bus.key_stats()
+    assert len(stats) <= MAX_KEYS + 1
+    assert stats["stb/tracker/robot"].received == 50
+    assert sum(s.dropped.get("not_msgpack", 0) for s in stats.values()) == 4000, "none lost"
+    assert stats[OTHER_KEYS].dropped["not_msgpack"] >= 4000 - MAX_KEYS
+    health = m.ServiceHealth(measured_s=time.time(), service="web", instance="main",
+                             host="h", pid=1, started_s=0.0, status="ok", keys=stats)
+    assert len(codec.encode(health)) < keys.HEALTH.max_payload_bytes
+    assert len(caplog.records) <= MAX_KEYS + 1
