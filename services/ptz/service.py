@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from common import keys
+from common import codec, keys
 from common import messages as m
 from common.camera import Pose, focal_mm_for_zoom
 from common.markers import warm_up
@@ -96,6 +96,12 @@ class _Loop:
         self.state_due = 0.0
 
     def on_pose(self, msg: m.CameraPose) -> None:
+        ahead_s = msg.measured_s - time.time()
+        if ahead_s > self.settings.bus.max_future_s:  # one such pose used to win for good
+            key = keys.CALIB_POSE.key(self.node.bus.prefix, camera=msg.camera)
+            self.node.bus.count_drop(key, codec.FROM_FUTURE, f"pose measured {ahead_s:.0f} s "
+                                     "in the future: refused")
+            return
         with self.lock:
             if self.pose is None or msg.measured_s >= self.pose.measured_s:
                 log.info("camera pose received (fit error %.2f px)", msg.mean_error_px)

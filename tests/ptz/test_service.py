@@ -187,3 +187,32 @@ def test_calibration_mode_holds_still_detects_and_ends_with_its_lease(service: d
     count = len(detections)
     time.sleep(0.5)
     assert len(detections) == count, "no more snapshots once the mode has ended"
+
+
+def test_a_pose_from_the_future_is_refused_and_cannot_mis_aim_the_camera(service: dict) -> None:
+    """One pose with a wrong rotation stamped in the year 2096 used to win for good: ptz1's
+    true aim error went from 0.1° to 60° until a restart, while it reported 'tracking'."""
+    service["servers"].append(_camera_server(service["port"]))
+    service["thread"].start()
+    world, states = service["world"], service["states"]
+    wait_for(lambda: states)  # the service listens
+    _publish_pose(world)
+
+    def on_target() -> bool:
+        _publish_robot(world, TARGET)
+        return bool(states) and states[-1].status == "tracking"
+
+    wait_for(on_target, timeout=5, period=0.05)
+    world.publish(keys.CALIB_POSE, m.CameraPose(
+        measured_s=4e9, camera="ptz1", x_mm=MOUNT.x_mm, y_mm=MOUNT.y_mm, z_mm=MOUNT.z_mm,
+        rx_deg=MOUNT.rx_deg, ry_deg=MOUNT.ry_deg - 40.0, rz_deg=MOUNT.rz_deg + 50.0,
+        focal_mm=3.8, mean_error_px=0.5, passpoints=100), camera="ptz1")
+    time.sleep(0.5)
+    for _ in range(10):
+        _publish_robot(world, TARGET)
+        time.sleep(0.05)
+    last = states[-1]
+    assert aim_error_deg(TARGET, MOUNT, last.pan_deg, last.tilt_deg) < 0.5, "the true aim"
+    node: Node = service["node"]
+    pose_key = keys.CALIB_POSE.key(node.bus.prefix, camera="ptz1")
+    assert node.health().keys[pose_key].dropped.get("from_future") == 1
