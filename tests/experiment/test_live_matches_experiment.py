@@ -21,8 +21,8 @@ from tests.conftest import free_port, stb_process, wait_for
 from tests.gantry.rig import Operator
 
 pytestmark = pytest.mark.usefixtures("compiled_detector")
-END_S = 40.0  # scenario seconds run
-WINDOW_S = (10.0, 38.0)  # compared: once both have settled, before the live run's end
+END_S = 30.0  # scenario seconds run
+WINDOW_S = (10.0, 28.0)  # compared: once both have settled, before the live run's end
 
 
 def _lab_file(tmp_path: Path, router: str, crater: Path) -> Path:
