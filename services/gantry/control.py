@@ -6,11 +6,13 @@ crater's height map) → predict (eq. 9–12 or ``default``) → guard (workspac
 hold). The live service and the experiments call the same ``Controller``; neither repeats any
 of these steps.
 
-Two safeguards the paper did not need: a spot farther than ``marker_gate_mm`` from where the
+Three safeguards the paper did not need: a spot farther than ``marker_gate_mm`` from where the
 robot is expected (its last measured position moved on with its last measured velocity, or
-the motion capture's fix) is not the robot — a reflection; and when the marker has been lost
-for ``reacquire_after_s`` while the motion capture has a fresh fix of the robot, the crane
-goes there at ``reacquire_speed_mm_s`` until the tracking camera sees the marker again.
+the motion capture's fix) is not the robot — a reflection; nor is one farther than
+``mocap_gate_mm`` from the motion capture's fresh fix, whatever the frames show; and when
+the marker has been lost for ``reacquire_after_s`` while the motion capture has a fresh fix
+of the robot, the crane goes there at ``reacquire_speed_mm_s`` until the tracking camera
+sees the marker again.
 """
 
 from __future__ import annotations
@@ -154,6 +156,8 @@ class Controller:
         expected = self._expected(captured)
         xyz = self._world(marker, crane_xy)
         if expected is None or self.settings.marker_gate_mm <= 0:
+            if (off_mocap := self._off_mocap(xyz)) is not None:
+                return None, off_mocap
             self.last_pixel = (marker.u, marker.v)
             return xyz, None
         off = float(np.hypot(*(xyz[:2] - expected)))
@@ -164,8 +168,20 @@ class Controller:
             if nearest is None or nearest[0] > self.settings.marker_gate_mm:
                 return None, off
             _, marker, xyz = nearest
+        if (off_mocap := self._off_mocap(xyz)) is not None:
+            return None, off_mocap
         self.last_pixel = (marker.u, marker.v)
         return xyz, None
+
+    def _off_mocap(self, xyz: np.ndarray) -> float | None:
+        """How far the spot is from the motion capture's fresh fix, if farther than
+        ``mocap_gate_mm``: then it is not the robot, whatever the tracking camera shows (a
+        spoofed or stray frame; 428 spoofed frames once pulled the crane 1.57 m off)."""
+        gate = self.settings.mocap_gate_mm
+        if self._fix is None or gate <= 0:
+            return None
+        off = float(np.hypot(*(xyz[:2] - self._fix.xy_mm)))
+        return off if off > gate else None
 
     def _world(self, marker: Marker, crane_xy: np.ndarray) -> np.ndarray:
         return locate(marker.u, marker.v, crane_xy, self.optics, self.heights,

@@ -72,6 +72,8 @@ class GantrySettings(ServiceSettings):
                                      "go to the motion capture's fix of the robot, if fresh")
     reacquire_speed_mm_s: float = Field(150.0, gt=0, description="... at this speed at most")
     mocap_max_age_s: float = Field(0.5, gt=0, le=5, description="an older fix is not used")
+    mocap_gate_mm: float = Field(500.0, ge=0, description="a spot farther than this from the "
+                                 "motion capture's fresh fix is not the robot (0: no check)")
     seed: int = 0
     pf_position: ParticleFilterSettings = Field(
         ParticleFilterSettings(), description="pf-position and pf-position-gauss")

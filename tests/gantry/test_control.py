@@ -111,3 +111,32 @@ def test_a_lost_marker_is_looked_for_where_the_motion_capture_sees_the_robot() -
     assert np.all(moved > 0) and np.all(moved <= 100.0 * 0.25 + 1e-6), "towards it, slowly"
     stale_fix = control.step(3.75, (3.71, _frame([], crane)), crane, Fix(2.0, fix.xy_mm))
     assert stale_fix.hold and not stale_fix.reacquiring, "an old fix is not followed"
+
+
+def test_frames_that_disagree_with_the_motion_capture_do_not_steer_the_crane() -> None:
+    """Spoofed frames (any client could publish them in an unsecured lab: 428 of them once
+    pulled the crane 1.57 m off the robot) drag the marker away 40 mm a frame; the motion
+    capture keeps seeing the robot where it stands. The spot is refused once it is
+    ``mocap_gate_mm`` from the fix, so the crane stays within that of the robot."""
+    control = Controller(SETTINGS, FLAT)
+    robot = np.array([0.0, 0.0])
+    crane = robot.copy()
+    farthest = 0.0
+    for k in range(60):
+        t = 1.0 + 0.25 * k
+        spoof = robot + [40.0 * k, 0.0]
+        step = control.step(t, (t - 0.04, _frame([tuple(spoof)], crane)), crane,
+                            fix=Fix(t - 0.01, robot))
+        crane = step.setpoint
+        farthest = max(farthest, float(np.hypot(*(crane - robot))))
+        if k * 40.0 > SETTINGS.mocap_gate_mm + 40.0:  # refused (or out of view by now)
+            assert step.measured_xyz is None
+            assert step.rejected_mm is not None or not step.detection.markers  # type: ignore[union-attr]
+    assert farthest < SETTINGS.mocap_gate_mm + 100.0, farthest
+    unchecked = Controller(SETTINGS.model_copy(update={"mocap_gate_mm": 0.0}), FLAT)
+    crane = robot.copy()
+    for k in range(60):  # the same frames without the check: the crane follows the spoof
+        t = 1.0 + 0.25 * k
+        crane = unchecked.step(t, (t - 0.04, _frame([tuple(robot + [40.0 * k, 0.0])], crane)),
+                               crane, fix=Fix(t - 0.01, robot)).setpoint
+    assert np.hypot(*(crane - robot)) > 1500.0
