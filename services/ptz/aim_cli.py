@@ -17,13 +17,15 @@ from services.ptz.aim import Limits, aim_at
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="stb ptz aim", description=__doc__)
     parser.add_argument("--pose", type=Path, required=True,
-                        help="JSON with position_mm [3] and orientation_deg [3] "
-                             "(as stb calib solve prints it)")
-    parser.add_argument("--target", required=True, help="X,Y,Z in mm (world frame)")
+                        help="the pose: as stb calib solve --json prints it (position_mm, "
+                             "orientation_deg) or as the calib service stores it "
+                             "(run/calib/<camera>/pose.json)")
+    parser.add_argument("--target", required=True,
+                        help="X,Y,Z in mm (world frame), e.g. -1200,300,0")
     parser.add_argument("--mount", choices=["standing", "hanging"], default="standing",
                         help="camera mounting; AXIS keeps the camera frame the same for both")
     parser.add_argument("--json", action="store_true")
-    args = parser.parse_args(argv)
+    args = parser.parse_args(_joined(sys.argv[1:] if argv is None else list(argv)))
     try:
         pose = _read_pose(args.pose)
         target = np.array([float(v) for v in args.target.split(",")])
@@ -38,8 +40,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
+def _joined(argv: list[str]) -> list[str]:
+    """``--target -1200,300,0`` as ``--target=-1200,300,0``: argparse takes a value that starts
+    with a minus for an option unless it is a single number."""
+    out: list[str] = []
+    for arg in argv:
+        if out and out[-1] == "--target" and arg.startswith("-"):
+            out[-1] = f"--target={arg}"
+        else:
+            out.append(arg)
+    return out
+
+
 def _read_pose(path: Path) -> Pose:
     data = json.loads(path.read_text())
+    if "pose" in data:  # the calib service's pose.json: the CameraPose message's fields
+        p = data["pose"]
+        return Pose(*(float(p[k]) for k in ("x_mm", "y_mm", "z_mm", "rx_deg", "ry_deg",
+                                             "rz_deg")))
     position, orientation = data["position_mm"], data["orientation_deg"]
     if len(position) != 3 or len(orientation) != 3:
         raise ValueError(f"{path}: position_mm and orientation_deg need three numbers each")

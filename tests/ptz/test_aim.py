@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from common import messages as m
 from common.camera import Pose, focal_mm_for_zoom
 from services.ptz.aim import (
     Limits,
@@ -86,3 +89,26 @@ def test_prediction_is_bounded() -> None:
     p, v = np.array([0.0, 0.0, 0.0]), np.array([290.0, 0.0, 0.0])
     np.testing.assert_allclose(predict(p, v, 0.2), [58.0, 0.0, 0.0])
     np.testing.assert_allclose(predict(p, v, 10.0), [145.0, 0.0, 0.0])  # at most 0.5 s
+
+
+def test_the_aim_command_takes_a_negative_target_and_the_calib_services_pose_file(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--target -1200,300,0`` used to fail ("expected one argument") and ``--pose`` refused
+    the pose file the calibration service writes."""
+    from services.calib.store import PoseStore
+    from services.ptz.aim_cli import main
+
+    mount = Pose(3550.0, 1090.0, 2190.0, 180.0, 30.0, 165.0)
+    stored = PoseStore(tmp_path).save(m.CameraPose(
+        measured_s=1.0, camera="ptz1", x_mm=mount.x_mm, y_mm=mount.y_mm, z_mm=mount.z_mm,
+        rx_deg=mount.rx_deg, ry_deg=mount.ry_deg, rz_deg=mount.rz_deg, focal_mm=3.8,
+        mean_error_px=0.5, passpoints=100), {"method": "auto"})
+    solved = tmp_path / "solved.json"
+    solved.write_text(json.dumps({"position_mm": [mount.x_mm, mount.y_mm, mount.z_mm],
+                                  "orientation_deg": [mount.rx_deg, mount.ry_deg,
+                                                      mount.rz_deg]}))
+    target = np.array([-1200.0, 300.0, 0.0])
+    for pose_file in (stored, solved):
+        assert main(["--pose", str(pose_file), "--target", "-1200,300,0", "--json"]) == 0
+        out = json.loads(capsys.readouterr().out)
+        assert aim_error_deg(target, mount, out["pan_deg"], out["tilt_deg"]) < 1e-6
