@@ -68,9 +68,13 @@ def _up(argv: list[str]) -> int:
 
 def _config(argv: list[str]) -> int:
     """``stb config check --lab FILE``: validate every section a service would read."""
-    parser = argparse.ArgumentParser(prog="stb config")
-    parser.add_argument("action", choices=["check"])
-    parser.add_argument("--lab", type=Path, required=True)
+    parser = argparse.ArgumentParser(
+        prog="stb config", description="stb config check --lab FILE: validate a lab file as "
+        "every service would read it — each section and each field; an error names the "
+        "field (for example gantry.x_max_mm) and the exit code is 2.")
+    parser.add_argument("action", choices=["check"], help="check the lab file")
+    parser.add_argument("--lab", type=Path, required=True, metavar="FILE",
+                        help="the lab file (TOML), e.g. config/lab.toml")
     args = parser.parse_args(argv)
     try:
         sections = read_lab_file(args.lab)
