@@ -3,8 +3,9 @@
 Reads:      Qualisys QTM over the RT protocol (qtm_host:qtm_port)
 Publishes:  stb/tracker/markers (MarkerFrame), every frame
             stb/tracker/robot   (RobotPosition), every frame in which the robot is seen
-A frame captured longer than ``bus.max_age_s`` ago (a backlog after a stall) is dropped,
-counted as stale on stb/tracker/markers in the service's health.
+A frame captured longer than ``bus.max_age_s`` ago (a backlog after a stall) gives no robot
+sample (counted as stale on stb/tracker/robot in the service's health); its markers still go
+out, stamped with their capture time, for calibration and recordings.
 """
 
 from __future__ import annotations
@@ -36,18 +37,19 @@ def run(node: Node, mocap: MocapSource | None = None) -> None:
     mocap = mocap or make_mocap(settings)
     picker = make_picker(settings)
 
-    markers_key = keys.TRACKER_MARKERS.key(node.bus.prefix)
+    robot_key = keys.TRACKER_ROBOT.key(node.bus.prefix)
 
     def on_frame(frame: m.MarkerFrame) -> None:
-        age = time.time() - frame.measured_s  # since capture (QTM's stamp on our clock)
-        if age > settings.bus.max_age_s:  # a backlog (the tracker stalled): never as fresh
-            node.bus.count_drop(markers_key, codec.STALE, f"frame {frame.frame} captured "
-                                f"{age:.3f} s ago > {settings.bus.max_age_s} s")
-            return
         seen = [Seen(mk.label, mk.id, np.array([mk.x_mm, mk.y_mm, mk.z_mm]))
                 for mk in frame.markers]
         robot = picker.update(frame.measured_s, seen)
-        if robot is not None:  # first: the robot sample is what the cameras wait for
+        age = time.time() - frame.measured_s  # since capture (QTM's stamp on our clock)
+        if robot is not None and age > settings.bus.max_age_s:
+            # a backlog (the tracker stalled): the robot sample is control input, never sent
+            # as fresh; the frame itself goes on below with its true capture time
+            node.bus.count_drop(robot_key, codec.STALE, f"frame {frame.frame} captured "
+                                f"{age:.3f} s ago > {settings.bus.max_age_s} s")
+        elif robot is not None:  # first: the robot sample is what the cameras wait for
             (x, y, z), (vx, vy, vz) = robot
             node.bus.publish(keys.TRACKER_ROBOT, m.RobotPosition(
                 measured_s=frame.measured_s, label=settings.robot_label, x_mm=x, y_mm=y,

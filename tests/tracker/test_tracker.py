@@ -187,7 +187,7 @@ def test_a_stale_backlog_is_dropped_and_counted_not_sent_as_fresh(
         ages = [r.sent_s - r.measured_s for r in robots]
         assert max(ages) < node.settings.bus.max_age_s, max(ages)
         assert not any(20 <= r.x_mm < 160 for r in robots), "nothing of the backlog went out"
-        dropped = node.health().keys[keys.TRACKER_MARKERS.key(service_bus.prefix)].dropped
+        dropped = node.health().keys[keys.TRACKER_ROBOT.key(service_bus.prefix)].dropped
         assert dropped.get("stale") == mocap.stale
     finally:
         node.stop.set()
