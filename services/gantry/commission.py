@@ -13,7 +13,8 @@ the controller's report, sampling counter and velocity come over Modbus. From th
   shift that lays the reported positions onto the camera's;
 * following — from the controller taking a setpoint to the crane following it, on a ramp:
   how long the crane trails the written ramp less half a sampling period (the dead time and
-  the position loop's lag); the gantry's ``reaction_s``;
+  the position loop's lag, and more where the acceleration limit shapes each step); the
+  gantry's ``reaction_s``;
 * top speed and acceleration — from long moves (the reported velocity's plateau; a
   constant-acceleration fit to the camera's positions as the crane sets off).
 """
@@ -96,27 +97,21 @@ def set_off(camera: Series, written_s: float, until_s: float, top_speed_mm_s: fl
     return SetOff(float(-intercept / slope), float(2 * slope ** 2))
 
 
-def lag(follower: Series, leader: Series, *, max_s: float = 1.0, step_s: float = 0.002
-        ) -> float:
-    """The shift τ that best lays ``follower`` onto ``leader`` τ earlier (``follower(t)`` ≈
-    ``leader(t − τ)`` plus a constant), over the leader's time span."""
-    t = follower.t_s
+def report_age(reported: Series, camera: Series, *, max_s: float = 1.0,
+               step_s: float = 0.002) -> float:
+    """The shift τ that best lays ``reported`` (position at publication) onto the camera's
+    position τ earlier; both in the same units, over the camera's time span."""
+    t = reported.t_s
     best, best_cost = 0.0, np.inf
     for tau in np.arange(0.0, max_s, step_s):
-        inside = (t - tau >= leader.t_s[0]) & (t - tau <= leader.t_s[-1])
+        inside = (t - tau >= camera.t_s[0]) & (t - tau <= camera.t_s[-1])
         if inside.sum() < 5:
             continue
-        offset = follower.values[inside] - leader.at(t[inside] - tau)
+        offset = reported.values[inside] - camera.at(t[inside] - tau)
         cost = float(np.var(offset))  # the camera's zero is arbitrary: only the spread counts
         if cost < best_cost:
             best, best_cost = float(tau), cost
     return best
-
-
-def report_age(reported: Series, camera: Series, *, max_s: float = 1.0) -> float:
-    """How old the reported position is when published: the reports (at publication) laid
-    onto the camera's true position."""
-    return lag(reported, camera, max_s=max_s)
 
 
 def ramp_lag(camera: Series, ramp_s: tuple[float, float], start_mm: float, speed_mm_s: float,

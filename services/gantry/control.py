@@ -155,17 +155,14 @@ class Controller:
         assert marker is not None
         expected = self._expected(captured)
         xyz = self._world(marker, crane_xy)
-        if expected is None or self.settings.marker_gate_mm <= 0:
-            if (off_mocap := self._off_mocap(xyz)) is not None:
-                return None, off_mocap
-            self.last_pixel = (marker.u, marker.v)
-            return xyz, None
-        off = float(np.hypot(*(xyz[:2] - expected)))
-        if off > self.settings.marker_gate_mm:  # a reflection? the robot may be elsewhere
+        gate = self.settings.marker_gate_mm
+        if expected is not None and gate > 0 and (
+                off := float(np.hypot(*(xyz[:2] - expected)))) > gate:
+            # a reflection? the robot may be another spot
             others = [(float(np.hypot(*(w[:2] - expected))), m, w) for m in found.markers
                       if m is not marker for w in [self._world(m, crane_xy)]]
             nearest = min(others, key=lambda o: o[0], default=None)
-            if nearest is None or nearest[0] > self.settings.marker_gate_mm:
+            if nearest is None or nearest[0] > gate:
                 return None, off
             _, marker, xyz = nearest
         if (off_mocap := self._off_mocap(xyz)) is not None:
