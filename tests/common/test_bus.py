@@ -241,7 +241,8 @@ def test_backlog_after_a_network_stall_never_reaches_the_handler(
             while not stop.wait(0.02):
                 producer.publish(keys.TRACKER_ROBOT, _robot())
 
-        threading.Thread(target=produce, daemon=True).start()
+        producing = threading.Thread(target=produce, daemon=True)
+        producing.start()
         wait_for(lambda: len(ages) > 10)
         proxy.stall()
         time.sleep(1.5)
@@ -249,6 +250,7 @@ def test_backlog_after_a_network_stall_never_reaches_the_handler(
         proxy.release()
         wait_for(lambda: len(ages) > before + 10, timeout=5)
         stop.set()
+        producing.join(2)  # not publishing while the publisher is undeclared below
         dropped = consumer.key_stats()["stb/tracker/robot"].dropped
         print("after stall:", dropped, f"max age {max(ages):.3f} s")
         # the backlog arrives in a burst: the mailbox supersedes most of it, and whatever is
