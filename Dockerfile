@@ -1,16 +1,36 @@
 # One image for every service; the command chooses which: `stb router`, `stb monitor`, ...
-FROM python:3.11-slim
+#
+#   docker compose build                                    # the official Python base
+#   docker build --build-arg BASE=stb-base:bookworm .       # any Debian with python3.11 + venv
+#
+# BASE is the official image in a lab with a registry; deploy/docker/make-base builds an
+# equivalent offline from Debian's archive. Where outbound HTTPS is intercepted, put the CA
+# bundle that verifies it at deploy/docker/build-ca/ca-certificates.crt (git- and image-free:
+# only the build stage sees it). docs/deployment.md §7.
+ARG BASE=python:3.11-slim
+
+FROM ${BASE} AS build
+COPY deploy/docker/build-ca/ /tmp/build-ca/
+COPY pyproject.toml README.md /src/
+COPY common /src/common
+COPY services /src/services
+RUN if [ -f /tmp/build-ca/ca-certificates.crt ]; then \
+        export PIP_CERT=/tmp/build-ca/ca-certificates.crt; fi \
+ && python3 -m venv /opt/stb \
+ && /opt/stb/bin/pip install --no-cache-dir --disable-pip-version-check /src
+
+FROM ${BASE}
+COPY --from=build /opt/stb /opt/stb
+ENV PATH=/opt/stb/bin:$PATH PYTHONUNBUFFERED=1 NUMBA_CACHE_DIR=/app/numba-cache \
+    MPLCONFIGDIR=/tmp/matplotlib
 WORKDIR /app
-COPY pyproject.toml README.md ./
-COPY common ./common
-COPY services ./services
-# The marker detector's compiled loop is built into the image (from the installed package, not
-# /app's copy: numba's cache is keyed by the source file), so no service compiles at start.
-ENV PYTHONUNBUFFERED=1 NUMBA_CACHE_DIR=/app/numba-cache
-RUN pip install --no-cache-dir . \
- && (cd / && python -c "from common.markers import warm_up; warm_up()") \
+# The marker detector's compiled loop is built into the image (numba's cache is keyed by the
+# installed source file), so no service compiles at start. The folders that compose mounts
+# volumes on (docker-compose.yml) exist here, owned by stb: a new volume takes their owner.
+RUN (cd / && python3 -c "from common.markers import warm_up; warm_up()") \
  && useradd --system --uid 10001 --home-dir /app stb \
- && mkdir -p /app/run && chown -R stb /app/run /app/numba-cache
+ && mkdir -p /app/run/sim /data/calib \
+ && chown -R stb /app/run /data/calib /app/numba-cache
 USER stb
 # A lab file, if any, is named by STB_LAB (see docker-compose.yml).
 ENTRYPOINT ["stb"]
