@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint setup wire-doc clean
+.PHONY: demo test compose-test lint setup wire-doc clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -20,8 +20,13 @@ demo: $(STAMP)
 
 ## Lint, then the full test suite.
 test: $(STAMP)
-	$(BIN)/ruff check common services tests benchmarks
+	$(BIN)/ruff check common services tests benchmarks compose_test
 	$(BIN)/python -m pytest -q
+
+## The lab under a real Docker engine (root; installs Debian's docker.io when missing):
+## build, docker compose up with the sim, crash, router restart, down/up (docs/deployment.md §7).
+compose-test: $(STAMP)
+	$(BIN)/python -m pytest -q -p no:cacheprovider compose_test --timeout 2400
 
 wire-doc: $(STAMP)
 	$(BIN)/python -m common.wiredoc > docs/wire-format.md
