@@ -131,7 +131,7 @@ def reference_follow_mm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[fl
     try:
         meter = FollowMeter(client.bus("monitor"))
         client.operator("arm", timeout_s=90)
-        time.sleep(SETTLE_S)
+        meter.caught_up()
         follow = meter.over(FOLLOW_WINDOW_S)
         figure("stb up: crane-to-robot RMS, mm", str(follow))
         yield follow.rms_mm
@@ -144,5 +144,4 @@ def reference_follow_mm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[fl
             proc.kill()
 
 
-SETTLE_S = 10.0         # after arming, before the error counts (the crane catches up)
 FOLLOW_WINDOW_S = 30.0  # more than one lap of the locomotive's railway (about 24 s)

@@ -35,6 +35,7 @@ ON_THE_BUS = {"tracker": ("tracker", "main"), "ptz-1": ("ptz", "ptz1"),
 REALTIME_SERVICES = ("tracker", "ptz-1", "ptz-2")  # compose gives them ulimits: {rtprio: 10}
 CAMERAS = ("ptz1", "ptz2")
 ROBOT = "locomotive"  # config/compose-sim.toml's scenario (the sim's default)
+CAUGHT_UP_MM = 300.0  # the crane is over the robot: it is well inside the tracking camera's view
 
 
 def project_folder(folder: Path, *, offline_router: bool, raise_limits: bool
@@ -149,6 +150,22 @@ class FollowMeter:
     def _on_state(self, state: m.CraneState) -> None:
         with self._lock:
             self._statuses.append((time.monotonic(), state.status))
+
+    def caught_up(self, within_mm: float = CAUGHT_UP_MM, for_s: float = 2.0,
+                  timeout_s: float = 60.0) -> float:
+        """Seconds until the crane has stayed within ``within_mm`` of the robot for ``for_s``
+        (armed after the robot left the tracking camera's view, the gantry first goes to the
+        motion capture's fix at its reacquire speed: that is not following yet)."""
+        start = time.monotonic()
+        while time.monotonic() - start < timeout_s:
+            now = time.monotonic()
+            with self._lock:
+                recent = [e for at, e in self._errors if at >= now - for_s]
+            if now - start >= for_s and len(recent) > 10 * for_s and max(recent) <= within_mm:
+                return now - start
+            time.sleep(0.2)
+        raise AssertionError(f"the crane did not come within {within_mm:.0f} mm of the robot "
+                             f"in {timeout_s:.0f} s")
 
     def over(self, seconds: float) -> Follow:
         """How the crane follows over the next ``seconds``."""
