@@ -57,6 +57,9 @@ TOOLS: dict[str, ServiceInfo] = {
     "experiment": ServiceInfo("the paper's gantry experiments on a simulated clock: "
                               "stb experiment gantry --scenario walker | identify", "",
                               "services.experiment.cli"),
+    "deploy": ServiceInfo("the router's access control and the compose services from the lab "
+                          "file: stb deploy render --lab FILE [--check]", "",
+                          "services.deploy.cli"),
     "detect": ServiceInfo("find markers in image files (paper §2.1): stb detect IMAGE --json",
                           "", "services.detect_cli"),
 }

@@ -3,9 +3,14 @@
 from __future__ import annotations
 
 import subprocess
+import time
+from collections.abc import Callable
 from pathlib import Path
 
+import zenoh
+
 from common.settings import TlsSettings, ZenohSettings
+from tests.conftest import wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 ROUTER_CONFIG = ROOT / "deploy" / "zenoh" / "router.json5"
@@ -36,3 +41,28 @@ def identity_env(secrets: Path, user: str, endpoint: str) -> dict[str, str]:
     return {"STB_BUS__ZENOH__CONNECT": f'["{endpoint}"]', "STB_BUS__ZENOH__USER": user,
             "STB_BUS__ZENOH__PASSWORD_FILE": str(secrets / f"{user}.password"),
             "STB_BUS__ZENOH__TLS__ROOT_CA_CERTIFICATE": str(secrets / "ca.pem")}
+
+
+def _collect(session: zenoh.Session, key_expr: str) -> tuple[list, object]:
+    got: list[tuple[str, bytes]] = []
+    sub = session.declare_subscriber(
+        key_expr, lambda s: got.append((str(s.key_expr), s.payload.to_bytes())))
+    return got, sub
+
+
+def only_allowed_arrive(session: Callable[[str], zenoh.Session],
+                        puts: list[tuple[str, str, bytes]], allowed: set[bytes]) -> None:
+    """Each (account, key, payload) put three times; what arrives at a reader is exactly the
+    ``allowed`` payloads (any account may read). ``session(account)``: a session as it."""
+    sessions = {account: session(account) for account, _, _ in puts}
+    got, _sub = _collect(session("tracker"), "stb/**")
+    time.sleep(0.5)
+    for _ in range(3):
+        for account, key, payload in puts:
+            sessions[account].put(key, payload)
+        time.sleep(0.05)
+    wait_for(lambda: {p for _, p in got} >= allowed)
+    time.sleep(0.5)  # what is denied would have arrived by now
+    payloads = {p for _, p in got}
+    for _, _, denied in puts:
+        assert denied in allowed or denied not in payloads, denied

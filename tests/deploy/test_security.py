@@ -11,7 +11,13 @@ import pytest
 import zenoh
 
 from tests.conftest import open_when_up, stb_process, wait_for
-from tests.deploy.lab_secrets import ROUTER_CONFIG, identity, identity_env, make_secrets
+from tests.deploy.lab_secrets import (
+    ROUTER_CONFIG,
+    identity,
+    identity_env,
+    make_secrets,
+    only_allowed_arrive,
+)
 from tests.ports import free_port
 
 
@@ -65,33 +71,8 @@ def test_plain_tcp_is_not_accepted(lab: dict) -> None:
     assert refused.returncode != 0 and "cannot open" in refused.stderr
 
 
-def _collect(session: zenoh.Session, key_expr: str) -> tuple[list, object]:
-    got: list[tuple[str, bytes]] = []
-    sub = session.declare_subscriber(
-        key_expr, lambda s: got.append((str(s.key_expr), s.payload.to_bytes())))
-    return got, sub
-
-
-def _only_allowed_arrive(lab: dict, puts: list[tuple[str, str, bytes]], allowed: set[bytes]
-                         ) -> None:
-    """Each (account, key, payload) put three times; what arrives at a reader is exactly the
-    ``allowed`` payloads (any account may read)."""
-    sessions = {account: lab["session"](account) for account, _, _ in puts}
-    got, _sub = _collect(lab["session"]("tracker"), "stb/**")
-    time.sleep(0.5)
-    for _ in range(3):
-        for account, key, payload in puts:
-            sessions[account].put(key, payload)
-        time.sleep(0.05)
-    wait_for(lambda: {p for _, p in got} >= allowed)
-    time.sleep(0.5)  # what is denied would have arrived by now
-    payloads = {p for _, p in got}
-    for _, _, denied in puts:
-        assert denied in allowed or denied not in payloads, denied
-
-
 def test_only_the_gantry_puts_setpoints_and_only_a_ptz_its_own_camera(lab: dict) -> None:
-    _only_allowed_arrive(lab, [
+    only_allowed_arrive(lab["session"], [
         ("gantry", "stb/gantry/setpoint", b"from gantry"),
         ("monitor", "stb/gantry/setpoint", b"from monitor"),
         ("calib", "stb/gantry/setpoint", b"from calib"),
@@ -108,7 +89,7 @@ def test_only_the_gantry_puts_setpoints_and_only_a_ptz_its_own_camera(lab: dict)
 
 
 def test_only_operators_and_the_web_page_command_the_gantry(lab: dict) -> None:
-    _only_allowed_arrive(lab, [
+    only_allowed_arrive(lab["session"], [
         ("operator", "stb/gantry/command", b"operator arms"),
         ("web", "stb/gantry/command", b"web page stops"),
         ("monitor", "stb/gantry/command", b"monitor arms"),
