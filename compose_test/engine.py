@@ -142,12 +142,14 @@ class Engine:
                **env: str) -> subprocess.CompletedProcess:
         return self._run(["docker", *args], check=check, timeout=timeout, env=env)
 
-    def compose(self, project: Path, files: list[str], *args: str, check: bool = True,
-                timeout: float = 300.0, **env: str) -> subprocess.CompletedProcess:
-        cmd = [str(COMPOSE), "--project-directory", str(project), "-p", "stb-compose-test"]
+    def compose(self, folder: Path, files: list[str], *args: str, check: bool = True,
+                timeout: float = 300.0, project: str = "stb-compose-test",
+                **env: str) -> subprocess.CompletedProcess:
+        """``docker compose -p PROJECT -f FILE... ARGS`` in the lab's ``folder``."""
+        cmd = [str(COMPOSE), "--project-directory", str(folder), "-p", project]
         for name in files:
-            cmd += ["-f", str(project / name)]
-        return self._run([*cmd, *args], check=check, timeout=timeout, env=env, cwd=project)
+            cmd += ["-f", str(folder / name)]
+        return self._run([*cmd, *args], check=check, timeout=timeout, env=env, cwd=folder)
 
     def _run(self, cmd: list[str], *, check: bool, timeout: float, env: dict[str, str],
              cwd: Path | None = None) -> subprocess.CompletedProcess:

@@ -15,22 +15,20 @@ import pytest
 from common import keys
 from common import messages as m
 from compose_test.conftest import FOLLOW_WINDOW_S, figure
-from compose_test.lab import CAMERAS, ON_THE_BUS, FollowMeter, Watch, container, up
-
-# Bounds, from our runs on 2 cores (docs/deployment.md §7 has the figures): every service
-# alive 9-12 s after `up -d` (the first start of a container; the imports of a service take
-# 2-4 s with all of them starting at once), healthy once both cameras are calibrated (the wand
-# phase: 35-45 s); a killed service back in 3-5 s; all of them heard again 6-10 s after the
-# router was restarted (their Zenoh clients retry every second or so).
-ALIVE_BOUND_S = 60.0
-HEALTHY_BOUND_S = 150.0
-RESTART_BOUND_S = 30.0
-RESUME_BOUND_S = 45.0
-# The crane's RMS distance to the robot under compose against stb up's on the host, measured in
-# the same run once the crane is over the robot: the same code and scenario, so the same up to
-# the spread of 30 s windows (stb up 44.9-45.3 mm, compose 45.2-47.1 mm in our runs) and the
-# containers' and TLS's share of two cores.
-FOLLOW_FACTOR, FOLLOW_SLACK_MM = 1.25, 15.0
+from compose_test.lab import (
+    ALIVE_BOUND_S,
+    CAMERAS,
+    HEALTHY_BOUND_S,
+    ON_THE_BUS,
+    RESTART_BOUND_S,
+    RESUME_BOUND_S,
+    FollowMeter,
+    Watch,
+    container,
+    follow_bound_mm,
+    up,
+    wait_until,
+)
 
 
 def _expected(lab: dict) -> list[tuple[str, str]]:
@@ -42,21 +40,12 @@ def watch(lab: dict) -> Watch:
     return Watch(lab["client"].bus("monitor"))
 
 
-def _wait(predicate, bound_s: float, what: str) -> float:  # type: ignore[no-untyped-def]
-    started = time.monotonic()
-    while time.monotonic() - started < bound_s:
-        if predicate():
-            return time.monotonic() - started
-        time.sleep(0.2)
-    pytest.fail(f"{what}: not within {bound_s:.0f} s")
-
-
 def test_every_service_is_alive_and_healthy_on_the_bus(lab: dict, watch: Watch) -> None:
     expected = _expected(lab)
-    _wait(lambda: all(watch.alive(who) for who in expected), ALIVE_BOUND_S,
+    wait_until(lambda: all(watch.alive(who) for who in expected), ALIVE_BOUND_S,
           f"every service alive ({expected})")
     figure("up -d -> every service alive on the bus, s", round(time.monotonic() - lab["up_at"], 1))
-    _wait(lambda: watch.ok_since(0.0, expected), HEALTHY_BOUND_S,
+    wait_until(lambda: watch.ok_since(0.0, expected), HEALTHY_BOUND_S,
           "every service healthy: " + ", ".join(
               f"{s}/{i} {h.status if (h := watch.latest((s, i))) else 'unheard'}"
               f"{' (' + h.detail + ')' if h and h.detail else ''}" for s, i in expected))
@@ -79,7 +68,7 @@ def test_the_cameras_are_calibrated_and_the_crane_follows_the_robot(
     figure("armed -> crane over the robot, s", round(meter.caught_up(), 1))
     follow = meter.over(FOLLOW_WINDOW_S)
     figure("compose: crane-to-robot RMS, mm", str(follow))
-    bound = max(FOLLOW_FACTOR * reference_follow_mm, reference_follow_mm + FOLLOW_SLACK_MM)
+    bound = follow_bound_mm(reference_follow_mm)
     assert follow.rms_mm <= bound, (f"the crane is {follow} mm from the robot under compose; "
                                     f"stb up: {reference_follow_mm:.0f} mm")
     lab["follow_bound_mm"] = bound
@@ -96,12 +85,12 @@ def test_a_crashed_gantry_is_restarted_by_the_engine_disarmed_with_the_fault_lat
     bus.subscribe(keys.GANTRY_STATE, states.append, latest=False)
     killed_at = time.monotonic()
     os.kill(engine.container_pid(gantry), signal.SIGKILL)  # a crash: `docker kill` would
-    back_s = _wait(                                        # disable the restart policy
+    back_s = wait_until(                                        # disable the restart policy
         lambda: (h := watch.latest(("gantry", "main"), killed_at)) is not None
         and h.started_s != before.started_s, RESTART_BOUND_S, "the killed gantry back")
     figure("SIGKILL gantry -> restarted, on the bus again, s", round(back_s, 1))
     assert engine.container_starts(gantry)[1] == restarts + 1
-    _wait(lambda: any(s.measured_s > before.started_s + 1 and s.mode == "disarmed"
+    wait_until(lambda: any(s.measured_s > before.started_s + 1 and s.mode == "disarmed"
                       for s in states[-20:]), 10, "the restarted gantry's state")
     assert all(s.mode == "disarmed" for s in states[-5:]), "a restarted gantry arms itself"
     # The crash stopped the crane's watchdog heartbeat: the controller latched the fault, and
@@ -120,7 +109,7 @@ def test_every_service_resumes_after_the_router_restarts(lab: dict, watch: Watch
     engine.compose(lab["folder"], lab["files"], "--profile", "sim", "restart", "-t", "5",
                    "router")
     back_at = time.monotonic()
-    resumed_s = _wait(lambda: all(watch.latest(who, back_at) for who in ON_THE_BUS.values()),
+    resumed_s = wait_until(lambda: all(watch.latest(who, back_at) for who in ON_THE_BUS.values()),
                       RESUME_BOUND_S, "every service heard again")
     figure("compose restart router -> every service heard again, s",
            round(back_at - restarted_at + resumed_s, 1))
@@ -160,7 +149,7 @@ def test_the_calibration_survives_down_and_up(lab: dict, watch: Watch) -> None:
     engine.compose(folder, files, "--profile", "sim", "down", "-t", "5")
     assert "calib-data" in engine.docker("volume", "ls", "--format", "{{.Name}}").stdout
     started = up(engine, folder, files)
-    _wait(lambda: watch.ok_since(started, [("calib", "main")]), HEALTHY_BOUND_S,
+    wait_until(lambda: watch.ok_since(started, [("calib", "main")]), HEALTHY_BOUND_S,
                  "calib healthy again")
     figure("down, up -d -> calib healthy with its stored poses, s",
            round(time.monotonic() - started, 1))

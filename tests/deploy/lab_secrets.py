@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import subprocess
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import zenoh
 
 from common.settings import TlsSettings, ZenohSettings
-from tests.conftest import wait_for
+from tests.conftest import open_when_up, stb_process, wait_for
+from tests.ports import free_port
 
 ROOT = Path(__file__).resolve().parents[2]
 ROUTER_CONFIG = ROOT / "deploy" / "zenoh" / "router.json5"
@@ -26,6 +28,30 @@ def make_secrets(workdir: Path, *hosts: str) -> Path:
         args += ["--host", host]
     subprocess.run(args, check=True, capture_output=True, text=True, timeout=60)
     return secrets
+
+
+@contextmanager
+def secured_router(config: Path, workdir: Path, secrets: Path
+                   ) -> Iterator[tuple[str, Callable[[str], zenoh.Session]]]:
+    """``stb router --config CONFIG`` on a free loopback port, run from ``workdir`` (the
+    config names its files relative to it): its endpoint, and ``session(user)`` opening a
+    session as a lab identity (closed with the router)."""
+    endpoint = f"tls/localhost:{free_port()}"
+    router = stb_process("router", "--config", str(config), "--listen",
+                         endpoint.replace("localhost", "127.0.0.1"), cwd=workdir)
+    sessions: list[zenoh.Session] = []
+
+    def session(user: str) -> zenoh.Session:
+        sessions.append(open_when_up(identity(secrets, user, endpoint)))
+        return sessions[-1]
+
+    try:
+        yield endpoint, session
+    finally:
+        for s in sessions:
+            s.close()
+        router.terminate()
+        router.wait(timeout=10)
 
 
 def identity(secrets: Path, user: str, endpoint: str, **changes: object) -> ZenohSettings:

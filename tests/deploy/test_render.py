@@ -10,13 +10,11 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-import zenoh
 
 from services.deploy.cli import main as deploy
-from tests.conftest import ROOT, open_when_up, stb_process
-from tests.deploy.lab_secrets import identity, only_allowed_arrive
+from tests.conftest import ROOT
+from tests.deploy.lab_secrets import only_allowed_arrive, secured_router
 from tests.deploy.test_compose import COMPOSE
-from tests.ports import free_port
 
 EXAMPLE_LAB = ROOT / "config" / "lab.example.toml"
 
@@ -60,23 +58,9 @@ def rendered(tmp_path: Path) -> Iterator[dict]:
     made = subprocess.run([str(tmp_path / "deploy" / "zenoh" / "make-secrets")],
                           capture_output=True, text=True, timeout=60, check=True)
     assert "ptz3" in made.stdout.splitlines()[-1]  # users.txt lists: ... ptz3 ...
-    endpoint = f"tls/localhost:{free_port()}"
-    router = stb_process("router", "--config", str(tmp_path / "deploy/zenoh/router.json5"),
-                         "--listen", endpoint.replace("localhost", "127.0.0.1"), cwd=tmp_path)
-    sessions: list[zenoh.Session] = []
-
-    def session(user: str) -> zenoh.Session:
-        sessions.append(open_when_up(identity(tmp_path / "deploy/zenoh/secrets", user,
-                                              endpoint)))
-        return sessions[-1]
-
-    try:
+    with secured_router(tmp_path / "deploy/zenoh/router.json5", tmp_path,
+                        tmp_path / "deploy/zenoh/secrets") as (_, session):
         yield {"folder": tmp_path, "session": session}
-    finally:
-        for s in sessions:
-            s.close()
-        router.terminate()
-        router.wait(timeout=10)
 
 
 def test_a_camera_added_to_the_lab_file_writes_only_its_own_keys(rendered: dict) -> None:

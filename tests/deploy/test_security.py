@@ -8,39 +8,23 @@ import time
 from collections.abc import Iterator
 
 import pytest
-import zenoh
 
-from tests.conftest import open_when_up, stb_process, wait_for
+from tests.conftest import stb_process, wait_for
 from tests.deploy.lab_secrets import (
     ROUTER_CONFIG,
-    identity,
     identity_env,
     make_secrets,
     only_allowed_arrive,
+    secured_router,
 )
-from tests.ports import free_port
 
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
     workdir = tmp_path_factory.mktemp("lab")
     secrets = make_secrets(workdir)
-    endpoint = f"tls/localhost:{free_port()}"
-    router = stb_process("router", "--config", str(ROUTER_CONFIG), "--listen",
-                         endpoint.replace("localhost", "127.0.0.1"), cwd=workdir)
-    sessions: list[zenoh.Session] = []
-
-    def session(user: str) -> zenoh.Session:
-        sessions.append(open_when_up(identity(secrets, user, endpoint)))
-        return sessions[-1]
-
-    try:
+    with secured_router(ROUTER_CONFIG, workdir, secrets) as (endpoint, session):
         yield {"secrets": secrets, "endpoint": endpoint, "session": session}
-    finally:
-        for s in sessions:
-            s.close()
-        router.terminate()
-        router.wait(timeout=10)
 
 
 def _monitor(env: dict[str, str]) -> subprocess.CompletedProcess:

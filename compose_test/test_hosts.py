@@ -1,0 +1,101 @@
+"""The lab split over three "hosts" as a lab would run it: one compose project per host (the
+router PC with the sim, the tracker, calib and the page; a camera host with both PTZ services;
+the gantry PC), all from the same docker-compose.yml, joined only by one network — the lab's
+LAN — and the containerised, secured router."""
+
+from __future__ import annotations
+
+import subprocess
+import tempfile
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from compose_test.conftest import FOLLOW_WINDOW_S, figure
+from compose_test.engine import Engine, may_raise_limits
+from compose_test.lab import (
+    HEALTHY_BOUND_S,
+    ON_THE_BUS,
+    Client,
+    FollowMeter,
+    Watch,
+    follow_bound_mm,
+    project_folder,
+    up,
+    wait_until,
+)
+
+HOSTS = {"router-pc": ["router", "sim", "tracker", "calib", "web"],
+         "camera-pc": ["ptz-1", "ptz-2"],
+         "gantry-pc": ["gantry"]}
+LAN = "stb-compose-lan"
+# On one engine the sim's crater reaches the gantry PC through a shared volume; on real hosts
+# the gantry PC has its own copy (its lab file's [gantry] height_map).
+CRATER_VOLUME = "stb-compose-lan-sim-data"
+
+
+def _project(host: str) -> str:
+    return f"stb-{host}"
+
+
+@pytest.fixture(scope="module")
+def hosts(engine: Engine, images: dict, reference_follow_mm: float) -> Iterator[dict]:
+    folder = Path(tempfile.mkdtemp(prefix="stb-hosts-"))
+    files, ports = project_folder(folder, offline_router=bool(images["offline_router"]),
+                                  raise_limits=may_raise_limits())
+    (folder / "compose.lan.yml").write_text(f"""# every project on the one network, the LAN
+networks:
+  default:
+    name: {LAN}
+    external: true
+volumes:
+  sim-data:
+    name: {CRATER_VOLUME}
+""")
+    files.append("compose.lan.yml")
+    client = Client(f"tls/localhost:{ports['router']}", folder / "deploy" / "zenoh" / "secrets")
+    engine.docker("network", "create", LAN)
+    try:
+        started = time.monotonic()
+        for host, services in HOSTS.items():
+            up(engine, folder, files, *services, project=_project(host))
+        yield {"engine": engine, "folder": folder, "files": files, "client": client,
+               "up_at": started, "reference_mm": reference_follow_mm}
+    finally:
+        client.close()
+        for host in reversed(HOSTS):
+            engine.compose(folder, files, "--profile", "sim", "down", "-v", "-t", "5",
+                           project=_project(host), check=False, timeout=180)
+        engine.docker("volume", "rm", "-f", CRATER_VOLUME, check=False)
+        engine.docker("network", "rm", LAN, check=False)
+        subprocess.run(["rm", "-rf", str(folder)], check=False, timeout=60)
+
+
+def test_each_host_runs_only_its_own_services_on_the_lan(hosts: dict) -> None:
+    engine = hosts["engine"]
+    for host, services in HOSTS.items():
+        running = engine.compose(hosts["folder"], hosts["files"], "ps", "--services",
+                                 "--status", "running", project=_project(host)).stdout.split()
+        assert sorted(running) == sorted(services), host
+        for service in services:
+            networks = engine.docker("inspect", "-f", "{{range $k, $v := .NetworkSettings."
+                                     "Networks}}{{$k}} {{end}}",
+                                     f"{_project(host)}-{service}-1").stdout.split()
+            assert networks == [LAN], (host, service, networks)
+
+
+def test_across_hosts_every_service_is_healthy_and_the_crane_follows(hosts: dict) -> None:
+    client = hosts["client"]
+    watch = Watch(client.bus("monitor"))
+    expected = list(ON_THE_BUS.values())
+    wait_until(lambda: watch.ok_since(0.0, expected), HEALTHY_BOUND_S,
+               "every service healthy across the hosts")
+    figure("3 hosts: up -> every service healthy, s", round(time.monotonic() - hosts["up_at"], 1))
+    meter = FollowMeter(client.bus("monitor"))
+    client.operator("arm")
+    meter.caught_up()
+    follow = meter.over(FOLLOW_WINDOW_S / 2)
+    figure("3 hosts: crane-to-robot RMS, mm", str(follow))
+    assert follow.rms_mm <= follow_bound_mm(hosts["reference_mm"]), str(follow)
