@@ -68,16 +68,17 @@ def wait_until(predicate: Callable[[], object], bound_s: float, what: str) -> fl
     pytest.fail(f"{what}: not within {bound_s:.0f} s")
 
 
-def project_folder(folder: Path, *, offline_router: bool, raise_limits: bool
-                   ) -> tuple[list[str], dict[str, int]]:
+def project_folder(folder: Path, *, offline_router: bool, raise_limits: bool,
+                   router_names: tuple[str, ...] = ()) -> tuple[list[str], dict[str, int]]:
     """Lay out what a lab's checkout has (docker-compose.yml, config/, the router config,
-    secrets from make-secrets) plus this test's override: loopback-only, free host ports.
+    secrets from make-secrets, the router's certificate naming ``router_names`` too) plus this
+    test's override: loopback-only, free host ports.
     Returns the compose files to use, in order, and the host ports."""
     shutil.copy(ROOT / "docker-compose.yml", folder)
     shutil.copytree(ROOT / "config", folder / "config")
     (folder / "deploy" / "zenoh").mkdir(parents=True)
     shutil.copy(ROOT / "deploy" / "zenoh" / "router.json5", folder / "deploy" / "zenoh")
-    make_secrets(folder)
+    make_secrets(folder, *router_names)
     files = ["docker-compose.yml"]
     if offline_router:
         shutil.copy(ROOT / "deploy" / "docker" / "compose.offline.yml", folder)
@@ -263,11 +264,11 @@ def container(service: str) -> str:
 
 
 def up(engine: Engine, folder: Path, files: list[str], *services: str,
-       project: str = PROJECT) -> float:
-    """``docker compose --profile sim up -d [--no-deps SERVICE...]`` with the sim's lab file;
-    its monotonic start."""
+       project: str = PROJECT, router: str = "router") -> float:
+    """``docker compose --profile sim up -d [--no-deps SERVICE...]`` with the sim's lab file,
+    the services connecting to ``router`` (STB_ROUTER); its monotonic start."""
     started = time.monotonic()
     only = ["--no-deps", *services] if services else []
     engine.compose(folder, files, "--profile", "sim", "up", "-d", "--no-build", *only,
-                   project=project, STB_LAB_FILE=LAB_FILE_IN_CONTAINERS)
+                   project=project, STB_LAB_FILE=LAB_FILE_IN_CONTAINERS, STB_ROUTER=router)
     return started

@@ -34,6 +34,7 @@ LAN = "stb-compose-lan"
 # On one engine the sim's crater reaches the gantry PC through a shared volume; on real hosts
 # the gantry PC has its own copy (its lab file's [gantry] height_map).
 CRATER_VOLUME = "stb-compose-lan-sim-data"
+ROUTER_HOST = "stb-router-pc-router-1"  # the router PC's router container, by its name on the LAN
 
 
 def _project(host: str) -> str:
@@ -44,7 +45,7 @@ def _project(host: str) -> str:
 def hosts(engine: Engine, images: dict, reference_follow_mm: float) -> Iterator[dict]:
     folder = Path(tempfile.mkdtemp(prefix="stb-hosts-"))
     files, ports = project_folder(folder, offline_router=bool(images["offline_router"]),
-                                  raise_limits=may_raise_limits())
+                                  raise_limits=may_raise_limits(), router_names=(ROUTER_HOST,))
     (folder / "compose.lan.yml").write_text(f"""# every project on the one network, the LAN
 networks:
   default:
@@ -59,8 +60,9 @@ volumes:
     engine.docker("network", "create", LAN)
     try:
         started = time.monotonic()
-        for host, services in HOSTS.items():
-            up(engine, folder, files, *services, project=_project(host))
+        for host, services in HOSTS.items():  # the others name the router PC's router
+            up(engine, folder, files, *services, project=_project(host),
+               router="router" if host == "router-pc" else ROUTER_HOST)
         yield {"engine": engine, "folder": folder, "files": files, "client": client,
                "up_at": started, "reference_mm": reference_follow_mm}
     finally:
@@ -84,6 +86,9 @@ def test_each_host_runs_only_its_own_services_on_the_lan(hosts: dict) -> None:
                                      "Networks}}{{$k}} {{end}}",
                                      f"{_project(host)}-{service}-1").stdout.split()
             assert networks == [LAN], (host, service, networks)
+    env = engine.docker("inspect", "-f", "{{range .Config.Env}}{{println .}}{{end}}",
+                        f"{_project('gantry-pc')}-gantry-1").stdout.splitlines()
+    assert f'STB_BUS__ZENOH__CONNECT=["tls/{ROUTER_HOST}:7447"]' in env
 
 
 def test_across_hosts_every_service_is_healthy_and_the_crane_follows(hosts: dict) -> None:

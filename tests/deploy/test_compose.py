@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.metadata
 import json
+import os
 import subprocess
 from pathlib import Path
 
@@ -20,14 +21,15 @@ def _config(path: Path, *args: str) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=60)
 
 
-def _config_with_sim(*args: str) -> subprocess.CompletedProcess:
+def _config_with_sim(*args: str, **env: str) -> subprocess.CompletedProcess:
+    environ = {k: v for k, v in os.environ.items() if k != "STB_ROUTER"}
     return subprocess.run([str(COMPOSE), "-f", str(ROOT / "docker-compose.yml"), "--profile",
                            "sim", "--profile", "camera", "config", *args], cwd=ROOT,
-                          capture_output=True, text=True, timeout=60)
+                          capture_output=True, text=True, timeout=60, env={**environ, **env})
 
 
-def _services() -> dict:
-    result = _config_with_sim("--format", "json")
+def _services(**env: str) -> dict:
+    result = _config_with_sim("--format", "json", **env)
     assert result.returncode == 0, result.stderr
     return json.loads(result.stdout)["services"]
 
@@ -40,6 +42,13 @@ def test_compose_file_is_valid_and_every_service_restarts() -> None:
     assert services["camera"]["profiles"] == ["camera"], "a camera only where there is one"
     for name, service in services.items():
         assert service["restart"] == "unless-stopped", name
+
+
+def test_on_another_host_the_services_connect_to_the_router_named_by_stb_router() -> None:
+    services = _services(STB_ROUTER="gantry-pc.lab")
+    for name in ("gantry", "tracker", "ptz-1"):
+        connect = services[name]["environment"]["STB_BUS__ZENOH__CONNECT"]
+        assert json.loads(connect) == ["tls/gantry-pc.lab:7447"], name
 
 
 def test_the_router_is_upstream_zenoh_at_the_python_package_version() -> None:
