@@ -107,6 +107,11 @@ class PtzState(Message):
     aim_error_deg: float = Field(
         ge=0, description="angle between the optical axis and the robot; 0 if not tracking"
     )
+    pointing_error_deg: float | None = Field(
+        None, ge=0, description="measured in the latest preview: from where the pose puts the "
+        "robot marker to the nearest marker found; None: not judged or no marker seen")
+    pointing_problem: str = Field("", max_length=300, description="why the pointing is not to "
+                                  "be trusted (previews disagreeing in a row); empty: fine")
 
 
 # --- calibration --------------------------------------------------------------------------------

@@ -39,6 +39,11 @@ def _within(msg: m.CalibrationMode, limits: Limits) -> m.CalibrationMode:
         "zoom": None if msg.zoom is None else int(zoom)})
 
 
+# The preview thread's infrared snapshot (the pointing check) sets the filter back to auto: if
+# that crossed the entry into this mode, the filter is set off again within this many seconds.
+REASSERT_INFRARED_S = 1.0
+
+
 @dataclass
 class CalibrationMode:
     camera: PtzCamera
@@ -49,6 +54,7 @@ class CalibrationMode:
     expires_at: float = 0.0
     _last_position: tuple[float, float, int] | None = None
     _seq: int = 0
+    _infrared_asserted: float = 0.0  # monotonic time the IR-cut filter was last set off
 
     def active(self, now: float) -> bool:
         return self.request is not None and now < self.expires_at
@@ -68,7 +74,7 @@ class CalibrationMode:
             log.info("%s: calibration mode (pan %s, tilt %s, zoom %s)", self.camera.name,
                      msg.pan_deg, msg.tilt_deg, msg.zoom)
             self._last_position = None
-            self.camera.set_ir_cut_filter("off")
+            self._infrared()
             if msg.pan_deg is not None or msg.tilt_deg is not None or msg.zoom is not None:
                 self.camera.move_to(msg.pan_deg, msg.tilt_deg, msg.zoom)
 
@@ -82,6 +88,10 @@ class CalibrationMode:
                 and (r.tilt_deg is None or abs(tilt - r.tilt_deg) < AT_TARGET_DEG)
                 and (r.zoom is None or zoom == r.zoom))
 
+    def _infrared(self) -> None:
+        self.camera.set_ir_cut_filter("off")
+        self._infrared_asserted = time.monotonic()
+
     def leave(self) -> None:
         log.info("%s: calibration mode ends", self.camera.name)
         self.request = None
@@ -90,6 +100,8 @@ class CalibrationMode:
     def cycle(self) -> None:
         """One snapshot: detect, publish the image and — if the camera stood still — the
         detections. Camera errors propagate (PtzError)."""
+        if time.monotonic() - self._infrared_asserted > REASSERT_INFRARED_S:
+            self._infrared()
         captured = time.time()
         jpeg = self.camera.snapshot_jpeg()
         position = self.camera.position()

@@ -44,10 +44,17 @@ class PreviewLoop:
     """Takes a preview every ``period_s`` unless ``paused()`` (calibration mode owns the
     camera then); camera errors are logged once per outage and retried next period."""
 
-    def __init__(self, camera: PtzCamera, period_s: float, publish: Callable[[m.PtzPreview], None],
+    def __init__(self, camera: PtzCamera, period_s: float,
+                 publish: Callable[[m.PtzPreview, float, bool], None],
                  mount: Callable[[], Pose | None], robot: Callable[[], m.RobotPosition | None],
-                 paused: Callable[[], bool], stop: threading.Event) -> None:
+                 paused: Callable[[], bool], stop: threading.Event,
+                 infrared_every_s: float = 0.0) -> None:
+        """``publish(preview, focal_mm, infrared)``: the preview, the focal length it was taken
+        at, and whether the IR-cut filter was off for it (the markers bright). Every
+        ``infrared_every_s`` (0: never) a preview is taken with the filter off, for the
+        pointing check, and the filter is set back to auto right after."""
         self.camera, self.period_s, self.publish = camera, period_s, publish
+        self.infrared_every_s, self._infrared_due = infrared_every_s, 0.0
         self.mount, self.robot, self.paused, self.stop = mount, robot, paused, stop
         self._seq = 0
         self._failing = False
@@ -65,7 +72,7 @@ class PreviewLoop:
             if self.paused():
                 continue
             try:
-                self.publish(self.take())
+                self.publish(*self._take_maybe_in_infrared())
                 if self._failing:
                     log.info("%s: previews again", self.camera.name)
                 self._failing = False
@@ -74,7 +81,19 @@ class PreviewLoop:
                     log.warning("%s: no preview: %s", self.camera.name, err)
                 self._failing = True
 
-    def take(self) -> m.PtzPreview:
+    def _take_maybe_in_infrared(self) -> tuple[m.PtzPreview, float, bool]:
+        now = time.monotonic()
+        if self.infrared_every_s <= 0 or now < self._infrared_due:
+            return *self.take(), False
+        self._infrared_due = now + self.infrared_every_s
+        self.camera.set_ir_cut_filter("off")
+        try:
+            return *self.take(), True
+        finally:
+            if not self.paused():  # calibration mode keeps the filter off (it says so again)
+                self.camera.set_ir_cut_filter("auto")
+
+    def take(self) -> tuple[m.PtzPreview, float]:
         captured = time.time()
         jpeg = self.camera.snapshot_jpeg()
         position = self.camera.position()
@@ -83,10 +102,11 @@ class PreviewLoop:
         found = to_message(detect(image, max_markers=8), self.camera.name, captured, width,
                            height)
         self._seq += 1
+        focal_mm = focal_mm_for_zoom(position.zoom)
         return m.PtzPreview(
             measured_s=captured, camera=self.camera.name, seq=self._seq, width_px=width,
             height_px=height, jpeg=jpeg, pan_deg=min(max(position.pan_deg, -180.0), 180.0),
             tilt_deg=min(max(position.tilt_deg, -90.0), 90.0), markers=found.markers,
             robot_px=robot_pixel(self.mount(), self.robot(), position.pan_deg,
-                                 position.tilt_deg, focal_mm_for_zoom(position.zoom), width,
-                                 height, captured))
+                                 position.tilt_deg, focal_mm, width, height, captured)
+        ), focal_mm

@@ -3,7 +3,8 @@
 Subscribes: stb/tracker/robot (RobotPosition), stb/calib/{camera}/pose (CameraPose; also
             queried at start for a pose published before this service ran)
             stb/ptz/{camera}/calibration (CalibrationMode: hold still and detect, with a lease)
-Publishes:  stb/ptz/{camera}/state (PtzState: pan, tilt, zoom, status, aim error), state_hz
+Publishes:  stb/ptz/{camera}/state (PtzState: pan, tilt, zoom, status, aim error, and the
+            pointing check's measured error from the previews), state_hz
             in calibration mode: stb/ptz/{camera}/detections and .../snapshot per snapshot
             otherwise stb/ptz/{camera}/preview (PtzPreview), preview_hz, for people to look at
 Drives:     the camera over VAPIX (pan/tilt/zoom), at most command_hz, with a dead band
@@ -26,6 +27,7 @@ from services.ptz.aim import Limits, aim_error_deg
 from services.ptz.calibration import CalibrationMode
 from services.ptz.camera import AxisPtzCamera, PtzCamera, PtzError, http_client
 from services.ptz.follow import Follower
+from services.ptz.pointing import NOT_SEEN, PointingCheck
 from services.ptz.preview import PreviewLoop
 from services.ptz.settings import PtzSettings
 
@@ -58,9 +60,10 @@ def run(node: Node, camera: PtzCamera | None = None) -> None:
     if settings.preview_hz > 0:
         preview = PreviewLoop(
             make_camera(settings), 1 / settings.preview_hz,  # its own client: never in the way
-            lambda msg: node.bus.publish(keys.PTZ_PREVIEW, msg, camera=name),
+            loop.on_preview,
             mount=lambda: _pose(loop.pose), robot=lambda: loop.robot,
-            paused=lambda: loop.calibration.active(time.time()), stop=node.stop)
+            paused=lambda: loop.calibration.active(time.time()), stop=node.stop,
+            infrared_every_s=settings.pointing_infrared_s)
         preview.start()
     try:
         loop.run()
@@ -94,6 +97,13 @@ class _Loop:
             lambda msg: node.bus.publish(keys.PTZ_SNAPSHOT, msg, camera=name),
             max_markers=settings.calibration_max_markers)
         self.state_due = 0.0
+        self.pointing = PointingCheck(settings.pointing_tolerance_deg, settings.pointing_persist)
+
+    def on_preview(self, preview: m.PtzPreview, focal_mm: float, infrared: bool) -> None:
+        """Publish it, and judge from it how well the camera points (services/ptz/pointing)."""
+        self.node.bus.publish(keys.PTZ_PREVIEW, preview, camera=self.settings.instance)
+        with self.lock:
+            self.pointing.observe(preview, focal_mm, infrared)
 
     def on_pose(self, msg: m.CameraPose) -> None:
         ahead_s = msg.measured_s - time.time()
@@ -105,6 +115,8 @@ class _Loop:
         with self.lock:
             if self.pose is None or msg.measured_s >= self.pose.measured_s:
                 log.info("camera pose received (fit error %.2f px)", msg.mean_error_px)
+                if msg != self.pose:
+                    self.pointing.forget()
                 self.pose = msg
 
     def on_calibration(self, msg: m.CalibrationMode) -> None:
@@ -181,23 +193,28 @@ class _Loop:
         with self.lock:
             pose, robot = _pose(self.pose), self.robot
             calibrating = self.calibration.active(now)
+            pointing_error, problem = self.pointing.error_deg, self.pointing.problem() or ""
         status = "waiting_for_pose" if pose is None else ("tracking" if robot else "idle")
         if calibrating:
             status = "calibrating"
-        self.node.set_status("ok" if pose else "degraded",
-                             "" if pose else "waiting for a camera pose from calib")
+        if pose is None:
+            self.node.set_status("degraded", "waiting for a camera pose from calib")
+        else:
+            self.node.set_status("degraded" if problem else "ok", problem)
         error = 0.0
         if pose is not None and robot is not None:
             error = aim_error_deg(_xyz(robot), pose, position.pan_deg, position.tilt_deg)
-        self._publish(status, position.pan_deg, position.tilt_deg, position.zoom, error, now)
+        self._publish(status, position.pan_deg, position.tilt_deg, position.zoom, error, now,
+                      pointing_error if pointing_error != NOT_SEEN else None, problem)
 
     def _publish(self, status: str, pan: float, tilt: float, zoom: int, error: float,
-                 now: float) -> None:
+                 now: float, pointing_error: float | None = None, problem: str = "") -> None:
         self.node.bus.publish(keys.PTZ_STATE, m.PtzState(
             measured_s=now, camera=self.settings.instance, status=status,
             pan_deg=min(max(pan, -180.0), 180.0), tilt_deg=min(max(tilt, -90.0), 90.0),
             zoom=min(max(zoom, 1), 19999), focal_mm=focal_mm_for_zoom(zoom),
-            aim_error_deg=error), camera=self.settings.instance)
+            aim_error_deg=error, pointing_error_deg=pointing_error, pointing_problem=problem),
+            camera=self.settings.instance)
 
     def _unreachable(self, now: float, err: PtzError) -> None:
         self.node.set_status("degraded", str(err))

@@ -42,6 +42,15 @@ class PtzSettings(ServiceSettings):
         None, gt=0, description="if set: zoom so that this size fills image_fraction")
     image_fraction: float = Field(0.3, gt=0, le=1)
     speed: int = Field(100, ge=1, le=100, description="VAPIX pan/tilt speed")
+    pointing_tolerance_deg: float = Field(
+        3.0, gt=0, le=90, description="the pointing check (docs/operator.md): a preview whose "
+        "robot marker is farther than this from where the pose puts it disagrees")
+    pointing_persist: int = Field(2, ge=1, le=100, description="this many disagreeing previews "
+                                  "in a row degrade the service's status")
+    pointing_infrared_s: float = Field(
+        2.0, ge=0, description="a preview in infrared (IR-cut filter off for one snapshot: the "
+        "markers bright) this often, for the pointing check; 0 = never (then it judges only "
+        "previews that show markers anyway)")
     preview_hz: float = Field(1.0, ge=0, le=5, description="preview snapshots a second while "
                               "following (stb/ptz/{camera}/preview); 0 = none")
     calibration_snapshot_hz: float = Field(10.0, gt=0, le=30,

@@ -131,6 +131,9 @@ class LiveState:
                                      "pan_deg": state.pan_deg if state else None,
                                      "tilt_deg": state.tilt_deg if state else None,
                                      "aim_error_deg": state.aim_error_deg if state else None,
+                                     "pointing_error_deg":
+                                         state.pointing_error_deg if state else None,
+                                     "pointing_problem": state.pointing_problem if state else "",
                                      "position": None, "looking_at": None, "preview": None}
             if pose is not None:
                 entry["position"] = [pose.x_mm, pose.y_mm, pose.z_mm]

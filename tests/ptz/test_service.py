@@ -216,3 +216,39 @@ def test_a_pose_from_the_future_is_refused_and_cannot_mis_aim_the_camera(service
     node: Node = service["node"]
     pose_key = keys.CALIB_POSE.key(node.bus.prefix, camera="ptz1")
     assert node.health().keys[pose_key].dropped.get("from_future") == 1
+
+
+def test_a_wrong_pose_is_caught_by_the_pointing_check(service: dict) -> None:
+    """A pose with a wrong rotation (as a poisoned pose message would bring) points the
+    camera away from the robot while its own aim error stays small; the infrared previews
+    show it (reported after 4.1 s here: two infrared previews 2 s apart)."""
+    node, states = service["node"], service["states"]
+    node.settings = node.settings.model_copy(update={"preview_hz": 5.0})
+    service["servers"].append(_camera_server(service["port"]))
+    service["thread"].start()
+    wait_for(lambda: states, timeout=5)  # subscribed by now
+    _publish_pose(service["world"])
+
+    def judged(predicate: Callable[[m.PtzState], bool]) -> bool:
+        _publish_robot(service["world"], TARGET)
+        return bool(states) and predicate(states[-1])
+
+    wait_for(lambda: judged(lambda s: s.pointing_error_deg is not None
+                            and s.pointing_error_deg < 1.0), timeout=8, period=0.1)
+    assert states[-1].pointing_problem == "" and node.health().status == "ok"
+    wrong = m.CameraPose(measured_s=time.time(), camera="ptz1", x_mm=MOUNT.x_mm,
+                         y_mm=MOUNT.y_mm, z_mm=MOUNT.z_mm, rx_deg=MOUNT.rx_deg,
+                         ry_deg=MOUNT.ry_deg, rz_deg=MOUNT.rz_deg + 40, focal_mm=3.8,
+                         mean_error_px=0.2, passpoints=100)
+    service["world"].publish(keys.CALIB_POSE, wrong, camera="ptz1")
+    poisoned_at = time.monotonic()
+    wait_for(lambda: judged(lambda s: s.pointing_problem.startswith("pointing:")), timeout=15,
+             period=0.1)
+    print(f"wrong pose reported after {time.monotonic() - poisoned_at:.1f} s: "
+          f"{states[-1].pointing_problem}")
+    assert states[-1].aim_error_deg < 1.0, "the pose's own aim error cannot see it"
+    health = node.health()
+    assert health.status == "degraded" and health.detail.startswith("pointing:")
+    _publish_pose(service["world"])  # the calibration service's true pose again
+    wait_for(lambda: judged(lambda s: s.pointing_problem == ""), timeout=8, period=0.1)
+    assert node.health().status == "ok"

@@ -163,7 +163,9 @@ function drawCameras(state) {
     }
     div.querySelector(".caption").textContent =
       `${name}: ${cam.status || "—"}, pan ${fmt(cam.pan_deg, 1, "°")}, tilt ${fmt(cam.tilt_deg, 1, "°")}, ` +
-      `aim error ${fmt(cam.aim_error_deg, 2, "°")}`;
+      `aim error ${fmt(cam.aim_error_deg, 2, "°")}, seen ${fmt(cam.pointing_error_deg, 1, "°")} off` +
+      (cam.pointing_problem ? ` — ${cam.pointing_problem}` : "");
+    div.classList.toggle("alarm", Boolean(cam.pointing_problem));
     const p = cam.preview;
     if (p && previewSeq[name] !== p.seq) {
       previewSeq[name] = p.seq;

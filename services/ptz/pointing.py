@@ -1,0 +1,80 @@
+"""Does the camera see the robot where its pose says? (pure) The pointing check.
+
+Every preview carries the markers the detector found and the pixel where the robot marker
+should be (the calibrated pose at the camera's reported pan and tilt). Their disagreement is
+measured as an angle: between the rays of that pixel and of the nearest marker found. The aim
+error in ``stb/ptz/{camera}/state`` is computed from the same pose and so cannot see a wrong
+pose; this check can: a poisoned or stale pose points the camera elsewhere, and the robot's
+marker is then far from where the pose puts it, or not in the picture at all.
+
+The robot's retro-reflective marker is bright only when the camera sees infrared (IR-cut
+filter off): so a preview without any marker counts only if it was taken in infrared (the
+preview loop takes one every ``pointing_infrared_s``). A single preview proves little (a
+reflection, the robot behind the crater's rim): only ``persist`` disagreeing previews in a
+row make a problem, and one agreeing preview ends it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from common import messages as m
+from common.camera import Intrinsics
+
+NOT_SEEN = math.inf  # no marker in the picture where the robot should be
+
+
+def pointing_error_deg(preview: m.PtzPreview, focal_mm: float) -> float | None:
+    """The angle from where the robot marker should appear to the nearest marker found
+    (``NOT_SEEN`` if none was found); None when there is nothing to judge: no pose or robot,
+    or the robot outside the picture."""
+    if preview.robot_px is None:
+        return None
+    u, v = preview.robot_px
+    if not (0 <= u < preview.width_px and 0 <= v < preview.height_px):
+        return None
+    if not preview.markers:
+        return NOT_SEEN
+    intr = Intrinsics(focal_mm, width_px=preview.width_px, height_px=preview.height_px)
+    nearest = min(preview.markers, key=lambda d: math.hypot(d.u_px - u, d.v_px - v))
+    a, b = _ray(u, v, intr), _ray(nearest.u_px, nearest.v_px, intr)
+    return math.degrees(math.acos(min(1.0, float(a @ b))))
+
+
+def _ray(u: float, v: float, intr: Intrinsics) -> np.ndarray:
+    """The unit ray of pixel (u, v) in the camera frame (x = optical axis, eq. 3 inverted)."""
+    ray = np.array([1.0, (u - intr.cy_px) / intr.fy_px, (v - intr.cz_px) / intr.fz_px])
+    return ray / np.linalg.norm(ray)
+
+
+class PointingCheck:
+    """The latest measured pointing error, and whether the last ``persist`` judged previews
+    all disagreed by more than ``tolerance_deg``."""
+
+    def __init__(self, tolerance_deg: float, persist: int) -> None:
+        self.tolerance_deg, self.persist = tolerance_deg, persist
+        self.error_deg: float | None = None  # of the latest judged preview
+        self._misses = 0
+
+    def observe(self, preview: m.PtzPreview, focal_mm: float, infrared: bool) -> None:
+        error = pointing_error_deg(preview, focal_mm)
+        if error is None or (error == NOT_SEEN and not infrared):
+            return
+        self.error_deg = error
+        self._misses = self._misses + 1 if error > self.tolerance_deg else 0
+
+    def forget(self) -> None:
+        """A new pose: what was measured with the old one no longer counts."""
+        self.error_deg, self._misses = None, 0
+
+    def problem(self) -> str | None:
+        """Why the camera's pointing is not to be trusted, or None."""
+        if self._misses < self.persist:
+            return None
+        if self.error_deg == NOT_SEEN:
+            return (f"pointing: the robot marker not seen where the pose puts it in "
+                    f"{self._misses} previews in a row (wrong pose? occluded?)")
+        return (f"pointing: the robot marker seen {self.error_deg:.1f}° from where the pose "
+                f"puts it in {self._misses} previews in a row (wrong pose?)")

@@ -1,0 +1,59 @@
+"""The pointing check (pure): the angle from where the pose puts the robot marker to the
+nearest marker found, and a problem only after disagreeing previews in a row."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import pytest
+
+from common import messages as m
+from common.camera import Intrinsics
+from services.ptz.pointing import NOT_SEEN, PointingCheck, pointing_error_deg
+
+FOCAL_MM = 3.8
+INTR = Intrinsics(FOCAL_MM)
+
+
+def _marker(u: float, v: float) -> m.DetectedMarker:
+    return m.DetectedMarker(u_px=u, v_px=v, radius_long_px=3, radius_short_px=3, angle_deg=0,
+                            roundness=1.0, area_px=28)
+
+
+def _preview(robot_px: list[float] | None, *markers: tuple[float, float]) -> m.PtzPreview:
+    return m.PtzPreview(measured_s=time.time(), camera="ptz1", seq=1, width_px=704,
+                        height_px=576, jpeg=b"", pan_deg=0, tilt_deg=0,
+                        markers=[_marker(u, v) for u, v in markers], robot_px=robot_px)
+
+
+def test_the_error_is_the_angle_to_the_nearest_marker() -> None:
+    centre = [INTR.cy_px, INTR.cz_px]
+    # one degree to the side of the optical axis: fy · tan(1°) pixels
+    one_degree = INTR.cy_px + INTR.fy_px * math.tan(math.radians(1.0))
+    error = pointing_error_deg(_preview(centre, (one_degree, INTR.cz_px), (10, 10)), FOCAL_MM)
+    assert error == pytest.approx(1.0, abs=1e-6)
+
+
+def test_nothing_to_judge_without_a_robot_pixel_or_with_the_robot_outside_the_picture() -> None:
+    assert pointing_error_deg(_preview(None, (300, 300)), FOCAL_MM) is None
+    assert pointing_error_deg(_preview([-5.0, 300.0], (300, 300)), FOCAL_MM) is None
+    assert pointing_error_deg(_preview([300.0, 600.0], (300, 300)), FOCAL_MM) is None
+    assert pointing_error_deg(_preview([300.0, 300.0]), FOCAL_MM) == NOT_SEEN
+
+
+def test_a_problem_only_after_disagreeing_previews_in_a_row() -> None:
+    check = PointingCheck(tolerance_deg=3.0, persist=3)
+    far, near = _preview([352.0, 288.0], (600, 100)), _preview([352.0, 288.0], (353, 289))
+    for preview in (far, far, near, far, far):  # one agreeing preview resets the count
+        check.observe(preview, FOCAL_MM, infrared=False)
+        assert check.problem() is None
+    check.observe(_preview(None), FOCAL_MM, infrared=True)  # nothing to judge
+    check.observe(_preview([352.0, 288.0]), FOCAL_MM, infrared=False)  # markers dim: no proof
+    assert check.problem() is None
+    check.observe(far, FOCAL_MM, infrared=False)
+    assert check.problem() is not None and "seen 2" in check.problem()
+    check.observe(_preview([352.0, 288.0]), FOCAL_MM, infrared=True)
+    assert "not seen" in check.problem()
+    check.forget()
+    assert check.problem() is None and check.error_deg is None
