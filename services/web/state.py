@@ -14,6 +14,9 @@ from common import messages as m
 from common.camera import Pose, head_pose
 
 TRACK_MIN_STEP_S = 0.1
+# A lab has a handful of cameras, robots and services; names beyond these many (a key churn)
+# push out the longest unheard, so that memory stays flat whatever arrives.
+MAX_CAMERAS, MAX_ROBOTS, MAX_SERVICES = 16, 8, 64
 GROUND_Z_MM = 0.0
 LOOK_MAX_MM = 8000.0
 
@@ -33,13 +36,22 @@ def looking_at(pose: m.CameraPose, pan_deg: float, tilt_deg: float) -> list[floa
     return [round(float(point[0]), 1), round(float(point[1]), 1)]
 
 
+def _keep(latest: dict, key: Any, value: Any, limit: int) -> None:
+    """``latest[key] = value``, the most recently heard last; beyond ``limit`` keys the
+    longest unheard goes."""
+    latest.pop(key, None)
+    latest[key] = value
+    while len(latest) > limit:
+        del latest[next(iter(latest))]
+
+
 @dataclass
 class LiveState:
     """The latest of everything the page shows; ``track_s`` of robot track is kept."""
 
     track_s: float = 60.0
     alive: set[tuple[str, str]] = field(default_factory=set)
-    seen: set[tuple[str, str]] = field(default_factory=set)  # stays listed when it goes
+    seen: dict[tuple[str, str], None] = field(default_factory=dict)  # listed when it goes
     health: dict[tuple[str, str], m.ServiceHealth] = field(default_factory=dict)
     robot: m.RobotPosition | None = None
     truth: dict[str, m.RobotTruth] = field(default_factory=dict)
@@ -53,7 +65,8 @@ class LiveState:
 
     def on_alive(self, service: str, instance: str, alive: bool) -> None:
         (self.alive.add if alive else self.alive.discard)((service, instance))
-        self.seen.add((service, instance))
+        _keep(self.seen, (service, instance), None, MAX_SERVICES)
+        self.alive &= self.seen.keys()
 
     def on_message(self, msg: m.Message) -> None:  # noqa: C901 - one branch per message kind
         if isinstance(msg, m.RobotPosition):
@@ -69,17 +82,17 @@ class LiveState:
         elif isinstance(msg, m.GravityOffload):
             self.offload = msg
         elif isinstance(msg, m.PtzState):
-            self.ptz[msg.camera] = msg
+            _keep(self.ptz, msg.camera, msg, MAX_CAMERAS)
         elif isinstance(msg, m.CameraPose):
             old = self.poses.get(msg.camera)
             if old is None or msg.measured_s >= old.measured_s:
-                self.poses[msg.camera] = msg
+                _keep(self.poses, msg.camera, msg, MAX_CAMERAS)
         elif isinstance(msg, m.PtzPreview):
-            self.previews[msg.camera] = msg
+            _keep(self.previews, msg.camera, msg, MAX_CAMERAS)
         elif isinstance(msg, m.ServiceHealth):
-            self.health[(msg.service, msg.instance)] = msg
+            _keep(self.health, (msg.service, msg.instance), msg, MAX_SERVICES)
         elif isinstance(msg, m.RobotTruth):
-            self.truth[msg.robot] = msg
+            _keep(self.truth, msg.robot, msg, MAX_ROBOTS)
 
     def view(self, now_s: float) -> dict[str, Any]:
         """Everything the page draws, JSON-ready (images only by sequence number)."""
@@ -111,7 +124,7 @@ class LiveState:
         }
 
     def _services(self, now_s: float) -> list[dict[str, Any]]:
-        names = sorted(self.seen | set(self.health))
+        names = sorted(set(self.seen) | set(self.health))
         out = []
         for service, instance in names:
             health = self.health.get((service, instance))

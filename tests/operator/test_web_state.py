@@ -129,3 +129,43 @@ def test_the_height_map_appears_once_the_sim_has_written_it(server: tuple) -> No
     assert info == {"extent_mm": [-2000.0, 1900.0, -1500.0, 1400.0], "image": True}
     status, png, kind = _get(web, "/map.png")
     assert status == 200 and png.startswith(b"\x89PNG") and kind == "image/png"
+
+
+def test_memory_stays_flat_under_key_churn() -> None:
+    """Valid messages under thousands of made-up camera and service names (a fuzzer's key
+    churn) keep at most MAX_* of each; the lab's own, heard all along, stay."""
+    import tracemalloc
+
+    from services.web.state import MAX_CAMERAS, MAX_SERVICES
+
+    state = LiveState()
+    jpeg = bytes(100_000)
+
+    def preview(camera: str) -> m.PtzPreview:
+        return m.PtzPreview(measured_s=1.0, camera=camera, seq=1, width_px=704, height_px=576,
+                            jpeg=jpeg + camera.encode(), pan_deg=0, tilt_deg=0, markers=[])
+
+    def health(service: str) -> m.ServiceHealth:
+        return m.ServiceHealth(measured_s=1.0, service=service, instance="main", host="h",
+                               pid=1, started_s=0.0, status="ok", keys={})
+
+    tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+        for i in range(2000):
+            state.on_message(preview(f"fuzz{i}"))
+            state.on_message(health(f"fuzz{i}"))
+            state.on_alive(f"fuzz{i}", "main", True)
+            if i % 5 == 0:  # the lab's own keep talking
+                state.on_message(preview("ptz1"))
+                state.on_message(health("gantry"))
+                state.on_alive("gantry", "main", True)
+        grown = tracemalloc.get_traced_memory()[0] - before
+    finally:
+        tracemalloc.stop()
+    assert len(state.previews) <= MAX_CAMERAS and len(state.health) <= MAX_SERVICES
+    assert len(state.seen) <= MAX_SERVICES and len(state.alive) <= MAX_SERVICES
+    assert "ptz1" in state.previews and ("gantry", "main") in state.health
+    assert ("gantry", "main") in state.alive
+    assert grown < (MAX_CAMERAS + 4) * len(jpeg), f"grew {grown / 1e6:.1f} MB"
+    assert len(state.view(2.0)["services"]) <= MAX_SERVICES
