@@ -229,7 +229,8 @@ class CraneSetpoint(Message):
     hold: bool = Field(description="True: stay where you are (no valid estimate)")
 
 
-CraneStatus = Literal["idle", "tracking", "holding", "stale", "fault", "stopped", "unreachable"]
+CraneStatus = Literal["idle", "tracking", "reacquiring", "holding", "stale", "fault", "stopped",
+                      "unreachable"]
 
 
 GantryMode = Literal["disarmed", "armed", "stopped"]

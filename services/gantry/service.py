@@ -142,7 +142,7 @@ class Control:
                 measured_s=now, seq=self.seq, x_mm=float(step.setpoint[0]),
                 y_mm=float(step.setpoint[1]), hold=step.hold))
         self._status(step)
-        self._state(now, reading, hold=step.hold)
+        self._state(now, reading, hold=step.hold, reacquiring=step.reacquiring)
         if armed and step.estimate is not None and not step.hold:
             crane_xy = np.array([reading.x_mm, reading.y_mm])
             self._offload(now, float(np.hypot(*(step.estimate.position - crane_xy))))
@@ -186,10 +186,12 @@ class Control:
             mode=modes.mode.value, mode_by=modes.by[:128], mode_reason=modes.reason[:500],
             mode_since_s=modes.since_s))
 
-    def _state(self, now: float, reading: CraneReading, *, hold: bool) -> None:
+    def _state(self, now: float, reading: CraneReading, *, hold: bool,
+               reacquiring: bool = False) -> None:
         modes = self.loop.modes
+        following = "reacquiring" if reacquiring else "tracking"
         status = {Mode.DISARMED: "idle", Mode.STOPPED: "stopped"}.get(
-            modes.mode, "holding" if hold else "tracking")
+            modes.mode, "holding" if hold else following)
         if reading.latched_faults and modes.mode is not Mode.STOPPED:
             status = "fault"
         self.node.bus.publish(keys.GANTRY_STATE, m.CraneState(

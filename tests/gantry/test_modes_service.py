@@ -208,6 +208,7 @@ def test_the_robot_is_found_again_from_the_motion_capture_after_it_left_the_view
         assert not 0 <= u < CAMERA.width_px, "the robot is out of view"
         wait_for(lambda: np.linalg.norm(crane.state()[1]) > 50.0, timeout=3)  # reacquiring
         assert np.linalg.norm(crane.state()[1]) <= rig["settings"].reacquire_speed_mm_s + 5
+        wait_for(lambda: rig["operator"].states[-1].status == "reacquiring", timeout=1)
         wait_for(lambda: np.linalg.norm(crane.state()[0]
                                         - robot(time.monotonic() - began)) < 60.0, timeout=20)
     assert rig["operator"].mode() == "armed"
