@@ -40,16 +40,16 @@ ROBOT = "locomotive"  # config/compose-sim.toml's scenario (the sim's default)
 CAUGHT_UP_MM = 300.0  # the crane is over the robot: it is well inside the tracking camera's view
 
 # Bounds, well above what our runs on 2 cores measured (docs/deployment.md §7): every service
-# alive 5.5-6.3 s after `up -d`, healthy once the wand has calibrated both cameras 32-33 s
-# after it; a killed gantry back in 3.0-3.4 s; every service heard again 2.7-6.2 s after
-# `compose restart router` began; calib healthy with its stored poses 5.3-6.7 s after `up -d`.
+# alive 5.0-6.3 s after `up -d`, healthy once the wand has calibrated both cameras 31-33 s
+# after it; a killed gantry back in 2.6-3.6 s; every service heard again 2.3-6.3 s after
+# `compose restart router` began; calib healthy with its stored poses 4.7-6.7 s after `up -d`.
 ALIVE_BOUND_S = 60.0
 HEALTHY_BOUND_S = 150.0
 RESTART_BOUND_S = 30.0
 RESUME_BOUND_S = 45.0
 # The crane's RMS distance to the robot under compose against stb up's on the host, measured in
 # the same run once the crane is over the robot: the same code and scenario, so the same up to
-# the spread of 30 s windows (stb up 44.9-45.3 mm, compose 45.2-47.1 mm in our runs) and the
+# the spread of 30 s windows (stb up 44.9-48.0 mm, compose 45.2-47.6 mm in our runs) and the
 # containers' and TLS's share of two cores.
 FOLLOW_FACTOR, FOLLOW_SLACK_MM = 1.25, 15.0
 
