@@ -17,12 +17,12 @@ trustworthy to say (the safety layer then holds the crane).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal, Protocol
+from typing import TYPE_CHECKING, Literal, Protocol
 
 import numpy as np
-from filterpy.common import Q_discrete_white_noise
-from filterpy.kalman import IMMEstimator, KalmanFilter
-from scipy.linalg import block_diag
+
+if TYPE_CHECKING:  # filterpy (with scipy.stats) takes 0.8 s to import: only the IMM needs it
+    from filterpy.kalman import IMMEstimator, KalmanFilter
 
 AlgorithmName = Literal["basic", "pf-position", "pf-position-gauss", "pf-velocity", "default"]
 ALGORITHMS: tuple[AlgorithmName, ...] = ("basic", "pf-position", "pf-position-gauss",
@@ -179,6 +179,10 @@ class KalmanPredictor:
                ) -> Estimate | None:
         if measured is None:
             return None
+        from filterpy.common import Q_discrete_white_noise
+        from filterpy.kalman import IMMEstimator
+        from scipy.linalg import block_diag
+
         z = np.asarray(measured, dtype=float)
         if self._imm is None or t_s <= self._t or t_s - self._t > self.max_gap_s:
             filters = [self._new_filter(z, q) for q in (self.calm_accel_mm_s2,
@@ -201,6 +205,8 @@ class KalmanPredictor:
         return Estimate(position, velocity, position + velocity * horizon)
 
     def _new_filter(self, z: np.ndarray, accel: float) -> KalmanFilter:
+        from filterpy.kalman import KalmanFilter
+
         kf = KalmanFilter(dim_x=4, dim_z=2)
         kf.x = np.array([z[0], z[1], 0.0, 0.0])
         kf.H = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
