@@ -9,7 +9,6 @@ import json
 import os
 import signal
 import subprocess
-import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -22,17 +21,18 @@ from compose_test.engine import (
     Engine,
     EngineError,
     install_when_missing,
-    may_raise_limits,
     why_no_engine,
 )
-from compose_test.lab import Client, project_folder, up
+from compose_test.lab import Client, FollowMeter, lab_folder, up
 from tests.conftest import stb_process
 from tests.ports import free_port
+from tests.sim.test_sim_service import write_lab
 
 UPSTREAM_ROUTER = "eclipse/zenoh:1.10.2"  # docker-compose.yml's
 OUT = ROOT / "run" / "compose-test"
 ENGINE_HOME = Path(os.environ.get("STB_ENGINE_HOME", "/var/tmp/stb-compose-engine"))
 FIGURES: dict[str, object] = {}
+FOLLOW_WINDOW_S = 30.0  # more than one lap of the locomotive's railway (about 24 s)
 
 
 def figure(name: str, value: object) -> None:
@@ -94,32 +94,23 @@ def images(engine: Engine) -> dict[str, object]:
 @pytest.fixture(scope="session")
 def lab(engine: Engine, images: dict, reference_follow_mm: float) -> Iterator[dict]:
     """The lab under compose (after the reference, which must not share the cores with it)."""
-    folder = Path(tempfile.mkdtemp(prefix="stb-compose-"))
-    files, ports = project_folder(folder, offline_router=bool(images["offline_router"]),
-                                  raise_limits=may_raise_limits())
-    client = Client(f"tls/localhost:{ports['router']}", folder / "deploy" / "zenoh" / "secrets")
-    try:
-        started = up(engine, folder, files)
-        yield {"engine": engine, "folder": folder, "files": files, "client": client,
-               "ports": ports,
-               "up_at": started, "offline_router": images["offline_router"]}
-    finally:
-        client.close()
-        logs = engine.compose(folder, files, "--profile", "sim", "logs", "--no-color",
-                              check=False, timeout=60)
-        (OUT / "containers.log").write_text(logs.stdout + logs.stderr)
-        engine.compose(folder, files, "--profile", "sim", "down", "-v", "--remove-orphans",
-                       "-t", "5", check=False, timeout=180)
-        subprocess.run(["rm", "-rf", str(folder)], check=False, timeout=60)
+    with lab_folder(offline_router=bool(images["offline_router"])) as (folder, files, client):
+        try:
+            started = up(engine, folder, files)
+            yield {"engine": engine, "folder": folder, "files": files, "client": client,
+                   "up_at": started, "offline_router": images["offline_router"]}
+        finally:
+            logs = engine.compose(folder, files, "--profile", "sim", "logs", "--no-color",
+                                  check=False, timeout=60)
+            (OUT / "containers.log").write_text(logs.stdout + logs.stderr)
+            engine.compose(folder, files, "--profile", "sim", "down", "-v", "--remove-orphans",
+                           "-t", "5", check=False, timeout=180)
 
 
 @pytest.fixture(scope="session")
 def reference_follow_mm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[float]:
     """The crane-to-robot RMS distance that ``stb up`` gives on the host: same sim scenario,
     same gantry defaults, plain local bus."""
-    from compose_test.lab import FollowMeter
-    from tests.sim.test_sim_service import write_lab
-
     workdir = tmp_path_factory.mktemp("reference")
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     lab_file, _ = write_lab(workdir, endpoint, workdir / "crater.npz")
@@ -143,5 +134,3 @@ def reference_follow_mm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[fl
         except subprocess.TimeoutExpired:
             proc.kill()
 
-
-FOLLOW_WINDOW_S = 30.0  # more than one lap of the locomotive's railway (about 24 s)

@@ -9,9 +9,11 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,10 +24,11 @@ from common import keys
 from common import messages as m
 from common.bus import Bus
 from common.settings import BusSettings, ZenohSettings
-from compose_test.engine import ROOT, Engine
+from compose_test.engine import ROOT, Engine, may_raise_limits
 from tests.conftest import open_when_up
 from tests.deploy.lab_secrets import identity, identity_env, make_secrets
 from tests.ports import free_port
+from tests.services.test_processes import AliveWatcher
 
 PROJECT = "stb-compose-test"
 LAB_FILE_IN_CONTAINERS = "/config/compose-sim.toml"
@@ -66,6 +69,26 @@ def wait_until(predicate: Callable[[], object], bound_s: float, what: str) -> fl
             return time.monotonic() - started
         time.sleep(0.2)
     pytest.fail(f"{what}: not within {bound_s:.0f} s")
+
+
+@contextmanager
+def lab_folder(*, offline_router: bool, router_names: tuple[str, ...] = ()
+               ) -> Iterator[tuple[Path, list[str], Client]]:
+    """A lab's folder in a temporary directory (``project_folder``), its compose files, and
+    the host's client of the router it will run; the folder (secrets included) goes after."""
+    folder = Path(tempfile.mkdtemp(prefix="stb-compose-"))
+    try:
+        files, ports = project_folder(folder, offline_router=offline_router,
+                                      raise_limits=may_raise_limits(),
+                                      router_names=router_names)
+        client = Client(f"tls/localhost:{ports['router']}",
+                        folder / "deploy" / "zenoh" / "secrets")
+        try:
+            yield folder, files, client
+        finally:
+            client.close()
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def project_folder(folder: Path, *, offline_router: bool, raise_limits: bool,
@@ -114,19 +137,12 @@ class Watch:
         self.bus = bus
         self._lock = threading.Lock()
         self.healths: list[Sighting] = []
-        self.alive_events: list[tuple[float, str, bool]] = []
         bus.subscribe(keys.HEALTH, self._on_health, latest=False)
-        self._alive = bus.session.liveliness().declare_subscriber(
-            "stb/alive/**", self._on_alive, history=True)
+        self._alive = AliveWatcher(bus.session)
 
     def _on_health(self, health: m.ServiceHealth) -> None:
         with self._lock:
             self.healths.append(Sighting(time.monotonic(), health))
-
-    def _on_alive(self, sample: zenoh.Sample) -> None:
-        with self._lock:
-            self.alive_events.append((time.monotonic(), str(sample.key_expr),
-                                      sample.kind == zenoh.SampleKind.PUT))
 
     def latest(self, who: tuple[str, str], since: float = 0.0) -> m.ServiceHealth | None:
         with self._lock:
@@ -139,10 +155,7 @@ class Watch:
                    for who in expected)
 
     def alive(self, who: tuple[str, str]) -> bool:
-        key = f"stb/alive/{who[0]}/{who[1]}"
-        with self._lock:
-            events = [put for _, k, put in self.alive_events if k == key]
-        return bool(events) and events[-1]
+        return self._alive.alive(keys.alive_key(self.bus.prefix, *who))
 
 
 @dataclass

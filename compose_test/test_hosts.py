@@ -5,24 +5,20 @@ LAN — and the containerised, secured router."""
 
 from __future__ import annotations
 
-import subprocess
-import tempfile
 import time
 from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 
 from compose_test.conftest import FOLLOW_WINDOW_S, figure
-from compose_test.engine import Engine, may_raise_limits
+from compose_test.engine import Engine
 from compose_test.lab import (
     HEALTHY_BOUND_S,
     ON_THE_BUS,
-    Client,
     FollowMeter,
     Watch,
     follow_bound_mm,
-    project_folder,
+    lab_folder,
     up,
     wait_until,
 )
@@ -43,10 +39,9 @@ def _project(host: str) -> str:
 
 @pytest.fixture(scope="module")
 def hosts(engine: Engine, images: dict, reference_follow_mm: float) -> Iterator[dict]:
-    folder = Path(tempfile.mkdtemp(prefix="stb-hosts-"))
-    files, ports = project_folder(folder, offline_router=bool(images["offline_router"]),
-                                  raise_limits=may_raise_limits(), router_names=(ROUTER_HOST,))
-    (folder / "compose.lan.yml").write_text(f"""# every project on the one network, the LAN
+    with lab_folder(offline_router=bool(images["offline_router"]),
+                    router_names=(ROUTER_HOST,)) as (folder, files, client):
+        (folder / "compose.lan.yml").write_text(f"""# every project on the one network, the LAN
 networks:
   default:
     name: {LAN}
@@ -55,24 +50,21 @@ volumes:
   sim-data:
     name: {CRATER_VOLUME}
 """)
-    files.append("compose.lan.yml")
-    client = Client(f"tls/localhost:{ports['router']}", folder / "deploy" / "zenoh" / "secrets")
-    engine.docker("network", "create", LAN)
-    try:
-        started = time.monotonic()
-        for host, services in HOSTS.items():  # the others name the router PC's router
-            up(engine, folder, files, *services, project=_project(host),
-               router="router" if host == "router-pc" else ROUTER_HOST)
-        yield {"engine": engine, "folder": folder, "files": files, "client": client,
-               "up_at": started, "reference_mm": reference_follow_mm}
-    finally:
-        client.close()
-        for host in reversed(HOSTS):
-            engine.compose(folder, files, "--profile", "sim", "down", "-v", "-t", "5",
-                           project=_project(host), check=False, timeout=180)
-        engine.docker("volume", "rm", "-f", CRATER_VOLUME, check=False)
-        engine.docker("network", "rm", LAN, check=False)
-        subprocess.run(["rm", "-rf", str(folder)], check=False, timeout=60)
+        files.append("compose.lan.yml")
+        engine.docker("network", "create", LAN)
+        try:
+            started = time.monotonic()
+            for host, services in HOSTS.items():  # the others name the router PC's router
+                up(engine, folder, files, *services, project=_project(host),
+                   router="router" if host == "router-pc" else ROUTER_HOST)
+            yield {"engine": engine, "folder": folder, "files": files, "client": client,
+                   "up_at": started, "reference_mm": reference_follow_mm}
+        finally:
+            for host in reversed(HOSTS):
+                engine.compose(folder, files, "--profile", "sim", "down", "-v", "-t", "5",
+                               project=_project(host), check=False, timeout=180)
+            engine.docker("volume", "rm", "-f", CRATER_VOLUME, check=False)
+            engine.docker("network", "rm", LAN, check=False)
 
 
 def test_each_host_runs_only_its_own_services_on_the_lan(hosts: dict) -> None:
