@@ -132,6 +132,9 @@ class CameraPose(Message):
     passpoints: int = Field(ge=0, description="passpoints used (inliers)")
     time_offset_s: float = Field(0.0, description="mocap clock minus camera clock (add it to a "
                                  "snapshot's time to get the mocap time), if fitted")
+    version: int = Field(0, ge=0, le=2**53, description="the calibration service's count for "
+                         "this camera: a newer pose has a higher version (or the same version, "
+                         "measured later); it out-versions any pose on its key it did not send")
 
 
 class CalibrationMode(Message):

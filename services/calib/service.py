@@ -3,7 +3,11 @@
 Publishes:  stb/calib/{camera}/pose (CameraPose) at start for every stored pose and after each
             solve; answers queries on it for late joiners
             stb/calib/{camera}/progress (CollectProgress) while collecting
+            A pose on its key that it did not send (a stale or poisoned one) is out-versioned:
+            its own pose goes out again with a higher ``version`` (PTZ services take the highest)
+            and its health says so for a minute
 Subscribes: stb/calib/{camera}/collect (CollectRequest: start or cancel a collection)
+            stb/calib/{camera}/pose (to hear poses it did not send)
             while collecting: stb/tracker/markers, stb/ptz/{camera}/detections, .../snapshot,
             .../state; puts stb/ptz/{camera}/calibration (the camera's calibration mode)
 Stores:     <data_dir>/<camera>/ pose.json, passpoints.csv, track.csv, images/
@@ -13,6 +17,8 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
+from collections import deque
 
 from common import keys
 from common import messages as m
@@ -23,6 +29,16 @@ from services.calib.store import PoseStore
 
 log = logging.getLogger(__name__)
 
+REASSERT_EVERY_S = 0.2  # at most five re-assertions a second, however many foreign poses come
+FOREIGN_REPORTED_S = 60.0  # health is degraded this long after the last foreign pose
+MAX_VERSION = 2**53  # CameraPose.version's bound
+
+
+def _same_solve(a: m.CameraPose, b: m.CameraPose) -> bool:
+    """The same pose whatever its version and publication time (an echo or a re-assertion)."""
+    ignore = {"version", "sent_s"}
+    return a.model_dump(exclude=ignore) == b.model_dump(exclude=ignore)
+
 
 class Calib:
     def __init__(self, node: Node, settings: CalibSettings, store: PoseStore) -> None:
@@ -30,6 +46,11 @@ class Calib:
         self.lock = threading.Lock()
         self.poses: dict[str, m.CameraPose] = {}
         self.sessions: dict[str, Session] = {}
+        self.seen_version: dict[str, int] = {}  # the highest version heard on each pose key
+        self.foreign: dict[str, deque[float]] = {}  # when poses it did not send were heard
+        self.reassert_due: dict[str, threading.Timer] = {}
+        self.last_reassert: dict[str, float] = {}
+        self.status_due = threading.Timer(0, lambda: None)  # not started: nothing due
 
     def start(self) -> None:
         bus = self.node.bus
@@ -41,6 +62,7 @@ class Calib:
                          pose.mean_error_px, pose.passpoints)
                 bus.publish(keys.CALIB_POSE, pose, camera=camera)
             bus.serve_latest(keys.CALIB_POSE, lambda c=camera: self.poses.get(c), camera=camera)
+            bus.subscribe(keys.CALIB_POSE, self.on_pose_heard, latest=False, camera=camera)
             bus.subscribe(keys.CALIB_COLLECT, self.on_request, latest=False, camera=camera)
         bus.subscribe(keys.TRACKER_MARKERS, self._each_session("on_frame"), latest=False)
         bus.subscribe(keys.PTZ_DETECTIONS, self._to_session("on_detections"), latest=False)
@@ -71,11 +93,58 @@ class Calib:
             return
         self._start(msg.camera, msg.count, msg.timeout_s)
 
-    def solved(self, pose: m.CameraPose) -> None:
+    def solved(self, pose: m.CameraPose, report: dict) -> None:
         with self.lock:
+            pose = pose.model_copy(update={"version": self._next_version(pose.camera)})
             self.poses[pose.camera] = pose
+        self.store.save(pose, report)
         self.node.bus.publish(keys.CALIB_POSE, pose, camera=pose.camera)
         self._report_status()
+
+    def on_pose_heard(self, msg: m.CameraPose) -> None:
+        """Its own echo, or a pose it did not send: out-version the latter if it could win."""
+        camera = msg.camera
+        with self.lock:
+            self.seen_version[camera] = max(self.seen_version.get(camera, 0), msg.version)
+            own = self.poses.get(camera)
+            if own is None or _same_solve(msg, own):
+                return
+            now = time.monotonic()
+            heard = self.foreign.setdefault(camera, deque())
+            heard.append(now)
+            # a PTZ service takes no lower version; and one answer at a time is enough
+            answer = msg.version >= own.version and camera not in self.reassert_due
+            if answer:
+                delay = max(self.last_reassert.get(camera, -1e9) + REASSERT_EVERY_S - now, 0.0)
+                timer = threading.Timer(delay, self._reassert, args=(camera,))
+                timer.daemon = True
+                self.reassert_due[camera] = timer
+        if answer:
+            log.warning("%s: a pose it did not send (version %d, up to %.1f° from its own) on "
+                        "the bus; sending its own again, out-versioned", camera, msg.version,
+                        _rotation_gap_deg(msg, own))
+            timer.start()
+        self._report_status()
+
+    def _reassert(self, camera: str) -> None:
+        with self.lock:
+            self.reassert_due.pop(camera, None)
+            self.last_reassert[camera] = time.monotonic()
+            own = self.poses.get(camera)
+            if own is None:
+                return
+            version = self._next_version(camera)
+            if version > MAX_VERSION:
+                log.error("%s: cannot out-version a pose at version %d", camera, version - 1)
+                return
+            own = own.model_copy(update={"version": version})
+            self.poses[camera] = own
+        self.store.save_version(own)
+        self.node.bus.publish(keys.CALIB_POSE, own, camera=camera)
+
+    def _next_version(self, camera: str) -> int:
+        held = self.poses.get(camera)
+        return max(held.version if held else 0, self.seen_version.get(camera, 0)) + 1
 
     def _start(self, camera: str, count: int, timeout_s: float) -> None:
         session = Session(self.node, self.settings, self.store, camera, count, timeout_s,
@@ -101,9 +170,29 @@ class Calib:
         return handler
 
     def _report_status(self) -> None:
-        missing = [c for c in self.settings.cameras if c not in self.poses]
-        self.node.set_status("degraded" if missing else "ok",
-                             f"no pose yet: {', '.join(missing)}" if missing else "")
+        now = time.monotonic()
+        with self.lock:
+            missing = [c for c in self.settings.cameras if c not in self.poses]
+            for heard in self.foreign.values():
+                while heard and now - heard[0] >= FOREIGN_REPORTED_S:
+                    heard.popleft()
+            foreign = {c: len(heard) for c, heard in self.foreign.items()}
+        problems = [f"no pose yet: {', '.join(missing)}"] if missing else []
+        problems += [f"{c}: {n} pose(s) it did not send in the last minute (out-versioned)"
+                     for c, n in sorted(foreign.items()) if n]
+        self.node.set_status("degraded" if problems else "ok", "; ".join(problems))
+        with self.lock:  # and again when the minute is over
+            due = self.status_due
+            pending = due.is_alive() and due is not threading.current_thread()
+            if any(foreign.values()) and not pending:
+                self.status_due = threading.Timer(FOREIGN_REPORTED_S + 0.5, self._report_status)
+                self.status_due.daemon = True
+                self.status_due.start()
+
+
+def _rotation_gap_deg(a: m.CameraPose, b: m.CameraPose) -> float:
+    return max(abs((getattr(a, f) - getattr(b, f) + 180) % 360 - 180)
+               for f in ("rx_deg", "ry_deg", "rz_deg"))
 
 
 def run(node: Node) -> None:

@@ -37,7 +37,7 @@ SNAPSHOTS_KEPT = 30
 class Session:
     def __init__(self, node: Node, settings: CalibSettings, store: PoseStore, camera: str,
                  count: int, timeout_s: float,
-                 on_pose: Callable[[m.CameraPose], None]) -> None:
+                 on_pose: Callable[[m.CameraPose, dict], None]) -> None:
         self.node, self.settings, self.store, self.camera = node, settings, store, camera
         self.timeout_s, self.on_pose = timeout_s, on_pose
         self.collector = Collector(count, settings.marker_label, settings.min_spacing_mm)
@@ -172,8 +172,7 @@ class Session:
             passpoints=len(solution.inliers), time_offset_s=solution.time_offset_s or 0.0)
         report = solution.report() | {"pan_deg": state.pan_deg, "tilt_deg": state.tilt_deg,
                                       "zoom": state.zoom}
-        self.store.save(pose, report)
-        self.on_pose(pose)
+        self.on_pose(pose, report)  # versioned, stored and published by the service
         self.mean_error_px = solution.mean_error_px
         rejected = report["rejected"]
         spread = float(np.max(solution.position_std_mm))

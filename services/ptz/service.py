@@ -113,7 +113,9 @@ class _Loop:
                                      "in the future: refused")
             return
         with self.lock:
-            if self.pose is None or msg.measured_s >= self.pose.measured_s:
+            # newer: a higher version from the calibration service, or the same one measured
+            # later (the calibration service out-versions a pose on its key it did not send)
+            if self.pose is None or _order(msg) >= _order(self.pose):
                 log.info("camera pose received (fit error %.2f px)", msg.mean_error_px)
                 if msg != self.pose:
                     self.pointing.forget()
@@ -221,6 +223,10 @@ class _Loop:
         self.retry_at, self.retry_s = now + self.retry_s, min(self.retry_s * 2, RETRY_MAX_S)
         self.limits = None  # ask again: the camera may have been replaced or reconfigured
         self._publish("camera_unreachable", 0.0, 0.0, 1, 0.0, now)
+
+
+def _order(pose: m.CameraPose) -> tuple[int, float]:
+    return pose.version, pose.measured_s
 
 
 def _pose(msg: m.CameraPose | None) -> Pose | None:

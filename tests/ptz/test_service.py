@@ -218,6 +218,41 @@ def test_a_pose_from_the_future_is_refused_and_cannot_mis_aim_the_camera(service
     assert node.health().keys[pose_key].dropped.get("from_future") == 1
 
 
+def test_a_higher_version_wins_however_old_its_measurement(service: dict) -> None:
+    """The calibration service answers a pose it did not send with its own at a higher version
+    (measured when it was solved, before the spoof): the PTZ service takes it back. By
+    measurement time alone, a later spoof would keep the camera for good."""
+    service["servers"].append(_camera_server(service["port"]))
+    service["thread"].start()
+    world, states = service["world"], service["states"]
+    wait_for(lambda: states)
+    solved_s = time.time() - 600.0
+    true_pose = dict(camera="ptz1", x_mm=MOUNT.x_mm, y_mm=MOUNT.y_mm, z_mm=MOUNT.z_mm,
+                     rx_deg=MOUNT.rx_deg, ry_deg=MOUNT.ry_deg, rz_deg=MOUNT.rz_deg,
+                     focal_mm=3.8, mean_error_px=1.0, passpoints=100)
+    world.publish(keys.CALIB_POSE, m.CameraPose(measured_s=solved_s, version=3, **true_pose),
+                  camera="ptz1")
+
+    def aim_error() -> float:
+        _publish_robot(world, TARGET)
+        last = states[-1]
+        return aim_error_deg(TARGET, MOUNT, last.pan_deg, last.tilt_deg)
+
+    wait_for(lambda: aim_error() < 0.5 and states[-1].status == "tracking", timeout=5,
+             period=0.05)
+    spoof = {**true_pose, "rz_deg": MOUNT.rz_deg + 30.0}
+    world.publish(keys.CALIB_POSE, m.CameraPose(measured_s=time.time(), version=3, **spoof),
+                  camera="ptz1")
+    wait_for(lambda: aim_error() > 20.0, timeout=5, period=0.05)  # same version, later: taken
+    world.publish(keys.CALIB_POSE, m.CameraPose(measured_s=solved_s, version=4, **true_pose),
+                  camera="ptz1")
+    wait_for(lambda: aim_error() < 0.5, timeout=5, period=0.05)
+    world.publish(keys.CALIB_POSE, m.CameraPose(measured_s=time.time(), version=3, **spoof),
+                  camera="ptz1")  # a lower version, however late, is not taken
+    time.sleep(0.5)
+    assert aim_error() < 0.5
+
+
 def test_a_wrong_pose_is_caught_by_the_pointing_check(service: dict) -> None:
     """A pose with a wrong rotation (as a poisoned pose message would bring) points the
     camera away from the robot while its own aim error stays small; the infrared previews
