@@ -62,8 +62,37 @@ class Node:
                          instance=self.settings.instance)
 
 
+class LogBudget(logging.Filter):
+    """At most ``burst`` lines at once and ``per_s`` a second after that, whatever logs them (a
+    flood of requests that each log a line cannot fill a disk); errors and above always pass.
+    What it held back is counted in the next line that passes."""
+
+    def __init__(self, per_s: float = 20.0, burst: float = 200.0,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        super().__init__()
+        self.per_s, self.burst, self.clock = per_s, burst, clock
+        self.tokens, self.at, self.held_back = burst, clock(), 0
+        self.lock = threading.Lock()
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        with self.lock:
+            now = self.clock()
+            self.tokens = min(self.burst, self.tokens + (now - self.at) * self.per_s)
+            self.at = now
+            if self.tokens < 1 and record.levelno < logging.ERROR:
+                self.held_back += 1
+                return False
+            self.tokens = max(self.tokens - 1, 0.0)
+            held, self.held_back = self.held_back, 0
+        if held:
+            record.msg = f"[{held} log lines held back before this one] {record.msg}"
+        return True
+
+
 def configure_logging(level: str) -> None:
     logging.basicConfig(level=level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    for handler in logging.getLogger().handlers:
+        handler.addFilter(LogBudget())
     for chatty in ("httpx", "httpcore", "pymodbus", "qtm_rt"):  # one line per request/frame
         logging.getLogger(chatty).setLevel(max(logging.WARNING, logging.getLogger().level))
 

@@ -178,8 +178,8 @@ class Calib:
                     heard.popleft()
             foreign = {c: len(heard) for c, heard in self.foreign.items()}
         problems = [f"no pose yet: {', '.join(missing)}"] if missing else []
-        problems += [f"{c}: {n} pose(s) it did not send in the last minute (out-versioned)"
-                     for c, n in sorted(foreign.items()) if n]
+        problems += [f"{c}: a pose it did not send was on the bus in the last minute "
+                     "(out-versioned)" for c, n in sorted(foreign.items()) if n]
         self.node.set_status("degraded" if problems else "ok", "; ".join(problems))
         with self.lock:  # and again when the minute is over
             due = self.status_due

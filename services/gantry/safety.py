@@ -45,7 +45,7 @@ class SetpointGuard:
     workspace: Workspace = Workspace()
     max_speed_mm_s: float = 450.0
     max_accel_mm_s2: float = 550.0
-    stale_after_s: float = 0.6
+    stale_after_s: float = 0.5
     _last: np.ndarray | None = None
     _step_velocity: np.ndarray = field(default_factory=lambda: np.zeros(2))
     _last_t: float | None = None

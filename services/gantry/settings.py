@@ -45,7 +45,8 @@ class GantrySettings(ServiceSettings):
                            "position, to tick a fixed time after each new one")
     after_report_s: float = Field(AFTER_REPORT_S, ge=0, description="ticks this long after "
                                   "the controller reports its position")
-    stale_after_s: float = Field(0.6, gt=0, le=5, description="older estimate → hold")
+    stale_after_s: float = Field(0.5, gt=0, le=5, description="older estimate → hold "
+                                 "(as old as the bus lets a sample be: bus.max_age_s)")
     reaction_s: float = Field(0.114, ge=0, le=3, description="from the controller taking a "
                               "setpoint to the crane following it (stb gantry identify)")
     report_age_s: float = Field(0.05, ge=0, le=2, description="how old the position the "
