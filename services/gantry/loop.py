@@ -23,6 +23,7 @@ from services.gantry.crane import Crane, CraneError, CraneReading
 from services.gantry.cycle import CycleSync
 from services.gantry.frames import FrameSource
 from services.gantry.modes import Action, Command, Decision, Facts, Mode, ModeKeeper
+from services.gantry.safety import TargetCheck
 from services.gantry.settings import GantrySettings
 
 log = logging.getLogger(__name__)
@@ -69,6 +70,7 @@ class GantryLoop:
         self.crane, self.frames, self.controller, self.fix = crane, frames, controller, fix
         self.sync = CycleSync(1 / settings.control_hz, settings.after_report_s)
         self.modes = ModeKeeper(now_s)
+        self.targets = TargetCheck(settings.target_check_mm)
         self.reachable = True
         self.reading: CraneReading | None = None
         self._error: CraneError | None = None  # of the last tick's setpoint
@@ -145,10 +147,13 @@ class GantryLoop:
         if self.reading is None:
             return ()
         stop = self.modes.observe(self.reading, now_s)
+        if stop is None and self.armed:
+            foreign = self.targets.observe(self.reading)
+            stop = None if foreign is None else self.modes.halt(foreign, now_s)
         if stop is None:
             return ()
-        log.warning("crane stopped by itself: %s; the gantry is stopped until an operator "
-                    "resets it", stop.detail)
+        log.warning("crane stopped: %s; the gantry is stopped until an operator resets it",
+                    stop.detail)
         self._act(stop.action)
         return (stop,)
 
@@ -157,6 +162,7 @@ class GantryLoop:
         try:
             if action is Action.ENABLE:
                 self.controller.restart()  # the first setpoint starts where the crane stands
+                self.targets.forget()
                 self.crane.enable()
             elif action is Action.DISABLE:
                 self.crane.disable()
@@ -164,6 +170,7 @@ class GantryLoop:
                 self.controller.restart()
                 if self.reading is not None:
                     self.crane.write_setpoint(self.reading.x_mm, self.reading.y_mm)
+                    self.targets.wrote(self.reading.x_mm, self.reading.y_mm)
                 self.crane.disable()
             elif action is Action.RESET_FAULTS:
                 self.crane.reset_faults()
@@ -185,6 +192,7 @@ class GantryLoop:
         if self.armed:
             try:
                 self.crane.write_setpoint(*step.setpoint)
+                self.targets.wrote(*step.setpoint)
             except CraneError as err:
                 self._error = self._unreachable(err)
         return step

@@ -7,9 +7,10 @@
   when it has a fresh estimate, holding otherwise.
 * ``stopped`` — after ``stop`` (accepted in every mode), or by itself when the crane stops
   on its own: a watchdog trip or another latched fault, the safety circuit open (e-stop), or
-  the crane disabled at the controller. The setpoint is frozen where the crane is and the
-  crane is disabled. Only ``reset`` (which clears the controller's latched faults) leads out,
-  to ``disarmed``; then ``arm``. The gantry never resets a fault on its own.
+  the crane disabled at the controller; or when the crane goes where the gantry did not send
+  it (another Modbus client's setpoints, ``TargetCheck``). The setpoint is frozen where the
+  crane is and the crane is disabled. Only ``reset`` (which clears the controller's latched
+  faults) leads out, to ``disarmed``; then ``arm``. The gantry never resets a fault on its own.
 
 Every change names who asked and why.
 """
@@ -100,6 +101,10 @@ class ModeKeeper:
         if why is None:
             return None
         return self._change(Mode.STOPPED, Action.FREEZE_AND_DISABLE, "crane", why, now_s)
+
+    def halt(self, why: str, now_s: float) -> Decision:
+        """The gantry stops the crane by itself (what it saw is ``why``), as a stop would."""
+        return self._change(Mode.STOPPED, Action.FREEZE_AND_DISABLE, "gantry", why, now_s)
 
     def _arm(self, by: str, reason: str, now_s: float, facts: Facts) -> Decision:
         if self.mode is Mode.ARMED:

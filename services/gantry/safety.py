@@ -11,9 +11,16 @@ controller's watchdog (heartbeat) covers a dead or cut-off gantry service.
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+from common.crane_registers import FAULT_CLAMPED
+
+if TYPE_CHECKING:  # the reading's type only: this module stays free of the Modbus driver
+    from services.gantry.crane import CraneReading
 
 
 @dataclass(frozen=True)
@@ -102,3 +109,42 @@ class SetpointGuard:
 def _limit(vector: np.ndarray, norm: float) -> np.ndarray:
     length = float(np.hypot(*vector))
     return vector if length <= norm else vector * (norm / length)
+
+
+class TargetCheck:
+    """Whether the crane goes where the gantry sends it. Modbus/TCP has no authentication: a
+    setpoint another client writes between two of the gantry's is taken by the controller
+    like the gantry's own. Each time the controller reports a setpoint taken
+    (``setpoints_taken`` changes), its target must be one of the setpoints the gantry wrote
+    lately; ``persist`` targets in a row that are none of them → the reason to stop. A
+    controller without those registers (constant values) is never judged; a clamped setpoint
+    (its target differs by design) is not either."""
+
+    def __init__(self, tolerance_mm: float, persist: int = 2, remember: int = 8) -> None:
+        self.tolerance_mm, self.persist = tolerance_mm, persist
+        self._written: deque[tuple[float, float]] = deque(maxlen=remember)
+        self._taken: int | None = None
+        self._misses = 0
+
+    def wrote(self, x_mm: float, y_mm: float) -> None:
+        self._written.append((x_mm, y_mm))
+
+    def forget(self) -> None:
+        """Before the crane is enabled: what was written before is no reference."""
+        self._written.clear()
+        self._taken, self._misses = None, 0
+
+    def observe(self, reading: CraneReading) -> str | None:
+        taken, self._taken = self._taken, reading.setpoints_taken
+        if self.tolerance_mm <= 0 or taken is None or taken == reading.setpoints_taken \
+                or not self._written or reading.faults & FAULT_CLAMPED:
+            return None
+        x, y = reading.target_x_mm, reading.target_y_mm
+        if any(np.hypot(x - wx, y - wy) <= self.tolerance_mm for wx, wy in self._written):
+            self._misses = 0
+            return None
+        self._misses += 1
+        if self._misses < self.persist:
+            return None
+        return (f"the crane's target ({x:.0f}, {y:.0f}) mm is none of the gantry's setpoints "
+                f"{self._misses} times in a row: another Modbus client writes setpoints")

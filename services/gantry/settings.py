@@ -45,6 +45,9 @@ class GantrySettings(ServiceSettings):
                            "position, to tick a fixed time after each new one")
     after_report_s: float = Field(AFTER_REPORT_S, ge=0, description="ticks this long after "
                                   "the controller reports its position")
+    target_check_mm: float = Field(5.0, ge=0, description="the crane's target must be within "
+                                   "this of a setpoint the gantry wrote, or it stops the crane "
+                                   "(another Modbus client writes setpoints); 0: no check")
     stale_after_s: float = Field(0.5, gt=0, le=5, description="older estimate → hold "
                                  "(as old as the bus lets a sample be: bus.max_age_s)")
     reaction_s: float = Field(0.114, ge=0, le=3, description="from the controller taking a "

@@ -7,10 +7,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from common.crane_registers import FAULT_CLAMPED
 from common.heightmap import HeightMap
+from services.gantry.crane import CraneReading
 from services.gantry.locate import TrackingOptics, locate, offset_mm
 from services.gantry.predict import ALGORITHMS, ParticleOptions, make_predictor
-from services.gantry.safety import SetpointGuard, Workspace
+from services.gantry.safety import SetpointGuard, TargetCheck, Workspace
 from services.sim.render import TrackingCamera
 
 FLAT = HeightMap(np.full((3, 3), 100.0, dtype=np.float32), -5000.0, -5000.0, 5000.0)
@@ -183,3 +185,25 @@ def test_a_gaussian_cloud_that_lost_the_robot_starts_again_from_the_measurement(
         estimate = predictor.update(ti, xy)
         assert estimate is not None
         assert np.linalg.norm(estimate.position - xy) < 300.0 + step, ti  # it went 2.1 m
+
+
+def _reading(taken: int, target: tuple[float, float], faults: int = 0) -> CraneReading:
+    return CraneReading(0.0, 0.0, 0.0, 0.0, 1, faults, target[0], target[1], taken)
+
+
+def test_the_target_check_stops_on_targets_the_gantry_never_wrote() -> None:
+    check = TargetCheck(tolerance_mm=5.0, persist=2)
+    assert check.observe(_reading(7, (900.0, 900.0))) is None, "nothing written: no judgement"
+    check.wrote(100.0, 200.0)
+    check.wrote(110.0, 200.0)
+    assert check.observe(_reading(8, (101.0, 199.0))) is None, "one of its own (rounded)"
+    assert check.observe(_reading(8, (900.0, 900.0))) is None, "no setpoint taken since"
+    assert check.observe(_reading(9, (900.0, 900.0))) is None, "one stray target is tolerated"
+    assert check.observe(_reading(10, (110.0, 200.0))) is None
+    assert check.observe(_reading(11, (900.0, 900.0))) is None
+    assert check.observe(_reading(12, (900.0, 900.0), FAULT_CLAMPED)) is None, "clamped"
+    why = check.observe(_reading(13, (900.0, 900.0)))
+    assert why is not None and "another Modbus client" in why
+    check.forget()
+    assert check.observe(_reading(14, (900.0, 900.0))) is None
+    assert TargetCheck(tolerance_mm=0.0).observe(_reading(1, (0.0, 0.0))) is None

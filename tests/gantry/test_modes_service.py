@@ -9,6 +9,7 @@ import time
 
 import numpy as np
 import pytest
+from pymodbus.client import ModbusTcpClient
 
 from common.crane_registers import FAULT_SAFETY, FAULT_WATCHDOG, RegisterMap
 from common.node import Node
@@ -113,6 +114,37 @@ def test_a_crane_disabled_at_the_controller_stops_the_gantry(rig: dict) -> None:
         assert operator.states[-1].mode_reason == "crane disabled at the controller"
         time.sleep(1.5)
         assert not crane.state()[2], "the gantry does not enable it again"
+
+
+def test_another_modbus_clients_setpoints_stop_the_gantry(rig: dict) -> None:
+    """Modbus has no authentication: setpoints written beside the gantry's (a commissioning
+    tool left running, a second gantry) become the crane's target; the gantry notices within
+    a few controller cycles and stops the crane, naming why."""
+    crane: CraneRig = rig["crane"]
+    operator: Operator = rig["operator"]
+    registers = crane.registers
+    with feeding(crane, rig["world"], lambda t: TARGET + [60.0 * t, 0.0]):
+        _moving(rig)
+        time.sleep(1.0)
+        assert operator.mode() == "armed", "its own setpoints are no reason to stop"
+        foreign = ModbusTcpClient("127.0.0.1", port=crane.port, timeout=1, retries=0)
+        began = time.monotonic()
+        try:
+            while operator.mode() != "stopped" and time.monotonic() - began < 3:
+                foreign.write_registers(registers.setpoint_x,
+                                        registers.encode("setpoint_x", -2500.0)
+                                        + registers.encode("setpoint_y", 2500.0),
+                                        device_id=registers.unit_id)
+                time.sleep(0.1)
+        finally:
+            foreign.close()
+        stopped_after = time.monotonic() - began
+        print(f"stopped {stopped_after:.2f} s after the first foreign write")
+        assert operator.mode() == "stopped" and stopped_after < 1.5
+        assert "another Modbus client writes setpoints" in operator.states[-1].mode_reason
+        wait_for(lambda: not crane.state()[2], timeout=1)
+        position = crane.state()[0]
+        assert position[0] > -2000.0, "stopped on its way, long before the foreign setpoint"
 
 
 def test_an_e_stop_stops_the_gantry_at_once_and_holds_until_released_and_reset(
