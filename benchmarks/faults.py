@@ -30,6 +30,7 @@ import argparse
 import json
 import os
 import random
+import shutil
 import signal
 import subprocess
 import sys
@@ -772,6 +773,24 @@ def table(rows: list[Row]) -> str:
     return "\n".join(lines)
 
 
+IN_NAMESPACE = "STB_FAULTS_IN_NAMESPACE"
+
+
+def in_own_namespace(argv: list[str]) -> int | None:
+    """Run the campaign again inside a new network namespace (only its loopback, up), so
+    that nothing it does reaches the host's network; None where that cannot be done (not
+    root, no unshare or ip): the campaign then runs on free loopback ports."""
+    if os.geteuid() != 0 or not shutil.which("unshare") or not shutil.which("ip"):
+        return None
+    probe = subprocess.run(["unshare", "--net", "true"], capture_output=True)
+    if probe.returncode != 0:
+        return None
+    command = ["unshare", "--net", "sh", "-c", 'ip link set lo up && exec "$0" "$@"',
+               sys.executable, "-m", "benchmarks.faults", *argv]
+    path = os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH", "")) if p)
+    return subprocess.call(command, env={**os.environ, IN_NAMESPACE: "1", "PYTHONPATH": path})
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -784,7 +803,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", type=Path, help="write the rows with their figures here")
     parser.add_argument("--keep", type=Path, help="the lab's folder (logs); default: a "
                         "temporary one, removed")
+    parser.add_argument("--loopback", action="store_true", help="on this host's loopback "
+                        "(default: in a network namespace of its own when run as root)")
     args = parser.parse_args(argv)
+    argv = sys.argv[1:] if argv is None else argv
+    if not args.loopback and os.environ.get(IN_NAMESPACE) != "1":
+        code = in_own_namespace(argv)
+        if code is not None:
+            return code
+    where = "its own network namespace" if os.environ.get(IN_NAMESPACE) == "1" else "loopback"
+    print(f"fault campaign on {where}", flush=True)
     per_key = args.per_key or (300 if args.short else 10_000)
     churn = args.churn or (1000 if args.short else 4000)
     began = time.monotonic()

@@ -175,6 +175,12 @@ class KalmanPredictor:
     _imm: IMMEstimator | None = None
     _t: float = 0.0
 
+    def __post_init__(self) -> None:
+        # Loaded now, when the gantry starts, not at the first update: that one may come while
+        # the crane is armed, and 0.8 s of importing starves the heartbeat (watchdog trip).
+        import filterpy.kalman  # noqa: F401
+        import scipy.linalg  # noqa: F401
+
     def update(self, t_s: float, measured: np.ndarray | None, horizon_s: float | None = None
                ) -> Estimate | None:
         if measured is None:

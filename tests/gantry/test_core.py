@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -207,3 +211,15 @@ def test_the_target_check_stops_on_targets_the_gantry_never_wrote() -> None:
     check.forget()
     assert check.observe(_reading(14, (900.0, 900.0))) is None
     assert TargetCheck(tolerance_mm=0.0).observe(_reading(1, (0.0, 0.0))) is None
+
+
+def test_the_imm_loads_its_libraries_when_made_not_at_its_first_update() -> None:
+    """Importing filterpy and scipy takes 0.8 s with the GIL held: at the first update, while
+    the crane is armed, it starved the heartbeat and tripped the crane's watchdog."""
+    code = ("import sys\n"
+            "from services.gantry.predict import make_predictor\n"
+            "assert 'filterpy.kalman' not in sys.modules, 'the CLI stays fast'\n"
+            "make_predictor('default')\n"
+            "assert {'filterpy.kalman', 'scipy.linalg'} <= set(sys.modules)\n")
+    subprocess.run([sys.executable, "-c", code], cwd=Path(__file__).parents[2], check=True,
+                   timeout=60)
