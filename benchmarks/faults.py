@@ -186,8 +186,9 @@ class Meters:
         bus.subscribe(keys.HEALTH, self._on_health, latest=False)
         bus.subscribe(keys.TRUTH_ROBOT, self._on_robot, latest=False)
         bus.subscribe(keys.TRUTH_CRANE, self._on_crane, latest=False)
-        bus.subscribe(keys.GANTRY_ESTIMATE, self._on_estimate, latest=False)
-        bus.subscribe(keys.GANTRY_SETPOINT, self._on_setpoint, latest=False)
+        # one subscription for both, so that they are seen in the order they were published:
+        # each setpoint's estimate age is from the estimate that went out before it
+        bus.subscribe_any(f"{bus.prefix}/gantry/*", self._on_gantry, latest=False)
         bus.subscribe(keys.TRACKER_ROBOT, self._on_tracked, latest=False, max_age_s=1e9)
         bus.subscribe(keys.CALIB_POSE, lambda p: self._add(self.poses, p), latest=False)
         self.stops: list[tuple[float, str]] = []  # when the gantry said it stopped, and why
@@ -225,12 +226,13 @@ class Meters:
         with self.lock:
             self.crane.append((time.monotonic(), msg.x_mm, msg.y_mm, gap))
 
-    def _on_estimate(self, msg: m.RobotEstimate) -> None:
-        self.estimate_s = max(self.estimate_s, msg.measured_s)
-
-    def _on_setpoint(self, msg: m.CraneSetpoint) -> None:
-        with self.lock:
-            self.setpoints.append((time.monotonic(), msg, msg.measured_s - self.estimate_s))
+    def _on_gantry(self, item: tuple[str, m.Message | dict]) -> None:
+        msg = item[1]
+        if isinstance(msg, m.RobotEstimate):
+            self.estimate_s = max(self.estimate_s, msg.measured_s)
+        elif isinstance(msg, m.CraneSetpoint):
+            with self.lock:
+                self.setpoints.append((time.monotonic(), msg, msg.measured_s - self.estimate_s))
 
     def _on_tracked(self, msg: m.RobotPosition) -> None:
         with self.lock:
@@ -571,6 +573,7 @@ class Campaign:
         tripped_in_time = trip is not None and trip <= GOAL_WATCHDOG_S + 2 * POLL_S
         held = (tripped_in_time if expect_trip else trip is None or trip > seconds) \
             and not stale
+        ages = [age for _, sp, age in setpoints if not sp.hold]
         text = (f"watchdog tripped {_s(trip)} after SIGSTOP" if trip is not None and
                 trip < seconds + 1 else "no watchdog trip") + \
             f"; {len(stale)} setpoints with an estimate older than {self.max_age_s} s " \
@@ -578,7 +581,8 @@ class Campaign:
         self.rows.append(Row(
             f"SIGSTOP gantry {seconds:g} s",
             "crane halted ≤ 0.5 s after the last write; 0 stale setpoints executed", text, held,
-            {"watchdog_s": trip, "stale_setpoints": len(stale)}))
+            {"watchdog_s": trip, "stale_setpoints": len(stale), "stale_ages_s": stale,
+             "oldest_estimate_s": max(ages, default=None)}))
         self.log(f"SIGSTOP gantry {seconds:g} s: {text}")
         self.follow()
 

@@ -117,8 +117,9 @@ class TargetCheck:
     like the gantry's own. Each time the controller reports a setpoint taken
     (``setpoints_taken`` changes), its target must be one of the setpoints the gantry wrote
     lately; ``persist`` targets in a row that are none of them → the reason to stop. A
-    controller without those registers (constant values) is never judged; a clamped setpoint
-    (its target differs by design) is not either."""
+    controller without those registers (constant values) is never judged. The gantry's
+    setpoints stay inside its workspace, which lies inside the crane's: a clamped target is
+    not one of them either."""
 
     def __init__(self, tolerance_mm: float, persist: int = 2, remember: int = 8) -> None:
         self.tolerance_mm, self.persist = tolerance_mm, persist
@@ -137,7 +138,7 @@ class TargetCheck:
     def observe(self, reading: CraneReading) -> str | None:
         taken, self._taken = self._taken, reading.setpoints_taken
         if self.tolerance_mm <= 0 or taken is None or taken == reading.setpoints_taken \
-                or not self._written or reading.faults & FAULT_CLAMPED:
+                or not self._written:
             return None
         x, y = reading.target_x_mm, reading.target_y_mm
         if any(np.hypot(x - wx, y - wy) <= self.tolerance_mm for wx, wy in self._written):
@@ -146,5 +147,8 @@ class TargetCheck:
         self._misses += 1
         if self._misses < self.persist:
             return None
-        return (f"the crane's target ({x:.0f}, {y:.0f}) mm is none of the gantry's setpoints "
-                f"{self._misses} times in a row: another Modbus client writes setpoints")
+        clamped = " (clamped: set outside the crane's workspace)" \
+            if reading.faults & FAULT_CLAMPED else ""
+        return (f"the crane's target ({x:.0f}, {y:.0f}) mm{clamped} is none of the gantry's "
+                f"setpoints {self._misses} times in a row: another Modbus client writes "
+                "setpoints")
