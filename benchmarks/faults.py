@@ -815,8 +815,9 @@ def main(argv: list[str] | None = None) -> int:
         code = in_own_namespace(argv)
         if code is not None:
             return code
-    where = "its own network namespace" if os.environ.get(IN_NAMESPACE) == "1" else "loopback"
-    print(f"fault campaign on {where}", flush=True)
+    where = "in a network namespace of its own" if os.environ.get(IN_NAMESPACE) == "1" \
+        else "on the host's loopback"
+    print(f"fault campaign {where}", flush=True)
     per_key = args.per_key or (300 if args.short else 10_000)
     churn = args.churn or (1000 if args.short else 4000)
     began = time.monotonic()

@@ -1,7 +1,7 @@
 """The fault campaign, shortened (a few seconds per fault): ``python -m benchmarks.faults
---short`` as a test. Every goal must hold except the three that docs/reliability.md reports as
-not met; those are checked in their own way here (the memory that grew once is flat when the
-same fault comes again; the spoofed frames do not steer the crane out of its workspace)."""
+--short`` as a test. Every goal must hold except those docs/reliability.md reports as not met;
+those are checked in their own way here (the memory that grew once is flat when the same fault
+comes again; the spoofed frames do not steer the crane out of its workspace)."""
 
 from __future__ import annotations
 
