@@ -56,3 +56,8 @@ class SimFrames:
         self._taken = number
         self.lab.crane.advance_to(self.clock())
         return captured, self.lab.tracking_frame(captured, self.rng)
+
+    def take_recent(self) -> list[Frame]:
+        """The newest only: older frames are not rendered (the experiment has no spoofer)."""
+        frame = self.take()
+        return [] if frame is None else [frame]

@@ -17,6 +17,7 @@ sees the marker again.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -92,18 +93,22 @@ class Controller:
         self.guard.reset()
 
     def step(self, now_s: float, frame: Frame | None, crane_xy: np.ndarray,
-             fix: Fix | None = None, timing: Timing | None = None) -> Step:
+             fix: Fix | None = None, timing: Timing | None = None,
+             older: Sequence[Frame] = ()) -> Step:
         """One control period: ``frame`` is the newest frame not used yet (or None),
         ``crane_xy`` the crane's position as its controller reports it (mm), ``fix`` the
         motion capture's latest fix of the robot (or None), ``timing`` where the step
-        stands in the controller's cycle (None: not known yet)."""
+        stands in the controller's cycle (None: not known yet), ``older`` the frames that
+        came before ``frame`` since the last step, newest first: the newest of them that
+        shows the robot stands in for ``frame`` when that one does not (a stray or spoofed
+        frame)."""
         crane_xy = np.asarray(crane_xy, dtype=float)
         s = self.settings
         self._fix = fix if fix is not None and abs(now_s - fix.t_s) <= s.mocap_max_age_s \
             else None
         seen: dict = {}
         if frame is not None:
-            seen = self._measure(frame, crane_xy, self._horizon(timing))
+            seen = self._measure([frame, *older], crane_xy, self._horizon(timing))
         if self._reacquire(now_s):
             assert self._fix is not None
             decision = self.guard.decide(now_s, self._fix.xy_mm, self._fix.t_s, crane_xy,
@@ -133,10 +138,19 @@ class Controller:
         return (timing.report_age_s + timing.taken_in_s + self.settings.reaction_s
                 + 0.5 * period)
 
-    def _measure(self, frame: Frame, crane_xy: np.ndarray, horizon_s: float | None) -> dict:
-        captured, image = frame
-        found = detect(image, max_markers=MAX_MARKERS)
-        xyz, rejected = self._locate(found, crane_xy, captured)
+    def _measure(self, frames: Sequence[Frame], crane_xy: np.ndarray, horizon_s: float | None
+                 ) -> dict:
+        """The newest of ``frames`` that shows the robot (or the newest, showing none)."""
+        newest = None
+        for captured, image in frames:
+            found = detect(image, max_markers=MAX_MARKERS)
+            xyz, rejected = self._locate(found, crane_xy, captured)
+            newest = newest or (captured, image, found, xyz, rejected)
+            if xyz is not None:
+                break
+        else:
+            assert newest is not None, "at least one frame"
+            captured, image, found, xyz, rejected = newest
         if xyz is not None:
             self._seen = [*self._seen[-1:], (captured, xyz[:2])]
         self.estimate = self.predictor.update(captured, None if xyz is None else xyz[:2],

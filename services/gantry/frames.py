@@ -1,11 +1,14 @@
 """Tracking-camera frames: from the bus (the camera host publishes them — the sim in local
 runs) or from a camera on this host through OpenCV. Either way ``take()`` gives the newest
-frame not taken yet, with its capture time, or None."""
+frame not taken yet, with its capture time, or None; ``take_recent()`` the frames that came
+since the last take, newest first (the gantry looks at the older ones when the newest does not
+show the robot: a stray or spoofed frame then does not blind it)."""
 
 from __future__ import annotations
 
 import logging
 import threading
+from collections import deque
 from typing import Protocol
 
 import numpy as np
@@ -24,22 +27,30 @@ class FrameSource(Protocol):
     def take(self) -> Frame | None:
         """The newest frame not taken yet, or None."""
 
+    def take_recent(self) -> list[Frame]:
+        """The frames not taken yet, newest first (a source may keep only the newest)."""
+
 
 class FrameInbox:
-    """The newest frame, handed over once."""
+    """The last ``keep`` frames, handed over once."""
 
-    def __init__(self) -> None:
+    def __init__(self, keep: int = 8) -> None:
         self._lock = threading.Lock()
-        self._frame: Frame | None = None
+        self._frames: deque[Frame] = deque(maxlen=keep)
 
     def put(self, frame: Frame) -> None:
         with self._lock:
-            self._frame = frame
+            self._frames.append(frame)
 
     def take(self) -> Frame | None:
+        recent = self.take_recent()
+        return recent[0] if recent else None
+
+    def take_recent(self) -> list[Frame]:
         with self._lock:
-            frame, self._frame = self._frame, None
-        return frame
+            frames = list(reversed(self._frames))
+            self._frames.clear()
+        return frames
 
 
 def decode(msg: m.CameraFrame) -> Frame | None:

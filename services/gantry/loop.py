@@ -186,9 +186,10 @@ class GantryLoop:
         if not self.reachable:
             log.info("crane controller reachable again")
             self.reachable = True
-        step = self.controller.step(now_s, self.frames.take(),
+        frames = self.frames.take_recent()
+        step = self.controller.step(now_s, frames[0] if frames else None,
                                     np.array([reading.x_mm, reading.y_mm]), self.fix(),
-                                    self._timing(mono_s))
+                                    self._timing(mono_s), older=frames[1:])
         if self.armed:
             try:
                 self.crane.write_setpoint(*step.setpoint)

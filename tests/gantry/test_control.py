@@ -59,6 +59,27 @@ def test_a_lost_marker_holds_and_says_so() -> None:
     assert lost.hold and lost.reason == "no estimate" and lost.measured_xyz is None
 
 
+def test_a_newest_frame_without_the_robot_gives_way_to_an_older_one_that_shows_it() -> None:
+    """A spoofed or stray frame (a spot where the robot cannot be) that arrived last does not
+    blind the gantry: the newest frame since the last step that shows the robot is used."""
+    control = Controller(SETTINGS, FLAT)
+    crane = np.array([0.0, 0.0])
+    control.step(1.0, (0.96, _frame([(100.0, 0.0)], crane)), crane)
+    spoofed = (1.24, _frame([(1500.0, 1500.0)], crane))
+    real = (1.20, _frame([(120.0, 0.0)], crane))
+    older = (1.10, _frame([(110.0, 0.0)], crane))
+    step = control.step(1.25, spoofed, crane, older=[real, older])
+    assert step.frame_s == 1.20 and step.measured_xyz is not None and not step.hold
+    np.testing.assert_allclose(step.measured_xyz[:2], [120.0, 0.0], atol=1.5)
+    alone = Controller(SETTINGS, FLAT)
+    alone.step(1.0, (0.96, _frame([(100.0, 0.0)], crane)), crane)
+    blinded = alone.step(1.25, spoofed, crane)
+    assert blinded.hold and blinded.measured_xyz is None, "without the older frames"
+    nothing = control.step(1.5, (1.49, _frame([], crane)), crane,
+                           older=[(1.45, _frame([(2000.0, -2000.0)], crane))])
+    assert nothing.frame_s == 1.49 and nothing.measured_xyz is None, "the newest, if none"
+
+
 def test_of_several_spots_it_keeps_the_one_nearest_the_last() -> None:
     control = Controller(SETTINGS, FLAT)
     crane = np.array([0.0, 0.0])

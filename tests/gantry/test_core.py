@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from common.crane_registers import FAULT_CLAMPED
 from common.heightmap import HeightMap
 from services.gantry.crane import CraneReading
+from services.gantry.frames import FrameInbox
 from services.gantry.locate import TrackingOptics, locate, offset_mm
 from services.gantry.predict import ALGORITHMS, ParticleOptions, make_predictor
 from services.gantry.safety import SetpointGuard, TargetCheck, Workspace
@@ -222,3 +223,15 @@ def test_the_imm_loads_its_libraries_when_made_not_at_its_first_update() -> None
             "assert {'filterpy.kalman', 'scipy.linalg'} <= set(sys.modules)\n")
     subprocess.run([sys.executable, "-c", code], cwd=Path(__file__).parents[2], check=True,
                    timeout=60)
+
+
+def test_the_frame_inbox_hands_over_what_came_since_the_last_take_newest_first() -> None:
+    inbox = FrameInbox(keep=3)
+    image = np.zeros((2, 2), np.uint8)
+    for t in (1.0, 2.0, 3.0, 4.0):
+        inbox.put((t, image))
+    assert [t for t, _ in inbox.take_recent()] == [4.0, 3.0, 2.0], "the last three, newest first"
+    assert inbox.take_recent() == [] and inbox.take() is None, "handed over once"
+    inbox.put((5.0, image))
+    inbox.put((6.0, image))
+    assert inbox.take()[0] == 6.0 and inbox.take() is None
