@@ -1,0 +1,147 @@
+"""Faults that come over the bus: fuzz, key churn, decode bombs, spoofed frames and poses."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import cv2
+import numpy as np
+
+from benchmarks.faults.lab import ALIVE, private_mb, wait_until
+from benchmarks.faults.payloads import fuzz_payloads, jpeg_declaring, valid
+from benchmarks.faults.rows import GOAL_MEMORY_MB, GOAL_POSE_REPORTED_S, Row, duration_text
+from common import keys
+from common import messages as m
+from tests.calib.test_demo_calibration import MOUNTS
+
+# Keys our meters read and that a single service writes (the secured lab lets only it):
+# fuzzing them would fool the meters, not the services.
+MEASURED = {keys.TRUTH_CRANE, keys.TRUTH_ROBOT, keys.GANTRY_SETPOINT, keys.GANTRY_ESTIMATE,
+            keys.GANTRY_STATE, keys.HEALTH}
+# Commands are fuzzed with invalid payloads only: a valid one is obeyed, which is what it is for
+# (a valid collect request starts a collection); in the secured lab only the operator sends them.
+COMMANDS = {keys.GANTRY_COMMAND, keys.CALIB_COLLECT, keys.PTZ_CALIBRATION}
+
+
+class BusFaults:
+    """The bus's faults, as a part of ``Campaign``."""
+
+    def fuzz(self, per_key: int, again: bool = False) -> None:
+        topics = [t for t in vars(keys).values() if isinstance(t, keys.Topic)
+                  and t not in MEASURED]
+        pids, memory, start = self.pids(), self.settled_memory(), time.monotonic()
+        sent = 0
+        for topic in topics:
+            params = {name: "ptz1" for name in topic.params}
+            key = topic.key(self.bus.prefix, **params)
+            publisher = self.session.declare_publisher(key)
+            for payload in fuzz_payloads(topic, per_key, self.rng):
+                if topic in COMMANDS and valid(topic, payload):
+                    continue
+                publisher.put(payload)
+                sent += 1
+                if sent % 2000 == 0:
+                    time.sleep(0.01)  # the router's queues are bounded: a burst is dropped
+            publisher.undeclare()
+        time.sleep(2 if self.short else 3)
+        for camera in MOUNTS:  # a fuzzed request may have started a collection: end it
+            self.bus.publish(keys.CALIB_COLLECT, m.CollectRequest(
+                measured_s=time.time(), camera=camera, action="cancel"), camera=camera)
+        what = f"{per_key} payloads on each of {len(topics)} keys ({sent} in " \
+            f"{time.monotonic() - start:.0f} s)"
+        self._survived("fuzz" + " again" * again, what, start, pids, memory, again=again)
+
+    def quiet(self) -> None:
+        """The control: the same wait as a fault's, with no fault."""
+        pids, memory, start = self.pids(), self.settled_memory(), time.monotonic()
+        time.sleep(5)
+        self._survived("nothing (control)", "5 s without a fault", start, pids, memory)
+
+    def churn(self, count: int, again: bool = False) -> None:
+        pids, memory, start = self.pids(), self.settled_memory(), time.monotonic()
+        patterns = ["stb/ptz/churn{}/state", "stb/calib/churn{}/progress",
+                    "stb/health/churn/{}", "stb/sim/truth/robot/churn{}"]
+        for i in range(count):
+            self.session.put(patterns[i % len(patterns)].format(i), os.urandom(8))
+            if i % 1000 == 999:
+                time.sleep(0.01)
+        time.sleep(2 if self.short else 3)
+        heard = self.meters.health_heard_after(time.monotonic() - 1.5)
+        too_large = sum(s.dropped.get("too_large", 0) for k, s in self.bus.key_stats().items()
+                        if k.startswith("stb/health/"))
+        extra = {"health messages too large": too_large,
+                 "services heard in the last 1.5 s": len(heard)}
+        self._survived("key churn" + " again" * again, f"8 bytes on each of {count} distinct "
+                       "keys", start, pids, memory, again=again, extra=extra,
+                       ok=too_large == 0 and len(heard) >= len(ALIVE))
+
+    def decode_bombs(self) -> None:
+        pid = self.meters.pid("gantry")
+        before, start = self.settled_memory()["gantry"], time.monotonic()
+        bomb = jpeg_declaring(24000, 24000)
+        for seq in range(20):
+            self.bus.publish(keys.GANTRY_FRAME, m.CameraFrame(
+                measured_s=time.time(), camera="tracking", seq=10**9 + seq, width_px=640,
+                height_px=480, encoding="jpeg", data=bomb))
+            time.sleep(0.05)
+        time.sleep(2)
+        after = private_mb(pid or -1)
+        deaths = self.meters.deaths(start)
+        held = not deaths and after - before <= GOAL_MEMORY_MB and self.meters.pid("gantry") == pid
+        self.rows.append(Row("decode bombs", "no crash; the gantry's own memory ≤ +20 MB",
+                             f"20 JPEGs declaring 24000×24000 in 640×480 frames: gantry "
+                             f"{before:.0f} → {after:.0f} MB, restarts {len(deaths)}", held,
+                             {"rss_before_mb": before, "rss_after_mb": after}))
+
+    def spoofed_frames(self, baseline: dict) -> None:
+        seconds = 3 if self.short else 8
+        start = time.monotonic()
+        frame = np.zeros((480, 640), np.uint8)
+        cv2.circle(frame, (60, 60), 5, 255, -1)
+        seq = 2 * 10**9
+        while time.monotonic() - start < seconds:
+            seq += 1
+            self.bus.publish(keys.GANTRY_FRAME, m.CameraFrame(
+                measured_s=time.time(), camera="tracking", seq=seq, width_px=640,
+                height_px=480, encoding="mono8", data=frame.tobytes()))
+            time.sleep(1 / 30)
+        crane = self.meters.crane_window(start)
+        worst = float(crane[:, 3].max()) if len(crane) else float("nan")
+        bound = max(2 * baseline["max_mm"], baseline["max_mm"] + 100)
+        self.rows.append(Row(
+            "spoofed frames", "crane stays with the robot (max gap ≤ 2× the baseline's)",
+            f"{seq - 2 * 10**9} frames with a spot 2 m off, over {seconds} s: crane–robot max "
+            f"{worst:.0f} mm (baseline max {baseline['max_mm']:.0f} mm)", worst <= bound,
+            {"max_gap_mm": worst}, [] if worst <= bound else ["gap"]))
+
+    def spoofed_pose(self) -> None:
+        held_version = max((p.version for _, p in self.meters.poses if p.camera == "ptz1"),
+                           default=1)
+        mount = MOUNTS["ptz1"]
+        start = time.monotonic()
+        self.bus.publish(keys.CALIB_POSE, m.CameraPose(
+            measured_s=time.time(), camera="ptz1", x_mm=mount.x_mm, y_mm=mount.y_mm,
+            z_mm=mount.z_mm, rx_deg=mount.rx_deg, ry_deg=mount.ry_deg,
+            rz_deg=mount.rz_deg + 40.0, focal_mm=3.8, mean_error_px=0.5, passpoints=100,
+            version=held_version), camera="ptz1")
+
+        def answered() -> float | None:
+            return next((t - start for t, p in list(self.meters.poses)
+                         if t > start and p.version > held_version
+                         and abs(p.rz_deg - mount.rz_deg) < 1e-6), None)
+
+        def reported() -> float | None:
+            with self.meters.lock:
+                entry = self.meters.health.get("calib/main")
+            ok = entry and entry[0] > start and "did not send" in entry[1].detail
+            return entry[0] - start if ok else None
+
+        wait_until(lambda: answered() is not None and reported() is not None, timeout=8)
+        a, r = answered(), reported()
+        held = a is not None and r is not None and max(a, r) <= GOAL_POSE_REPORTED_S
+        self.rows.append(Row(
+            "spoofed pose", "detected and reported ≤ 5 s",
+            f"ptz1 turned 40° at the held version: true pose out-versioned after "
+            f"{duration_text(a)}, calib health degraded after {duration_text(r)}", held,
+            {"answered_s": a, "reported_s": r}))

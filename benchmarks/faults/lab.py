@@ -1,0 +1,127 @@
+"""The simulated lab the campaign runs against (``stb up`` with every service), and what /proc
+says about its processes."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import zenoh
+
+from common import messages as m
+from common.bus import open_session
+from common.settings import ZenohSettings
+from services.calib.store import PoseStore
+from tests.calib.test_demo_calibration import MOUNTS
+from tests.ports import free_port
+from tests.sim.test_sim_service import write_lab
+
+ROOT = Path(__file__).resolve().parents[2]
+SERVICES = ["router", "sim", "tracker", "calib", "ptz:ptz1", "ptz:ptz2", "gantry", "web"]
+ALIVE = {"sim": "sim/main", "tracker": "tracker/main", "calib": "calib/main",
+         "ptz:ptz1": "ptz/ptz1", "ptz:ptz2": "ptz/ptz2", "gantry": "gantry/main",
+         "web": "web/main"}
+
+
+@contextmanager
+def running_lab(folder: Path) -> Iterator[tuple[subprocess.Popen, Path, str]]:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    lab, _ = write_lab(folder, endpoint, folder / "crater.npz")
+    services = ", ".join(f'"{s}"' for s in SERVICES)
+    with open(lab, "a") as f:
+        f.write(f'[router]\nlisten = ["{endpoint}"]\n[up]\nlog_dir = "{folder / "logs"}"\n'
+                f'services = [{services}]\n[web]\nport = {free_port()}\n'
+                f'height_map = "{folder / "crater.npz"}"\n')
+    store = PoseStore(folder / "calib")
+    for camera, mount in MOUNTS.items():  # as a finished calibration leaves them
+        store.save(m.CameraPose(measured_s=time.time(), camera=camera, x_mm=mount.x_mm,
+                                y_mm=mount.y_mm, z_mm=mount.z_mm, rx_deg=mount.rx_deg,
+                                ry_deg=mount.ry_deg, rz_deg=mount.rz_deg, focal_mm=3.8,
+                                mean_error_px=1.5, passpoints=100, version=1), {})
+    with open(folder / "up.log", "w") as log:
+        up = subprocess.Popen([sys.executable, "-m", "services.cli", "up", "--lab", str(lab),
+                               "--no-view"], cwd=ROOT, stdout=log, stderr=subprocess.STDOUT,
+                              env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    try:
+        yield up, lab, endpoint
+    finally:
+        up.send_signal(signal.SIGINT)
+        try:
+            up.wait(30)
+        except subprocess.TimeoutExpired:
+            up.kill()
+            up.wait()
+
+
+def children(pid: int) -> list[int]:
+    try:
+        text = Path(f"/proc/{pid}/task/{pid}/children").read_text()
+    except OSError:
+        return []
+    return [int(p) for p in text.split()]
+
+
+def cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+    except OSError:
+        return ""
+
+
+def _status(pid: int, field: str) -> float:
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith(f"{field}:"):
+                return float(line.split()[1])
+    except OSError:
+        pass
+    return float("nan")
+
+
+def private_mb(pid: int) -> float:
+    """A process's own resident memory (RssAnon): what it allocated. Not the shared memory it
+    maps: Zenoh hands messages over 3 kB between processes on one host through each sender's
+    16 MiB shared-memory pool, which every receiver maps once it gets such a message from that
+    sender (it counts in each one's VmRSS, in 17 MiB steps, but exists once)."""
+    return _status(pid, "RssAnon") / 1024
+
+
+def shared_mb(pid: int) -> float:
+    return _status(pid, "RssShmem") / 1024
+
+
+def threads(pid: int) -> float:
+    return _status(pid, "Threads")
+
+
+def wait_until(predicate: Callable[[], object], timeout: float, period: float = 0.05) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(period)
+    return bool(predicate())
+
+
+def ports_of(lab: Path) -> dict:
+    import tomllib
+
+    doc = tomllib.loads(lab.read_text())
+    return {"crane": doc["sim"]["crane"]["port"]}
+
+
+def open_when_up(settings: ZenohSettings) -> zenoh.Session:
+    deadline = time.monotonic() + 30
+    while True:
+        try:
+            return open_session(settings)
+        except Exception:  # noqa: BLE001 - the router is still starting
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.3)

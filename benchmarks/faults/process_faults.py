@@ -1,0 +1,152 @@
+"""Faults of processes and devices: SIGKILL, SIGSTOP, a router restart, a foreign Modbus
+writer."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+
+from pymodbus.client import ModbusTcpClient
+
+from benchmarks.faults.lab import ALIVE, SERVICES, children, cmdline, wait_until
+from benchmarks.faults.rows import (
+    GOAL_ALIVE_S,
+    GOAL_FOREIGN_STOP_S,
+    GOAL_WATCHDOG_S,
+    POLL_S,
+    Row,
+    duration_text,
+)
+from common.crane_registers import DEFAULT_MAP, ENABLED, FAULTED
+
+
+class ProcessFaults:
+    """The processes' and devices' faults, as a part of ``Campaign``."""
+
+    def kill_each(self) -> None:
+        for service in [s for s in SERVICES if s != "router"]:
+            pid = self.meters.pid(service)
+            if pid is None:
+                self.rows.append(Row(f"SIGKILL {service}", "alive ≤ 2 s", "no pid heard", False))
+                continue
+            at = time.monotonic()
+            os.kill(pid, signal.SIGKILL)
+            wait_until(lambda s=service, t=at: self.meters.alive_again(ALIVE[s], t) is not None,
+                       20)
+            back = self.meters.alive_again(ALIVE[service], at)
+            figures = {"alive_again_s": back}
+            text = f"alive again after {duration_text(back)}"
+            held = back is not None and back <= GOAL_ALIVE_S
+            if service == "gantry":
+                trip = self.meters.first_status(at, ENABLED, present=False)
+                figures["crane_disabled_s"] = trip
+                text += f"; crane disabled after {duration_text(trip)}"
+                held = held and trip is not None and trip <= GOAL_WATCHDOG_S + 2 * POLL_S
+            if service in ("gantry", "sim"):  # it comes back disarmed; the crane disabled
+                self.follow()
+            self.rows.append(Row(f"SIGKILL {service}", "alive ≤ 2 s" + (
+                "; crane disabled ≤ 0.5 s" if "crane_disabled_s" in figures else ""),
+                text, held, figures))
+            self.log(f"SIGKILL {service}: {text}")
+            # the next kill once this one is up again (its health from the new process): each
+            # restart measured alone, not while the one before still loads
+            wait_until(lambda s=service, p=pid: self.meters.pid(s) not in (None, p), 10)
+            time.sleep(0.3 if self.short else 1)
+        self.router_restart()
+
+    def router_restart(self) -> None:
+        routers = [p for p in children(self.up.pid) if "services.router" in cmdline(p)]
+        if not routers:
+            self.rows.append(Row("router restart", "resumed ≤ 2 s", "no router process", False))
+            return
+        at = time.monotonic()
+        os.kill(routers[0], signal.SIGKILL)
+        names = {f"{s.replace(':', '/')}" if ":" in s else f"{s}/main" for s in ALIVE}
+        wait_until(lambda: names <= self.meters.health_heard_after(at + 0.1), 30)
+        heard = {}
+        with self.meters.lock:
+            for name in names:
+                entry = self.meters.health.get(name)
+                heard[name] = entry[0] - at if entry and entry[0] > at + 0.1 else None
+        worst = max((v for v in heard.values() if v is not None), default=None)
+        held = None not in heard.values() and worst is not None and worst <= GOAL_ALIVE_S + 1.0
+        self.rows.append(Row(
+            "router SIGKILL", "every service heard again ≤ 2 s after the router is back",
+            f"router restarted by stb up; every service's health heard again after "
+            f"{duration_text(worst)} (router restart included)", held, {"resumed_s": heard}))
+        self.follow()
+
+    def stall(self, service: str, seconds: float) -> None:
+        pid = self.meters.pid(service)
+        if pid is None:
+            return
+        at = time.monotonic()
+        os.kill(pid, signal.SIGSTOP)
+        time.sleep(seconds)
+        os.kill(pid, signal.SIGCONT)
+        resumed = time.monotonic()
+        time.sleep(2)
+        if service == "gantry":
+            self._gantry_stall(seconds, at, resumed)
+        else:
+            ages = [age for t, age in self.meters.robot_ages if t > resumed]
+            stale = sum(age > self.max_age_s for age in ages)
+            self.rows.append(Row(
+                f"SIGSTOP {service} {seconds:g} s",
+                f"0 robot samples older than bus.max_age_s ({self.max_age_s} s) sent",
+                f"{len(ages)} robot samples in 2 s after SIGCONT, {stale} older than "
+                f"{self.max_age_s} s (oldest {max(ages, default=0):.2f} s)", stale == 0,
+                {"stale_samples": stale, "samples": len(ages)}))
+
+    def _gantry_stall(self, seconds: float, at: float, resumed: float) -> None:
+        trip = self.meters.first_status(at, FAULTED, present=True)
+        setpoints = self.meters.setpoints_since(resumed)
+        stale = [age for t, sp, age in setpoints if not sp.hold and age > self.max_age_s
+                 and self.meters.status_at(t) & ENABLED]
+        expect_trip = seconds > GOAL_WATCHDOG_S
+        tripped_in_time = trip is not None and trip <= GOAL_WATCHDOG_S + 2 * POLL_S
+        held = (tripped_in_time if expect_trip else trip is None or trip > seconds) \
+            and not stale
+        ages = [age for _, sp, age in setpoints if not sp.hold]
+        text = (f"watchdog tripped {duration_text(trip)} after SIGSTOP" if trip is not None and
+                trip < seconds + 1 else "no watchdog trip") + \
+            f"; {len(stale)} setpoints with an estimate older than {self.max_age_s} s " \
+            "executed after SIGCONT"
+        self.rows.append(Row(
+            f"SIGSTOP gantry {seconds:g} s",
+            "crane halted ≤ 0.5 s after the last write; 0 stale setpoints executed", text, held,
+            {"watchdog_s": trip, "stale_setpoints": len(stale), "stale_ages_s": stale,
+             "oldest_estimate_s": max(ages, default=None)}))
+        self.log(f"SIGSTOP gantry {seconds:g} s: {text}")
+        self.follow()
+
+    def foreign_modbus(self, baseline: dict) -> None:
+        """Another client writes setpoints 2 m outside the workspace at 10 Hz for 2 s."""
+        client = ModbusTcpClient("127.0.0.1", port=self.crane_port, timeout=0.5, retries=0)
+        start = time.monotonic()
+        g = self.gantry
+        written = 0
+        for i in range(20):
+            x = g.x_max_mm + 2000 if i % 2 else g.x_min_mm - 2000
+            values = DEFAULT_MAP.encode("setpoint_x", x) + DEFAULT_MAP.encode("setpoint_y", 0)
+            reply = client.write_registers(DEFAULT_MAP.setpoint_x, values,
+                                           device_id=DEFAULT_MAP.unit_id)
+            written += not reply.isError()
+            time.sleep(0.1)
+        client.close()
+        time.sleep(1)
+        crane = self.meters.crane_window(start)
+        inside = bool(len(crane)) and bool(
+            (crane[:, 1] >= g.x_min_mm).all() and (crane[:, 1] <= g.x_max_mm).all())
+        worst = float(crane[:, 3].max()) if len(crane) else float("nan")
+        with self.meters.lock:
+            stopped = next((t - start for t, why in self.meters.stops
+                            if t > start and "another Modbus client" in why), None)
+        held = inside and stopped is not None and stopped <= GOAL_FOREIGN_STOP_S
+        self.rows.append(Row(
+            "foreign Modbus writer", "crane inside the workspace; the gantry stops it ≤ 1 s",
+            f"{written} setpoint writes 2 m beyond the workspace over 2 s: the gantry stopped "
+            f"the crane after {duration_text(stopped)}; crane x {crane[:, 1].min():.0f}…"
+            f"{crane[:, 1].max():.0f} mm, max gap to the robot {worst:.0f} mm (baseline "
+            f"{baseline['max_mm']:.0f})", held, {"stopped_s": stopped, "max_gap_mm": worst}))

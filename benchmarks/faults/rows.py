@@ -1,0 +1,38 @@
+"""A fault's row in the campaign's table, and the goals (issue: hardening from a fault
+campaign)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+GOAL_ALIVE_S = 2.0
+GOAL_WATCHDOG_S = 0.5
+GOAL_MEMORY_MB = 20.0
+GOAL_FLAT_MB = 5.0  # the same fault again: memory that grew once must not grow again
+GOAL_POSE_REPORTED_S = 5.0
+GOAL_FOREIGN_STOP_S = 1.0
+POLL_S = 0.01
+
+
+@dataclass
+class Row:
+    fault: str
+    goal: str
+    measured: str
+    held: bool
+    figures: dict = field(default_factory=dict)
+    misses: list[str] = field(default_factory=list)  # which part of the goal did not hold
+
+    def __post_init__(self) -> None:
+        if not self.held and not self.misses:
+            self.misses = ["goal"]
+
+
+def duration_text(value: float | None) -> str:
+    return "never" if value is None else f"{value:.2f} s"
+
+
+def largest(before: dict[str, float], after: dict[str, float]) -> tuple[str, float]:
+    grown = {s: after[s] - before[s] for s in before}
+    worst = max(grown, key=lambda s: grown[s])
+    return worst, grown[worst]
