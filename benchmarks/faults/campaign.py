@@ -66,14 +66,11 @@ class Campaign(BusFaults, ProcessFaults):
     def follow(self, timeout: float = 60.0) -> bool:
         """Reset a latched fault if there is one, arm, and wait until the crane tracks."""
         def tracking() -> bool:
-            states = self.meters.states
-            if states and states[-1].mode == "armed" and states[-1].status == "tracking":
-                return True
-            if states and states[-1].mode != "armed":
-                self.operator("reset")
-                reply = self.operator("arm")
-                return False if reply is None else False
-            return False
+            state = self.meters.states[-1] if self.meters.states else None
+            if state is not None and state.mode != "armed":
+                self.operator("reset")  # clears a latched fault, as an operator would
+                self.operator("arm")  # refused without a fresh estimate: asked again
+            return state is not None and state.mode == "armed" and state.status == "tracking"
         return wait_until(tracking, timeout, period=0.5)
 
     def snapshot_memory(self) -> dict[str, float]:
