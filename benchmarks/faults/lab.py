@@ -14,16 +14,11 @@ from pathlib import Path
 
 import zenoh
 
-from common import messages as m
 from common.bus import open_session
 from common.settings import ZenohSettings
-from services.calib.store import PoseStore
-from tests.calib.test_demo_calibration import MOUNTS
-from tests.ports import free_port
-from tests.sim.test_sim_service import write_lab
+from tests.uplab import SERVICES, write_up_lab
 
 ROOT = Path(__file__).resolve().parents[2]
-SERVICES = ["router", "sim", "tracker", "calib", "ptz:ptz1", "ptz:ptz2", "gantry", "web"]
 ALIVE = {"sim": "sim/main", "tracker": "tracker/main", "calib": "calib/main",
          "ptz:ptz1": "ptz/ptz1", "ptz:ptz2": "ptz/ptz2", "gantry": "gantry/main",
          "web": "web/main"}
@@ -31,19 +26,7 @@ ALIVE = {"sim": "sim/main", "tracker": "tracker/main", "calib": "calib/main",
 
 @contextmanager
 def running_lab(folder: Path) -> Iterator[tuple[subprocess.Popen, Path, str]]:
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    lab, _ = write_lab(folder, endpoint, folder / "crater.npz")
-    services = ", ".join(f'"{s}"' for s in SERVICES)
-    with open(lab, "a") as f:
-        f.write(f'[router]\nlisten = ["{endpoint}"]\n[up]\nlog_dir = "{folder / "logs"}"\n'
-                f'services = [{services}]\n[web]\nport = {free_port()}\n'
-                f'height_map = "{folder / "crater.npz"}"\n')
-    store = PoseStore(folder / "calib")
-    for camera, mount in MOUNTS.items():  # as a finished calibration leaves them
-        store.save(m.CameraPose(measured_s=time.time(), camera=camera, x_mm=mount.x_mm,
-                                y_mm=mount.y_mm, z_mm=mount.z_mm, rx_deg=mount.rx_deg,
-                                ry_deg=mount.ry_deg, rz_deg=mount.rz_deg, focal_mm=3.8,
-                                mean_error_px=1.5, passpoints=100, version=1), {})
+    lab, endpoint, _ = write_up_lab(folder, SERVICES, pose_version=1)
     with open(folder / "up.log", "w") as log:
         up = subprocess.Popen([sys.executable, "-m", "services.cli", "up", "--lab", str(lab),
                                "--no-view"], cwd=ROOT, stdout=log, stderr=subprocess.STDOUT,

@@ -50,7 +50,7 @@ class Calib:
         self.foreign: dict[str, deque[float]] = {}  # when poses it did not send were heard
         self.reassert_due: dict[str, threading.Timer] = {}
         self.last_reassert: dict[str, float] = {}
-        self.status_due = threading.Timer(0, lambda: None)  # not started: nothing due
+        self.status_due: threading.Timer | None = None  # the status once the minute is over
 
     def start(self) -> None:
         bus = self.node.bus
@@ -183,7 +183,7 @@ class Calib:
         self.node.set_status("degraded" if problems else "ok", "; ".join(problems))
         with self.lock:  # and again when the minute is over
             due = self.status_due
-            pending = due.is_alive() and due is not threading.current_thread()
+            pending = due is not None and due.is_alive() and due is not threading.current_thread()
             if any(foreign.values()) and not pending:
                 self.status_due = threading.Timer(FOREIGN_REPORTED_S + 0.5, self._report_status)
                 self.status_due.daemon = True

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import signal
 import subprocess
-import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,14 +15,11 @@ import pytest
 from common import keys
 from common import messages as m
 from common.bus import Bus
-from services.calib.store import PoseStore
 from tests.calib.test_demo_calibration import MOUNTS
-from tests.conftest import client_settings, free_port, stb_process, wait_for
+from tests.conftest import client_settings, stb_process, wait_for
 from tests.gantry.rig import Operator
 from tests.services.test_processes import _open_when_up, _stop
-from tests.sim.test_sim_service import write_lab
-
-SERVICES = ["router", "sim", "tracker", "calib", "ptz:ptz1", "ptz:ptz2", "gantry", "web"]
+from tests.uplab import SERVICES, write_up_lab
 
 
 @dataclass
@@ -36,35 +32,10 @@ class LiveLab:
     up: subprocess.Popen
 
 
-def store_poses(data_dir: Path) -> None:
-    """The cameras' poses as a finished calibration leaves them on disk."""
-    store = PoseStore(data_dir)
-    for camera, mount in MOUNTS.items():
-        store.save(m.CameraPose(measured_s=time.time(), camera=camera, x_mm=mount.x_mm,
-                                y_mm=mount.y_mm, z_mm=mount.z_mm, rx_deg=mount.rx_deg,
-                                ry_deg=mount.ry_deg, rz_deg=mount.rz_deg, focal_mm=3.8,
-                                mean_error_px=1.5, passpoints=100), {"method": "stored"})
-
-
 @pytest.fixture(scope="package")
 def live_lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveLab]:
     tmp = tmp_path_factory.mktemp("live")
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    lab, _ = write_lab(tmp, endpoint, tmp / "crater.npz")
-    web_port = free_port()
-    services = ", ".join(f'"{s}"' for s in SERVICES)
-    with open(lab, "a") as f:
-        f.write(f"""
-[router]
-listen = ["{endpoint}"]
-[up]
-log_dir = "{tmp / 'logs'}"
-services = [{services}]
-[web]
-port = {web_port}
-height_map = "{tmp / 'crater.npz'}"
-""")
-    store_poses(tmp / "calib")
+    lab, endpoint, web_port = write_up_lab(tmp, SERVICES)
     up = stb_process("up", "--lab", str(lab), "--no-view")
     session = None
     try:
