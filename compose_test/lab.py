@@ -267,6 +267,14 @@ class Client:
                                      f"{timeout_s:.0f} s: {said}")
             time.sleep(1.0)
 
+    def armed(self) -> None:
+        """The gantry armed whatever an earlier test left: a latched fault reset first."""
+        status, said = self.operator_once("arm")
+        if status != 0 and "reset first" in said:
+            self.operator("reset")
+        if status != 0:
+            self.operator("arm")
+
     def close(self) -> None:
         for session in self._sessions:
             session.close()
