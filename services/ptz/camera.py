@@ -8,6 +8,7 @@ import httpx
 import numpy as np
 
 from common.jpeg import JpegError, decode_gray
+from common.trace import TRACE_HEADER
 from services.ptz import vapix
 from services.ptz.aim import Limits
 
@@ -58,7 +59,7 @@ class AxisPtzCamera:
                 measured_s: float | None = None) -> None:
         """Absolute move; ``measured_s`` (when the data behind it was measured) travels as a
         trace header that cameras ignore and the sim records, to measure the chain's latency."""
-        headers = {vapix.TRACE_HEADER: f"{measured_s:.6f}"} if measured_s is not None else None
+        headers = {TRACE_HEADER: f"{measured_s:.6f}"} if measured_s is not None else None
         self._request(vapix.PTZ_PATH, vapix.move_params(pan_deg, tilt_deg, zoom, speed),
                       headers)
 

@@ -12,7 +12,6 @@ from services.ptz.aim import Limits
 
 PTZ_PATH = "/axis-cgi/com/ptz.cgi"
 IMAGE_PATH = "/axis-cgi/jpg/image.cgi"
-TRACE_HEADER = "X-STB-Measured"  # when the data behind a command was measured; cameras ignore it
 _RANGES = {"pan": (-180.0, 180.0), "tilt": (-180.0, 180.0), "zoom": (1, 9999),
            "speed": (1, 100)}
 

@@ -1,4 +1,5 @@
-"""A simulated AXIS 215 PTZ camera on HTTP: VAPIX, Digest (or Basic) authentication, JPEGs."""
+"""A simulated AXIS 215 PTZ camera on HTTP: VAPIX, Digest (or Basic) authentication, JPEG
+snapshots and an MJPEG stream."""
 
 from __future__ import annotations
 
@@ -22,15 +23,18 @@ import cv2
 import numpy as np
 
 from common.camera import Intrinsics
-from services.ptz.vapix import TRACE_HEADER
+from common.trace import TRACE_HEADER
 from services.sim import vapix
 from services.sim.arrival import StampedReader
 from services.sim.ptz import PtzHead
 from services.sim.render import Glint, draw, glint_blobs, marker_blobs
+from services.sim.vapix_device import Device, api_discovery
+from services.sim.vapix_ptz import CameraMemory, handle_ptz
 
 log = logging.getLogger(__name__)
 
 REALM = "AXIS_ACCC8E5A0215"
+BOUNDARY = "myboundary"  # what AXIS cameras put between the JPEGs of video.cgi
 NONCE_LIFETIME_S = 300.0
 
 
@@ -48,6 +52,8 @@ class SimCamera:
     password: str = "pass"
     auth: Literal["digest", "basic", "none"] = "digest"
     jpeg_quality: int = 90
+    mjpeg_fps: float = 2.0  # video.cgi's rate when the request names none
+    memory: CameraMemory = field(default_factory=CameraMemory)
     commands: deque[tuple[float, float]] = field(default_factory=lambda: deque(maxlen=100_000))
     """(arrival wall time, X-STB-Measured) of every traced PTZ command: latency figures. The
     arrival is the kernel's receive time of the bytes carrying the request line."""
@@ -62,6 +68,10 @@ class SimCamera:
         if ir_visible:
             blobs += glint_blobs(self.glints, pose, intr)
         return draw(blobs, width, height, self.rng, background=background)
+
+    @property
+    def device(self) -> Device:
+        return Device(self.name, self.head, self.memory, self.user)
 
 
 def digest_challenge(secret: bytes, now: float) -> str:
@@ -129,6 +139,7 @@ class CameraServer:
     def __init__(self, camera: SimCamera, host: str, port: int) -> None:
         self.camera = camera
         self._secret = secrets.token_bytes(16)
+        self._closing = threading.Event()
         self._httpd = ThreadingHTTPServer((host, port), self._handler_class())
         self._httpd.daemon_threads = True
         self.port = self._httpd.server_address[1]
@@ -140,6 +151,7 @@ class CameraServer:
         return self
 
     def close(self) -> None:
+        self._closing.set()
         self._httpd.shutdown()
         self._httpd.server_close()
 
@@ -178,24 +190,43 @@ class CameraServer:
         arrived: float = request.arrived  # type: ignore[attr-defined]
         url = urlsplit(request.path)
         args = dict(parse_qsl(url.query, keep_blank_values=True))
+        body = b""
         if method == "POST":
             length = request.headers.get("Content-Length") or "0"
             if not length.isdigit() or int(length) > 65536:
                 self._send(request, vapix.Reply(400, "text/plain", b"Bad Request\r\n"))
                 return
-            body = request.rfile.read(int(length)).decode(errors="replace")
-            args.update(parse_qsl(body, keep_blank_values=True))
+            body = request.rfile.read(int(length))
+            if not request.headers.get("Content-Type", "").startswith("application/json"):
+                args.update(parse_qsl(body.decode(errors="replace"), keep_blank_values=True))
         if not self._authorized(request, method):
             return
         now = self.camera.clock()
-        if url.path == vapix.PTZ_PATH:
+        if url.path == vapix.MJPEG_PATH:
+            self._stream(request, args)
+            return
+        self._send(request, self._reply(url.path, args, body, now, request, arrived))
+
+    def _reply(self, path: str, args: dict[str, str], body: bytes, now: float,
+               request: BaseHTTPRequestHandler, arrived: float) -> vapix.Reply:
+        cam = self.camera
+        if path == vapix.PTZ_PATH:
             self._trace(request, arrived)
-            reply = vapix.handle_ptz(args, self.camera.head, now)
-        elif url.path == vapix.IMAGE_PATH:
-            reply = self._image(args)
-        else:
-            reply = vapix.Reply(404, "text/plain", b"Not Found\r\n")
-        self._send(request, reply)
+            return handle_ptz(args, cam.head, cam.memory, now)
+        if path == vapix.IMAGE_PATH:
+            size = vapix.image_size(args)
+            return size if isinstance(size, vapix.Reply) else self._jpeg(size, args)
+        if path == vapix.PARAM_PATH:
+            return cam.device.param_cgi(args, now)
+        if path == vapix.BASIC_DEVICE_INFO_PATH:
+            return cam.device.basic_device_info(body)
+        if path == vapix.API_DISCOVERY_PATH:
+            return api_discovery(body)
+        if path == vapix.PWDGRP_PATH:
+            return cam.device.users(args)
+        if path == vapix.USERGROUP_PATH:
+            return cam.device.user_groups()
+        return vapix.not_found()
 
     def _trace(self, request: BaseHTTPRequestHandler, arrived: float) -> None:
         measured = request.headers.get(TRACE_HEADER)
@@ -225,10 +256,7 @@ class CameraServer:
         request.wfile.write(body)
         return False
 
-    def _image(self, args: dict[str, str]) -> vapix.Reply:
-        size = vapix.snapshot_size(args)
-        if isinstance(size, vapix.Reply):
-            return size
+    def _jpeg(self, size: tuple[int, int], args: dict[str, str]) -> vapix.Reply:
         image = self.camera.snapshot(*size)
         quality = self.camera.jpeg_quality
         if "compression" in args and args["compression"].isdigit():
@@ -237,6 +265,33 @@ class CameraServer:
         if not ok:
             return vapix.error("image: encoding failed")
         return vapix.Reply(200, "image/jpeg", jpeg.tobytes())
+
+    def _stream(self, request: BaseHTTPRequestHandler, args: dict[str, str]) -> None:
+        """``video.cgi``: multipart JPEGs at ``fps`` (or the camera's rate) until the client
+        leaves, ``duration`` seconds or ``nbrofframes`` frames are over, or the server closes."""
+        asked = vapix.stream_request(args, self.camera.mjpeg_fps)
+        if isinstance(asked, vapix.Reply):
+            self._send(request, asked)
+            return
+        request.send_response(200)
+        request.send_header("Content-Type", f"multipart/x-mixed-replace; boundary={BOUNDARY}")
+        request.send_header("Cache-Control", "no-cache")
+        request.send_header("Connection", "close")
+        request.end_headers()
+        request.close_connection = True
+        started, sent = time.monotonic(), 0
+        while not self._closing.is_set() and (asked.frames is None or sent < asked.frames) \
+                and time.monotonic() - started < asked.duration_s:
+            part = self._jpeg(asked.size, args)
+            try:
+                request.wfile.write(f"--{BOUNDARY}\r\nContent-Type: image/jpeg\r\n"
+                                    f"Content-Length: {len(part.body)}\r\n\r\n".encode()
+                                    + part.body + b"\r\n")
+                request.wfile.flush()
+            except OSError:  # the client left
+                return
+            sent += 1
+            self._closing.wait(max(0.0, started + sent / asked.fps - time.monotonic()))
 
     @staticmethod
     def _send(request: BaseHTTPRequestHandler, reply: vapix.Reply) -> None:

@@ -99,7 +99,7 @@ def start_cameras(lab: Lab, settings: SimSettings, clock: Clock) -> list[CameraS
     for i, cam in enumerate(settings.cameras):
         sim_camera = SimCamera(cam.name, lab.heads[cam.name], lambda: lab.bright_points(clock()),
                                lab.ptz_glints, clock, np.random.default_rng((settings.seed, 3, i)),
-                               cam.user, cam.password, cam.auth)
+                               cam.user, cam.password, cam.auth, mjpeg_fps=cam.mjpeg_fps)
         try:
             servers.append(CameraServer(sim_camera, settings.host_of(cam.host), cam.port).start())
         except OSError as err:

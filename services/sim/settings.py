@@ -50,6 +50,8 @@ class PtzCameraSettings(_Section):
     latency_s: float = Field(0.12, ge=0)
     pan_speed_deg_s: float = Field(100.0, gt=0)
     tilt_speed_deg_s: float = Field(90.0, gt=0)
+    mjpeg_fps: float = Field(2.0, gt=0, le=30, description="the MJPEG stream's frame rate "
+                             "(mjpg/video.cgi) when the request names none")
 
 
 def _default_cameras() -> list[PtzCameraSettings]:

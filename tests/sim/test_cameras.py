@@ -131,7 +131,7 @@ def test_continuous_move_and_stop(servers: dict) -> None:
 
 def test_info_lists_the_ir_cut_filter(servers: dict) -> None:
     _, client = servers["ptz1"]
-    assert "ircutfilter={on|off|auto}" in client.get(PTZ, params={"info": "1"}).text
+    assert "ircutfilter={ on | off | auto }" in client.get(PTZ, params={"info": "1"}).text
 
 
 def _snapshot(client: httpx.Client, **params: str) -> np.ndarray:
