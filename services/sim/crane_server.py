@@ -1,5 +1,6 @@
-"""The simulated crane controller on Modbus/TCP (pymodbus): the lab's register map
-(``common.crane_registers.RegisterMap``, docs/devices.md) on unit ``unit_id``.
+"""The simulated crane controller on Modbus/TCP: the lab's register map
+(``common.crane_registers.RegisterMap``, docs/devices.md) on unit ``unit_id``, answered as
+the Modbus specification says (``services.sim.modbus``): only the documented registers exist.
 
 Every access is played against the ``CraneModel`` at the moment it arrives: writes become
 model inputs, reads of the input registers report the model's state at that instant. One
@@ -9,20 +10,58 @@ presses it (the safety circuit opens), 0 releases it (``stb sim estop``).
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import logging
 import threading
 from collections.abc import Callable
 
-from pymodbus.server import ModbusTcpServer
-from pymodbus.simulator import DataType, SimData, SimDevice
-
-from common.crane_registers import DEFAULT_MAP, RegisterMap
+from common.crane_registers import DEFAULT_MAP, HOLDING, RegisterMap
+from services.sim import modbus
 from services.sim.crane import CraneModel
 
 log = logging.getLogger(__name__)
 
-_READ_INPUT, _WRITE_CODES = 4, {6, 16, 23}
 ESTOP_REGISTER = 100
+
+
+class CraneRegisters:
+    """The controller's registers over a CraneModel (guarded by ``lock``)."""
+
+    def __init__(self, model: CraneModel, clock: Callable[[], float], lock: threading.Lock,
+                 registers: RegisterMap, estop_register: int) -> None:
+        self.model, self.clock, self.lock = model, clock, lock
+        self.registers, self.estop_register = registers, estop_register
+        self.holding = frozenset({*_addresses(registers, HOLDING), estop_register})
+        # The input registers are one block, read in one request: a lab map's gaps in it read 0.
+        self.inputs = frozenset(range(registers.input_start,
+                                      registers.input_start + registers.input_count))
+        self._values = [0] * (max(self.holding) + 1)
+
+    def read_holding(self, address: int, count: int) -> list[int]:
+        with self.lock:
+            return self._values[address:address + count]
+
+    def read_input(self, address: int, count: int) -> list[int]:
+        now, start = self.clock(), self.registers.input_start
+        with self.lock:
+            self.model.advance_to(now)
+            block = input_registers(self.model, self.registers)
+        return block[address - start:address - start + count]
+
+    def write(self, address: int, values: list[int]) -> None:
+        now = self.clock()
+        touched = range(address, address + len(values))
+        with self.lock:
+            self._values[address:address + len(values)] = values
+            write_holding(self.model, now, touched, self._values, self.registers)
+            if self.estop_register in touched:
+                self.model.set_safety_circuit(now, not self._values[self.estop_register])
+
+
+def _addresses(registers: RegisterMap, names: tuple[str, ...]) -> set[int]:
+    return {a for n in names
+            for a in range(getattr(registers, n), getattr(registers, n) + registers.width(n))}
 
 
 class CraneServer:
@@ -35,43 +74,53 @@ class CraneServer:
         self.model, self.clock, self.lock = model, clock, lock
         self.host, self.port = host, port
         self.registers, self.estop_register = registers, estop_register
-        holding = max(registers.holding_count, estop_register + 1)
-        self._device = SimDevice(
-            id=registers.unit_id,
-            simdata=([SimData(0, values=False, datatype=DataType.BITS)],
-                     [SimData(0, values=False, datatype=DataType.BITS)],
-                     [SimData(0, count=holding, values=0, datatype=DataType.REGISTERS)],
-                     [SimData(registers.input_start, count=registers.input_count, values=0,
-                              datatype=DataType.REGISTERS)]),
-            action=self._access)
-        self._server: ModbusTcpServer | None = None
+        self.device = CraneRegisters(model, clock, lock, registers, estop_register)
+        self._server: asyncio.Server | None = None
+        self._closing = False
 
     async def serve(self) -> None:
-        """Listen and serve until closed (must run inside the event loop: pymodbus binds it)."""
-        self._server = ModbusTcpServer(self._device, address=(self.host, self.port))
+        """Listen and serve until closed (inside the device loop's event loop)."""
+        self._server = await asyncio.start_server(self._connection, self.host, self.port)
         log.info("crane controller (Modbus/TCP) on %s:%d, unit %d", self.host, self.port,
                  self.registers.unit_id)
-        await self._server.serve_forever()
+        try:
+            await self._server.serve_forever()
+        except asyncio.CancelledError:
+            if not self._closing:
+                raise
 
     async def close(self) -> None:
+        self._closing = True
         if self._server is not None:
-            await self._server.shutdown()
+            self._server.close()
+            with contextlib.suppress(Exception):
+                await self._server.wait_closed()
 
-    async def _access(self, function_code: int, start: int, address: int, count: int,
-                      registers: list[int], values: list[int] | list[bool] | None) -> None:
-        now = self.clock()
-        with self.lock:
-            if function_code in _WRITE_CODES and values is not None:
-                after = list(registers)
-                after[address - start: address - start + len(values)] = [int(v) for v in values]
-                touched = range(address, address + len(values))
-                write_holding(self.model, now, touched, after, self.registers)
-                if self.estop_register in touched:
-                    self.model.set_safety_circuit(now, not after[self.estop_register])
-            elif function_code == _READ_INPUT:
-                self.model.advance_to(now)
-                registers[:] = input_registers(self.model, self.registers)
-        return None
+    async def _connection(self, reader: asyncio.StreamReader,
+                          writer: asyncio.StreamWriter) -> None:
+        buffer = bytearray()
+        try:
+            while chunk := await reader.read(4096):
+                buffer += chunk
+                for request in modbus.split_requests(buffer):
+                    writer.write(modbus.frame(request, self._answer(request)))
+                await writer.drain()
+        except modbus.BadFrame as err:
+            log.debug("crane controller: not Modbus/TCP (%s): connection closed", err)
+        except (ConnectionError, OSError):
+            pass
+        finally:
+            writer.close()
+
+    def _answer(self, request: modbus.Request) -> bytes:
+        function = request.pdu[0] if request.pdu else 0
+        if request.unit != self.registers.unit_id:
+            return modbus.exception(function, modbus.GATEWAY_TARGET_FAILED)
+        try:
+            return modbus.answer(request.pdu, self.device)
+        except Exception:  # a fault of the sim's own: answered, as a PLC does, and logged
+            log.exception("crane controller: failed to serve function %d", function)
+            return modbus.exception(function, modbus.DEVICE_FAILURE)
 
 
 def write_holding(model: CraneModel, now: float, touched: range, holding: list[int],
