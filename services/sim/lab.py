@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from common.camera import Pose
+from services.sim.bodies import ROBOT_POINTS_MM, WAND_POINTS_MM, BodyDefinition, fit, heading_rotation, place
 from services.sim.crane import CraneModel
 from services.sim.mocap_server import MocapFrame
 from services.sim.ptz import PtzHead
@@ -143,17 +144,38 @@ class Lab:
     # --- motion capture -----------------------------------------------------------------------
 
     @property
+    def bodies(self) -> list[BodyDefinition]:
+        """The 6DOF bodies QTM streams, in its order: the robot's, then the wand's."""
+        m = self.settings.mocap
+        return [BodyDefinition(name, points) for name, points in
+                ((m.robot_body, ROBOT_POINTS_MM), (m.wand_body, WAND_POINTS_MM)) if name]
+
+    @property
+    def body_points(self) -> list[tuple[BodyDefinition, list[str]]]:
+        """Each body with its points' labels (QTM's 6D parameters)."""
+        m = self.settings.mocap
+        origin = {m.robot_body: m.robot_label, m.wand_body: WAND_LABEL}
+        return [(body, body.marker_labels(origin[body.name] or f"{body.name} - 1"))
+                for body in self.bodies]
+
+    @property
     def labels(self) -> list[str]:
+        """QTM's 3D labels: the robot's marker, the wand's, the static ones, then the bodies'
+        other markers."""
         robot = [self.settings.mocap.robot_label] if self.settings.mocap.robot_label else []
-        return robot + [WAND_LABEL] + [f"static_{i + 1}" for i in range(len(self.static_markers))]
+        extra = [label for body in self.bodies for label in body.marker_labels("")[1:]]
+        return (robot + [WAND_LABEL] + [f"static_{i + 1}" for i in range(len(self.static_markers))]
+                + extra)
 
     def mocap_frame(self, number: int) -> MocapFrame:
-        """Frame ``number`` as QTM would measure it: noise, dropouts, occlusions."""
+        """Frame ``number`` as QTM would measure it: noise, dropouts, occlusions, and the
+        bodies fitted to the markers it saw."""
         m = self.settings.mocap
         t = number / m.rate_hz
         rng = np.random.default_rng((self.settings.seed, number))
         robot = self.robot(t)
-        if self._occluded(t):
+        occluded = self._occluded(t)
+        if occluded:
             robot = np.full(3, np.nan)
         wand = self.wand_position(t)
         wand = np.full(3, np.nan) if wand is None else wand
@@ -162,13 +184,43 @@ class Lab:
         noisy[rng.random(len(noisy)) < m.dropout] = np.nan
         unlabelled = [(100 + i, xyz) for i, xyz in enumerate(self.ghost_markers)
                       if rng.random() < 0.5]
+        origins = {m.robot_body: noisy[0], m.wand_body: noisy[1]}
+        extra, bodies = self._body_markers(t, number, occluded, origins)
         if m.robot_label:
-            labelled = noisy
+            labelled = np.vstack([noisy, *extra]) if extra else noisy
         else:
-            labelled = noisy[1:]
+            labelled = np.vstack([noisy[1:], *extra]) if extra else noisy[1:]
             if np.all(np.isfinite(noisy[0])):
                 unlabelled.insert(0, (1, noisy[0]))
-        return MocapFrame(number, int(round(t * 1e6)), labelled, unlabelled)
+        return MocapFrame(number, int(round(t * 1e6)), labelled, unlabelled, bodies)
+
+    def _body_markers(self, t: float, number: int, occluded: bool,
+                      origins: dict[str, np.ndarray]
+                      ) -> tuple[list[np.ndarray], list[tuple[np.ndarray, np.ndarray] | None]]:
+        """Each body's other markers as measured (noise and dropouts from a stream of their
+        own, so the other markers' are as before), and its fitted pose (None: lost)."""
+        m = self.settings.mocap
+        rng = np.random.default_rng((self.settings.seed, number, 6))
+        extra, poses = [], []
+        for body in self.bodies:
+            true = self._body_pose(body.name, t)
+            if true is None or (occluded and body.name == m.robot_body):
+                points = np.full(body.points_mm.shape, np.nan)
+            else:
+                points = place(body.points_mm, *true)
+                points[1:] += rng.normal(0.0, m.noise_mm, size=points[1:].shape)
+                points[1:][rng.random(len(points) - 1) < m.dropout] = np.nan
+            points[0] = origins[body.name]
+            extra.append(points[1:])
+            poses.append(fit(body.points_mm, points))
+        return extra, poses
+
+    def _body_pose(self, name: str, t: float) -> tuple[np.ndarray, np.ndarray] | None:
+        if name == self.settings.mocap.robot_body:
+            ahead = self.robot(t + 0.5) - self.robot(t)
+            return self.robot(t), heading_rotation(self.robot_velocity(t), ahead)
+        wand = self.wand_position(t)
+        return None if wand is None else (wand, np.eye(3))
 
     def _occluded(self, t: float) -> bool:
         window = int(t // OCCLUSION_WINDOW_S)

@@ -1,14 +1,18 @@
 """A Qualisys QTM real-time server (RT protocol 1.25, little-endian port) playing the scenario.
 
-The unmodified ``qtm-rt`` client connects, reads the 3D labels, and streams ``3d`` (labelled)
-and ``3dnolabels`` (unidentified) frames at the configured rate, with noise, dropouts (NaN
-markers) and the protocol's events; while not capturing it answers with NoMoreData.
+The unmodified ``qtm-rt`` client connects, reads the 3D labels and 6DOF bodies, and streams
+``3d`` (labelled), ``3dnolabels`` (unidentified), ``6d`` (body position and rotation matrix)
+and ``6deuler`` (position and Euler angles) frames at the configured rate, with noise, dropouts
+(NaN markers, lost bodies as NaN) and the protocol's events; while not capturing it answers
+with NoMoreData. Parameters it does not have (analog, force, image, calibration, skeleton, …)
+are refused with an error packet.
 Packet building is pure (top of the module); the asyncio server is at the bottom.
 """
 
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import logging
 import struct
 import time
@@ -18,6 +22,9 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
+
+from common.camera import euler_xyz_deg
+from services.sim.bodies import BodyDefinition
 
 log = logging.getLogger(__name__)
 
@@ -43,6 +50,8 @@ class Event(IntEnum):
 
 COMPONENT_3D = 1
 COMPONENT_3D_NO_LABELS = 2
+COMPONENT_6D = 5
+COMPONENT_6D_EULER = 6
 
 
 def packet(kind: PacketType, body: bytes = b"") -> bytes:
@@ -65,6 +74,8 @@ class MocapFrame:
     timestamp_us: int
     labelled: np.ndarray  # (L, 3)
     unlabelled: list[tuple[int, np.ndarray]]
+    bodies: list[tuple[np.ndarray, np.ndarray] | None] = dataclasses.field(default_factory=list)
+    """Per 6DOF body: (position of its origin, world-from-body rotation), None when lost."""
 
 
 def data_packet(frame: MocapFrame, components: set[int]) -> bytes:
@@ -79,21 +90,79 @@ def data_packet(frame: MocapFrame, components: set[int]) -> bytes:
             struct.pack("<3fi", *map(float, xyz), marker_id) for marker_id, xyz in
             frame.unlabelled)
         parts.append(struct.pack("<II", 8 + len(body), COMPONENT_3D_NO_LABELS) + body)
+    for component in (COMPONENT_6D, COMPONENT_6D_EULER):
+        if component in components:
+            body = struct.pack("<Ihh", len(frame.bodies), 0, 0) + b"".join(
+                _body_values(pose, component) for pose in frame.bodies)
+            parts.append(struct.pack("<II", 8 + len(body), component) + body)
     header = struct.pack("<qII", frame.timestamp_us, frame.number, len(parts))
     return packet(PacketType.DATA, header + b"".join(parts))
 
 
-def parameters_xml(labels: list[str], frequency_hz: float) -> str:
-    label_xml = "".join(f"<Label><Name>{name}</Name><RGBColor>ff0000</RGBColor></Label>"
-                        for name in labels)
-    return ("<QTM_Parameters_Ver_1.25>"
-            f"<General><Frequency>{frequency_hz:g}</Frequency><Capture_Time>0</Capture_Time>"
-            "</General>"
-            f"<The_3D><AxisUpwards>+Z</AxisUpwards><Labels>{len(labels)}</Labels>{label_xml}"
-            "</The_3D></QTM_Parameters_Ver_1.25>")
+def _body_values(pose: tuple[np.ndarray, np.ndarray] | None, component: int) -> bytes:
+    """One body of a 6D component: position and the rotation matrix column by column (as QTM
+    sends it: R11 R21 R31 R12 …), or position and Euler angles (degrees; R = Rx·Ry·Rz, QTM's
+    default roll, pitch, yaw); all NaN when the body is lost."""
+    count = 12 if component == COMPONENT_6D else 6
+    if pose is None:
+        return struct.pack(f"<{count}f", *([NAN32] * count))
+    position, rotation = pose
+    rest = rotation.T.ravel() if component == COMPONENT_6D else euler_xyz_deg(rotation)
+    return struct.pack(f"<{count}f", *map(float, position), *map(float, rest))
 
 
-_COMPONENTS = {"3d": COMPONENT_3D, "3dnolabels": COMPONENT_3D_NO_LABELS}
+PARAMETER_GROUPS = ("general", "3d", "6d")
+NOT_AVAILABLE = ("analog", "force", "gazevector", "eyetracker", "image", "skeleton",
+                 "skeleton:global", "calibration")
+
+
+def parameters_xml(labels: list[str], frequency_hz: float,
+                   bodies: list[tuple[BodyDefinition, list[str]]] = (),  # type: ignore[assignment]
+                   groups: tuple[str, ...] = PARAMETER_GROUPS) -> str:
+    """The parameters of ``groups`` (general, 3d, 6d); each body with its points' labels."""
+    parts = ["<QTM_Parameters_Ver_1.25>"]
+    if "general" in groups:
+        parts.append(f"<General><Frequency>{frequency_hz:g}</Frequency>"
+                     "<Capture_Time>0</Capture_Time></General>")
+    if "3d" in groups:
+        label_xml = "".join(f"<Label><Name>{name}</Name><RGBColor>ff0000</RGBColor></Label>"
+                            for name in labels)
+        parts.append(f"<The_3D><AxisUpwards>+Z</AxisUpwards><Labels>{len(labels)}</Labels>"
+                     f"{label_xml}</The_3D>")
+    if "6d" in groups:
+        parts.append(f"<The_6D><Bodies>{len(bodies)}</Bodies>"
+                     + "".join(_body_xml(b, names) for b, names in bodies) + "</The_6D>")
+    return "".join(parts) + "</QTM_Parameters_Ver_1.25>"
+
+
+def _body_xml(body: BodyDefinition, names: list[str]) -> str:
+    points = "".join(f'<Point X="{x:.6f}" Y="{y:.6f}" Z="{z:.6f}" Virtual="0" PhysicalId="0" '
+                     f'Name="{name}"/>' for (x, y, z), name in zip(body.points_mm, names,
+                                                                    strict=True))
+    return (f"<Body><Name>{body.name}</Name><Enabled>true</Enabled>"
+            '<Color R="255" G="0" B="0"/><MaximumResidual>10.000000</MaximumResidual>'
+            "<MinimumMarkersInBody>3</MinimumMarkersInBody>"
+            f"<Points>{points}</Points></Body>")
+
+
+def parse_parameters_command(words: list[str]) -> tuple[str, ...] | str:
+    """``getparameters <group...>`` → the groups to send, or an error for one it lacks."""
+    asked = [w.lower() for w in words] or ["all"]
+    groups: list[str] = []
+    for name in asked:
+        if name == "all":
+            groups += PARAMETER_GROUPS
+        elif name in PARAMETER_GROUPS:
+            groups.append(name)
+        elif name in NOT_AVAILABLE:
+            return f"No {name} parameters available in this capture"
+        else:
+            return f"Parse error: unknown parameter {name}"
+    return tuple(groups)
+
+
+_COMPONENTS = {"3d": COMPONENT_3D, "3dnolabels": COMPONENT_3D_NO_LABELS, "6d": COMPONENT_6D,
+               "6deuler": COMPONENT_6D_EULER}
 
 
 def parse_stream_command(words: list[str], rate_hz: float) -> tuple[int, set[int]] | str:
@@ -126,6 +195,8 @@ class MocapSource:
     rate_hz: float
     frame_at: Callable[[int], MocapFrame]
     clock: Callable[[], float]  # seconds since the capture started
+    bodies: list[tuple[BodyDefinition, list[str]]] = dataclasses.field(default_factory=list)
+    """The 6DOF bodies, each with its points' labels, in the order frames carry them."""
 
     def frame_now(self) -> int:
         """The frame number the capture is at."""
@@ -229,7 +300,11 @@ class MocapServer:
             return event_packet(Event.CAPTURE_STARTED if self.capturing
                                 else Event.CAPTURE_STOPPED)
         if command == "getparameters":
-            return text_packet(PacketType.XML, parameters_xml(src.labels, src.rate_hz))
+            groups = parse_parameters_command(words[1:])
+            if isinstance(groups, str):
+                return text_packet(PacketType.ERROR, groups)
+            return text_packet(PacketType.XML, parameters_xml(src.labels, src.rate_hz,
+                                                              src.bodies, groups))
         if command == "getcurrentframe":
             if not self.capturing:
                 return packet(PacketType.NO_MORE_DATA)

@@ -116,7 +116,8 @@ class DeviceLoop:
 
     def __init__(self, lab: Lab, settings: SimSettings, clock: Clock) -> None:
         m_ = settings.mocap
-        source = MocapSource(lab.labels, m_.rate_hz, lab.mocap_frame, clock)
+        source = MocapSource(lab.labels, m_.rate_hz, lab.mocap_frame, clock,
+                             lab.body_points)
         self.mocap = MocapServer(source, settings.host_of(m_.host), m_.port)
         self.crane = CraneServer(lab.crane, clock, lab.crane_lock,
                                  settings.host_of(settings.crane.host), settings.crane.port,

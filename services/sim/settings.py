@@ -31,6 +31,9 @@ class MocapSettings(_Section):
     robot_label: str = Field("robot", description='label of the robot marker; "" = unlabelled')
     static_markers: int = Field(3, ge=0, le=20)
     ghost_markers: int = Field(1, ge=0, le=10, description="unidentified markers in 3dnolabels")
+    robot_body: str = Field("robot", max_length=64, description="the robot's 6DOF body (its "
+                            'marker and three more, streamed as 6d/6deuler); "" = none')
+    wand_body: str = Field("wand", max_length=64, description='the wand\'s 6DOF body; "" = none')
 
 
 class PtzCameraSettings(_Section):
