@@ -14,7 +14,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from common.camera import Pose
-from services.sim.bodies import ROBOT_POINTS_MM, WAND_POINTS_MM, BodyDefinition, fit, heading_rotation, place
+from services.sim.bodies import (
+    ROBOT_POINTS_MM,
+    WAND_POINTS_MM,
+    BodyDefinition,
+    fit,
+    heading_rotation,
+    place,
+)
 from services.sim.crane import CraneModel
 from services.sim.mocap_server import MocapFrame
 from services.sim.ptz import PtzHead

@@ -3,7 +3,6 @@ wand as bodies (6d and 6deuler), their markers in 3d, parameters QTM does not ha
 
 from __future__ import annotations
 
-import asyncio
 import xml.etree.ElementTree as ET
 
 import numpy as np
