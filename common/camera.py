@@ -51,6 +51,29 @@ def euler_xyz_deg(rotation: np.ndarray) -> tuple[float, float, float]:
     return tuple(float(a) for a in np.degrees([rx, ry, rz]))  # type: ignore[return-value]
 
 
+def quaternion_wxyz(rotation: np.ndarray) -> tuple[float, float, float, float]:
+    """A rotation matrix as a unit quaternion (w, x, y, z) with w ≥ 0."""
+    r = np.asarray(rotation, dtype=float)
+    # The largest of the four |components| first, for accuracy (Shepperd's method).
+    trace = float(np.trace(r))
+    options = [trace, r[0, 0], r[1, 1], r[2, 2]]
+    k = int(np.argmax(options))
+    if k == 0:
+        s = 2.0 * np.sqrt(max(1.0 + trace, 0.0))
+        q = [s / 4, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
+    else:
+        i, j, m = k - 1, k % 3, (k + 1) % 3
+        s = 2.0 * np.sqrt(max(1.0 + r[i, i] - r[j, j] - r[m, m], 0.0))
+        q = [0.0, 0.0, 0.0, 0.0]
+        q[0] = (r[m, j] - r[j, m]) / s
+        q[1 + i] = s / 4
+        q[1 + j] = (r[j, i] + r[i, j]) / s
+        q[1 + m] = (r[m, i] + r[i, m]) / s
+    quat = np.array(q) / np.linalg.norm(q)
+    quat = -quat if quat[0] < 0 else quat
+    return tuple(float(c) for c in np.clip(quat, -1.0, 1.0))  # type: ignore[return-value]
+
+
 @dataclass(frozen=True)
 class Pose:
     """T_world_camera: where a camera is (mm) and how it is turned (deg, R = Rx·Ry·Rz)."""

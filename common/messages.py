@@ -43,23 +43,50 @@ class Marker(BaseModel):
     z_mm: float
 
 
+class RigidBody(BaseModel):
+    """One 6DOF body of a mocap frame (QTM's 6D): where its origin is and how it is turned."""
+
+    model_config = Message.model_config
+
+    name: str = Field(min_length=1, max_length=64, description="QTM's name of the body")
+    x_mm: float
+    y_mm: float
+    z_mm: float
+    qw: float = Field(ge=0, le=1, description="rotation, world from body, as a unit quaternion "
+                      "(w, x, y, z) with w ≥ 0")
+    qx: float = Field(ge=-1, le=1)
+    qy: float = Field(ge=-1, le=1)
+    qz: float = Field(ge=-1, le=1)
+
+
 class MarkerFrame(Message):
-    """All markers seen in one mocap frame. Markers the mocap lost are absent."""
+    """All markers and 6DOF bodies seen in one mocap frame. Those the mocap lost are absent."""
 
     frame: int = Field(ge=0, description="mocap frame number")
     markers: list[Marker] = Field(max_length=1000)
+    bodies: list[RigidBody] = Field(default_factory=list, max_length=100,
+                                    description="6DOF bodies (only when the tracker streams them)")
 
 
 class RobotPosition(Message):
-    """The robot marker's position and velocity, in the world frame."""
+    """The robot's position and velocity, in the world frame: its marker's, or — when the
+    tracker is given a 6DOF body — the body's origin, with the body's orientation."""
 
-    label: str = Field("", max_length=64, description='marker label; "" if picked by motion')
+    label: str = Field("", max_length=64, description='marker label; "" if picked by motion '
+                       "or from a body")
     x_mm: float
     y_mm: float
     z_mm: float
     vx_mm_s: float
     vy_mm_s: float
     vz_mm_s: float
+    body: str = Field("", max_length=64, description='the 6DOF body it comes from; "" for a '
+                      "marker")
+    qw: float | None = Field(None, ge=0, le=1, description="the body's rotation, world from "
+                             "body, as a unit quaternion (w, x, y, z), w ≥ 0; None for a marker")
+    qx: float | None = Field(None, ge=-1, le=1)
+    qy: float | None = Field(None, ge=-1, le=1)
+    qz: float | None = Field(None, ge=-1, le=1)
 
 
 # --- marker detections (PTZ calibration mode and the gantry's tracking camera) ---------------

@@ -23,9 +23,12 @@ _T = 1795000000.25  # an example UNIX time
 EXAMPLES: dict[type[m.Message], m.Message] = {
     m.MarkerFrame: m.MarkerFrame(measured_s=_T, frame=1042, markers=[
         m.Marker(label="robot", x_mm=3412.5, y_mm=1093.0, z_mm=212.4),
-        m.Marker(id=7, x_mm=-120.0, y_mm=88.5, z_mm=40.0)]),
-    m.RobotPosition: m.RobotPosition(measured_s=_T, label="robot", x_mm=3412.5, y_mm=1093.0,
-                                     z_mm=212.4, vx_mm_s=290.0, vy_mm_s=-3.5, vz_mm_s=0.4),
+        m.Marker(id=7, x_mm=-120.0, y_mm=88.5, z_mm=40.0)], bodies=[
+        m.RigidBody(name="robot", x_mm=3412.5, y_mm=1093.0, z_mm=212.4, qw=0.99993, qx=0.0,
+                    qy=0.0, qz=-0.0121)]),
+    m.RobotPosition: m.RobotPosition(measured_s=_T, x_mm=3412.5, y_mm=1093.0, z_mm=212.4,
+                                     vx_mm_s=290.0, vy_mm_s=-3.5, vz_mm_s=0.4, body="robot",
+                                     qw=0.99993, qx=0.0, qy=0.0, qz=-0.0121),
     m.MarkerDetections: m.MarkerDetections(
         measured_s=_T, camera="ptz1", status="ok", threshold=230, width_px=704, height_px=576,
         markers=[m.DetectedMarker(u_px=351.6, v_px=290.2, radius_long_px=3.1,
@@ -131,8 +134,8 @@ def _type_name(annotation: object) -> str:
         return " or ".join(_type_name(a) for a in args)
     if isinstance(annotation, type) and issubclass(annotation, BaseModel):
         return annotation.__name__
-    return {float: "float", int: "int", str: "str", bool: "bool", bytes: "bin"}.get(
-        annotation, str(annotation))  # type: ignore[arg-type]
+    return {float: "float", int: "int", str: "str", bool: "bool", bytes: "bin",
+            type(None): "nil"}.get(annotation, str(annotation))  # type: ignore[arg-type]
 
 
 def _constraints(info: FieldInfo) -> str:
@@ -147,19 +150,25 @@ def _constraints(info: FieldInfo) -> str:
     return ", ".join(parts)
 
 
+def _summary(model: type[BaseModel]) -> str:
+    """The docstring's first paragraph, on one line."""
+    return " ".join((model.__doc__ or "").strip().split("\n\n")[0].split())
+
+
 def _model_table(model: type[BaseModel]) -> list[str]:
     lines = ["| field | type | limits | meaning |", "|---|---|---|---|"]
     for name, info in model.model_fields.items():
         meaning = (info.description or "").replace("|", "\\|")
         if not info.is_required():
-            meaning = f"{meaning} (default {info.default!r})".strip()
+            default = info.default_factory() if info.default_factory else info.default  # type: ignore[call-arg]
+            meaning = f"{meaning} (default {default!r})".strip()
         lines.append(f"| `{name}` | {_type_name(info.annotation)} | {_constraints(info)} "
                      f"| {meaning} |")
     return lines
 
 
 def _nested_models() -> list[type[BaseModel]]:
-    return [m.Marker, m.DetectedMarker, m.KeyStats]
+    return [m.Marker, m.RigidBody, m.DetectedMarker, m.KeyStats]
 
 
 def render() -> str:
@@ -209,14 +218,12 @@ def render() -> str:
         "",
     ]
     for model, example in EXAMPLES.items():
-        doc = (model.__doc__ or "").strip().splitlines()[0]
-        out += [f"### {model.__name__}", "", doc, ""] + _model_table(model) + [
+        out += [f"### {model.__name__}", "", _summary(model), ""] + _model_table(model) + [
             "", "Example (as JSON; on the wire it is msgpack):", "", "```json",
             json.dumps(example.model_dump(mode="json"), indent=None)[:600], "```", ""]
     out += ["## Nested maps", ""]
     for model in _nested_models():
-        doc = (model.__doc__ or "").strip().splitlines()[0]
-        out += [f"### {model.__name__}", "", doc, ""] + _model_table(model) + [""]
+        out += [f"### {model.__name__}", "", _summary(model), ""] + _model_table(model) + [""]
     out += [
         "## A subscriber in plain Python",
         "",

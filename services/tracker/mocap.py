@@ -1,8 +1,9 @@
 """The motion-capture driver: a small interface and Qualisys QTM over its RT protocol (qtm-rt).
 
-``QualisysMocap.run`` connects, reads the 3D labels, streams ``3d`` and ``3dnolabels`` and
-hands every frame on as a ``MarkerFrame``; when QTM goes away it reconnects with backoff.
-NaN markers (lost by QTM) are left out, never sent as zero.
+``QualisysMocap.run`` connects, reads the 3D labels (and, when asked for one, the 6DOF bodies),
+streams ``3d`` and ``3dnolabels`` (and ``6d``) and hands every frame on as a ``MarkerFrame``;
+when QTM goes away it reconnects with backoff. NaN markers and bodies (lost by QTM) are left
+out, never sent as zero. QTM sends a body's rotation matrix column by column.
 """
 
 from __future__ import annotations
@@ -16,9 +17,11 @@ import xml.etree.ElementTree as ET
 from collections.abc import Callable
 from typing import Protocol
 
+import numpy as np
 import qtm_rt
 
-from common.messages import Marker, MarkerFrame
+from common.camera import quaternion_wxyz
+from common.messages import Marker, MarkerFrame, RigidBody
 
 log = logging.getLogger(__name__)
 
@@ -35,6 +38,12 @@ def labels_from_xml(xml: bytes | str) -> list[str]:
     """The 3D labels from a ``getparameters 3d`` reply, in QTM's order."""
     root = ET.fromstring(xml)
     return [(label.findtext("Name") or "").strip() for label in root.iter("Label")]
+
+
+def bodies_from_xml(xml: bytes | str) -> list[str]:
+    """The 6DOF bodies' names from a ``getparameters 6d`` reply, in QTM's order."""
+    root = ET.fromstring(xml)
+    return [(name.text or "").strip() for name in root.findall("*/Body/Name")]
 
 
 class ClockSync:
@@ -56,9 +65,9 @@ class ClockSync:
         return stamp_s + self._offset
 
 
-def frame_from_packet(packet: qtm_rt.QRTPacket, labels: list[str],
-                      measured_s: float) -> MarkerFrame:
-    """A MarkerFrame from a QTM data packet; lost (NaN) markers are left out."""
+def frame_from_packet(packet: qtm_rt.QRTPacket, labels: list[str], measured_s: float,
+                      body_names: list[str] = ()) -> MarkerFrame:  # type: ignore[assignment]
+    """A MarkerFrame from a QTM data packet; lost (NaN) markers and bodies are left out."""
     markers = []
     labelled = packet.get_3d_markers()
     if labelled is not None:
@@ -70,15 +79,33 @@ def frame_from_packet(packet: qtm_rt.QRTPacket, labels: list[str],
         for m in unlabelled[1]:
             if all(math.isfinite(c) for c in (m.x, m.y, m.z)) and m.id >= 0:
                 markers.append(Marker(id=m.id, x_mm=m.x, y_mm=m.y, z_mm=m.z))
-    return MarkerFrame(measured_s=measured_s, frame=packet.framenumber, markers=markers[:1000])
+    return MarkerFrame(measured_s=measured_s, frame=packet.framenumber, markers=markers[:1000],
+                       bodies=_bodies(packet, body_names) if body_names else [])
+
+
+def _bodies(packet: qtm_rt.QRTPacket, names: list[str]) -> list[RigidBody]:
+    six_d = packet.get_6d()
+    if six_d is None:
+        return []
+    bodies = []
+    for name, (position, rotation) in zip(names, six_d[1], strict=False):
+        values = (position.x, position.y, position.z, *rotation.matrix)
+        if not name or not all(math.isfinite(v) for v in values):
+            continue
+        matrix = np.array(rotation.matrix, dtype=float).reshape(3, 3).T  # column by column
+        qw, qx, qy, qz = quaternion_wxyz(matrix)
+        bodies.append(RigidBody(name=name[:64], x_mm=position.x, y_mm=position.y,
+                                z_mm=position.z, qw=qw, qx=qx, qy=qy, qz=qz))
+    return bodies[:100]
 
 
 class QualisysMocap:
     def __init__(self, host: str = "127.0.0.1", port: int = 22223, *,
                  frames: str = "allframes", timeout_s: float = 5.0,
                  retry_initial_s: float = 0.5, retry_max_s: float = 5.0,
-                 clock: Callable[[], float] = time.time) -> None:
-        self.host, self.port, self.frames = host, port, frames
+                 clock: Callable[[], float] = time.time, body: str = "") -> None:
+        """``body``: a 6DOF body to stream (and check QTM has); "" = markers only."""
+        self.host, self.port, self.frames, self.body = host, port, frames, body
         self.timeout_s, self.retry_initial_s, self.retry_max_s = (timeout_s, retry_initial_s,
                                                                   retry_max_s)
         self.clock = clock
@@ -116,15 +143,22 @@ class QualisysMocap:
                       stop: threading.Event, lost: asyncio.Event,
                       on_state: StateHandler) -> None:
         labels = labels_from_xml(await conn.get_parameters(parameters=["3d"]))
+        bodies = bodies_from_xml(await conn.get_parameters(parameters=["6d"])) if self.body \
+            else []
         sync = ClockSync()
 
         def on_packet(packet: qtm_rt.QRTPacket) -> None:
             measured = sync.measured(packet.timestamp / 1e6, self.clock())
-            on_frame(frame_from_packet(packet, labels, measured))
+            on_frame(frame_from_packet(packet, labels, measured, bodies))
 
-        await conn.stream_frames(frames=self.frames, components=["3d", "3dnolabels"],
-                                 on_packet=on_packet)
-        on_state(True, f"streaming from QTM at {self.host}:{self.port} ({len(labels)} labels)")
+        components = ["3d", "3dnolabels", *(["6d"] if self.body else [])]
+        await conn.stream_frames(frames=self.frames, components=components, on_packet=on_packet)
+        if self.body and self.body not in bodies:
+            on_state(False, f"QTM at {self.host}:{self.port} has no 6DOF body {self.body!r} "
+                     f"(it has: {', '.join(bodies) or 'none'})")
+        else:
+            on_state(True, f"streaming from QTM at {self.host}:{self.port} ({len(labels)} "
+                     f"labels, {len(bodies)} bodies)")
         while not stop.is_set() and not lost.is_set():
             await asyncio.sleep(0.05)
         if lost.is_set():

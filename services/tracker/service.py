@@ -2,7 +2,9 @@
 
 Reads:      Qualisys QTM over the RT protocol (qtm_host:qtm_port)
 Publishes:  stb/tracker/markers (MarkerFrame), every frame
-            stb/tracker/robot   (RobotPosition), every frame in which the robot is seen
+            stb/tracker/robot   (RobotPosition), every frame in which the robot is seen: its
+                                marker, or with ``robot_body`` its 6DOF body (origin and
+                                orientation; a frame in which QTM lost the body has none)
 A frame captured longer than ``bus.max_age_s`` ago (a backlog after a stall) gives no robot
 sample (counted as stale on stb/tracker/robot in the service's health); its markers still go
 out, stamped with their capture time, for calibration and recordings.
@@ -23,11 +25,12 @@ from services.tracker.settings import TrackerSettings
 
 
 def make_mocap(settings: TrackerSettings) -> QualisysMocap:
-    return QualisysMocap(settings.qtm_host, settings.qtm_port, frames=settings.frames)
+    return QualisysMocap(settings.qtm_host, settings.qtm_port, frames=settings.frames,
+                         body=settings.robot_body)
 
 
 def make_picker(settings: TrackerSettings) -> RobotPicker:
-    return RobotPicker(settings.robot_label, settings.volume,
+    return RobotPicker(settings.robot_body or settings.robot_label, settings.volume,
                        min_motion_mm=settings.min_motion_mm,
                        velocity_window_s=settings.velocity_window_s)
 
@@ -40,8 +43,14 @@ def run(node: Node, mocap: MocapSource | None = None) -> None:
     robot_key = keys.TRACKER_ROBOT.key(node.bus.prefix)
 
     def on_frame(frame: m.MarkerFrame) -> None:
-        seen = [Seen(mk.label, mk.id, np.array([mk.x_mm, mk.y_mm, mk.z_mm]))
-                for mk in frame.markers]
+        body = next((b for b in frame.bodies if b.name == settings.robot_body), None) \
+            if settings.robot_body else None
+        if settings.robot_body:
+            seen = [] if body is None else [Seen(body.name, 0, np.array([body.x_mm, body.y_mm,
+                                                                         body.z_mm]))]
+        else:
+            seen = [Seen(mk.label, mk.id, np.array([mk.x_mm, mk.y_mm, mk.z_mm]))
+                    for mk in frame.markers]
         robot = picker.update(frame.measured_s, seen)
         age = time.time() - frame.measured_s  # since capture (QTM's stamp on our clock)
         if robot is not None and age > settings.bus.max_age_s:
@@ -51,9 +60,11 @@ def run(node: Node, mocap: MocapSource | None = None) -> None:
                                 f"{age:.3f} s ago > {settings.bus.max_age_s} s")
         elif robot is not None:  # first: the robot sample is what the cameras wait for
             (x, y, z), (vx, vy, vz) = robot
+            turn = {} if body is None else {"body": body.name, "qw": body.qw, "qx": body.qx,
+                                            "qy": body.qy, "qz": body.qz}
             node.bus.publish(keys.TRACKER_ROBOT, m.RobotPosition(
-                measured_s=frame.measured_s, label=settings.robot_label, x_mm=x, y_mm=y,
-                z_mm=z, vx_mm_s=vx, vy_mm_s=vy, vz_mm_s=vz))
+                measured_s=frame.measured_s, label="" if body else settings.robot_label,
+                x_mm=x, y_mm=y, z_mm=z, vx_mm_s=vx, vy_mm_s=vy, vz_mm_s=vz, **turn))
         node.bus.publish(keys.TRACKER_MARKERS, frame)
 
     def on_state(connected: bool, why: str) -> None:

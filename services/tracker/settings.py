@@ -17,6 +17,8 @@ class TrackerSettings(ServiceSettings):
                         description="QTM stream rate: allframes, frequency:n, frequencydivisor:n")
     robot_label: str = Field("robot", description='label of the robot marker; "" = pick the '
                              "unidentified marker that moves")
+    robot_body: str = Field("", max_length=64, description="QTM 6DOF body of the robot: its "
+                            'origin and orientation instead of a marker; "" = use the marker')
     min_motion_mm: float = Field(15.0, gt=0, description="unlabelled: motion that marks the robot")
     velocity_window_s: float = Field(0.1, gt=0)
     volume: Volume = Field(Volume(), description="robot positions outside are ignored (mm)")

@@ -85,3 +85,19 @@ def test_mount_pose_undoes_head_pose() -> None:
         back = mount_pose(head_pose(mount, pan, tilt), pan, tilt)
         assert np.allclose(back.rotation, mount.rotation, atol=1e-12)
         assert np.allclose(back.position, mount.position)
+
+
+def test_quaternion_of_a_rotation_matches_scipy_and_keeps_w_non_negative() -> None:
+    from scipy.spatial.transform import Rotation
+
+    from common.camera import quaternion_wxyz
+    for rotation in [*Rotation.random(500, random_state=4).as_matrix(),
+                     np.eye(3), np.diag([1.0, -1.0, -1.0]), np.diag([-1.0, -1.0, 1.0])]:
+        q = np.array(quaternion_wxyz(rotation))
+        x, y, z, w = Rotation.from_matrix(rotation).as_quat()
+        expected = np.array([w, x, y, z]) * (1 if w >= 0 else -1)
+        assert q[0] >= 0 and abs(np.linalg.norm(q) - 1) < 1e-12
+        if abs(w) > 1e-9:  # at w = 0 both signs are the same rotation
+            np.testing.assert_allclose(q, expected, atol=1e-12)
+        np.testing.assert_allclose(Rotation.from_quat([*q[1:], q[0]]).as_matrix(), rotation,
+                                   atol=1e-12)

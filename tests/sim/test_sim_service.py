@@ -113,7 +113,8 @@ def test_sim_serves_every_device_and_publishes(sim: dict, make_bus: Callable[...
 
     packet = asyncio.run(mocap())
     _, markers = packet.get_3d_markers()
-    assert len(markers) == 5, "robot, wand (absent: NaN) and three static markers"
+    assert len(markers) == 10, ("robot, wand (absent: NaN), three static markers and the "
+                                "bodies' other markers (robot's three, wand's two)")
 
     proc = sim["proc"]
     proc.send_signal(signal.SIGINT)

@@ -16,7 +16,7 @@ from common.bus import Bus
 from common.node import Node
 from services.sim.lab import Lab
 from services.sim.mocap_server import MocapServer, MocapSource
-from services.tracker.mocap import QualisysMocap, labels_from_xml
+from services.tracker.mocap import QualisysMocap, bodies_from_xml, labels_from_xml
 from services.tracker.service import run
 from services.tracker.settings import TrackerSettings
 from tests.conftest import free_port, wait_for
@@ -25,8 +25,9 @@ from tests.conftest import free_port, wait_for
 class QtmThread:
     """The sim's QTM RT server on a loop thread of its own; stop() and start() it again."""
 
-    def __init__(self, lab: Lab, port: int) -> None:
-        self.lab, self.port, self.t0 = lab, port, time.monotonic()
+    def __init__(self, lab: Lab, port: int, start_s: float = 0.0) -> None:
+        """``start_s``: the capture's time now (the locomotive waits 2 s before it moves)."""
+        self.lab, self.port, self.t0 = lab, port, time.monotonic() - start_s
         self.loop = asyncio.new_event_loop()
         threading.Thread(target=self.loop.run_forever, daemon=True).start()
         self.server: MocapServer | None = None
@@ -36,7 +37,8 @@ class QtmThread:
 
     def start(self) -> None:
         rate = self.lab.settings.mocap.rate_hz
-        source = MocapSource(self.lab.labels, rate, self.lab.mocap_frame, self.sim_time)
+        source = MocapSource(self.lab.labels, rate, self.lab.mocap_frame, self.sim_time,
+                             self.lab.body_points)
         self.server = MocapServer(source, "127.0.0.1", self.port)
         asyncio.run_coroutine_threadsafe(self.server.start(), self.loop).result(5)
 
@@ -192,3 +194,100 @@ def test_a_stale_backlog_is_dropped_and_counted_not_sent_as_fresh(
     finally:
         node.stop.set()
         thread.join(10)
+
+
+@pytest.fixture
+def moving_qtm(lab: Lab) -> Iterator[QtmThread]:
+    server = QtmThread(lab, free_port(), start_s=4.0)
+    server.start()
+    yield server
+    server.stop()
+    server.loop.call_soon_threadsafe(server.loop.stop)
+
+
+def _tracker(settings: TrackerSettings, make_bus: Callable[..., Bus]
+             ) -> tuple[Node, list[m.RobotPosition], list[m.MarkerFrame], threading.Thread]:
+    service_bus, watcher = make_bus(), make_bus()
+    node = Node("tracker", settings, service_bus)
+    robots: list[m.RobotPosition] = []
+    frames: list[m.MarkerFrame] = []
+    watcher.subscribe(keys.TRACKER_ROBOT, robots.append, latest=False)
+    watcher.subscribe(keys.TRACKER_MARKERS, frames.append, latest=False)
+    thread = threading.Thread(target=run, args=(node,))
+    thread.start()
+    return node, robots, frames, thread
+
+
+def test_service_publishes_the_robot_body_with_its_orientation(
+        lab: Lab, moving_qtm: QtmThread, make_bus: Callable[..., Bus]) -> None:
+    node, robots, frames, thread = _tracker(
+        TrackerSettings(qtm_port=moving_qtm.port, robot_body="robot"), make_bus)
+    try:
+        wait_for(lambda: len(robots) > 50, timeout=10)
+        last = robots[-1]
+        assert (last.body, last.label) == ("robot", "")
+        q = np.array([last.qw, last.qx, last.qy, last.qz])
+        assert abs(np.linalg.norm(q) - 1) < 1e-6
+        yaw = np.degrees(2 * np.arctan2(last.qz, last.qw))  # a level body turns about z only
+        heading = np.degrees(np.arctan2(last.vy_mm_s, last.vx_mm_s))
+        assert abs((yaw - heading + 180) % 360 - 180) < 5, (yaw, heading)
+        truth = lab.robot(moving_qtm.sim_time())
+        assert np.hypot(last.x_mm - truth[0], last.y_mm - truth[1]) < 60
+        assert {b.name for f in frames for b in f.bodies} == {"robot"}, \
+            "the wand's body is lost while the robot runs: absent, never zero"
+        assert node.health().status == "ok"
+    finally:
+        node.stop.set()
+        thread.join(5)
+
+
+def test_an_unknown_body_is_named_in_the_health_with_those_qtm_has(
+        qtm: QtmThread, make_bus: Callable[..., Bus]) -> None:
+    node, robots, frames, thread = _tracker(
+        TrackerSettings(qtm_port=qtm.port, robot_body="rover"), make_bus)
+    try:
+        wait_for(lambda: node.health().status == "degraded" and len(frames) > 20, timeout=10)
+        assert "'rover'" in node.health().detail and "robot, wand" in node.health().detail
+        assert not robots, "no robot without its body"
+    finally:
+        node.stop.set()
+        thread.join(5)
+
+
+class LosingBody:
+    """The robot's body for 20 frames, then QTM loses it (6D NaN: absent from the frame)."""
+
+    def run(self, on_frame: Callable[[m.MarkerFrame], None], stop: threading.Event,
+            on_state: Callable[[bool, str], None]) -> None:
+        on_state(True, "bodies")
+        for k in range(40):
+            bodies = [m.RigidBody(name="robot", x_mm=float(k), y_mm=5.0, z_mm=80.0, qw=1.0,
+                                  qx=0.0, qy=0.0, qz=0.0)] if k < 20 else []
+            on_frame(m.MarkerFrame(measured_s=time.time(), frame=k, markers=[
+                m.Marker(label="robot", x_mm=1.0, y_mm=2.0, z_mm=3.0)], bodies=bodies))
+            time.sleep(0.01)
+        stop.wait(5)
+
+
+def test_a_body_lost_by_qtm_gives_no_robot_sample_never_a_zero_or_its_marker(
+        make_bus: Callable[..., Bus]) -> None:
+    service_bus, watcher = make_bus(), make_bus()
+    node = Node("tracker", TrackerSettings(robot_body="robot"), service_bus)
+    robots: list[m.RobotPosition] = []
+    watcher.subscribe(keys.TRACKER_ROBOT, robots.append, latest=False)
+    thread = threading.Thread(target=run, args=(node, LosingBody()))
+    thread.start()
+    try:
+        wait_for(lambda: len(robots) >= 20, timeout=10)
+        time.sleep(0.5)
+        assert [r.x_mm for r in robots] == [float(k) for k in range(20)]
+        assert all(r.body == "robot" and r.qw == 1.0 for r in robots)
+    finally:
+        node.stop.set()
+        thread.join(10)
+
+
+def test_bodies_from_the_parameters_xml() -> None:
+    xml = ("<QTM_Parameters_Ver_1.25><The_6D><Bodies>2</Bodies><Body><Name>robot</Name>"
+           "</Body><Body><Name> wand </Name></Body></The_6D></QTM_Parameters_Ver_1.25>")
+    assert bodies_from_xml(xml) == ["robot", "wand"]
