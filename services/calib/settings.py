@@ -10,7 +10,8 @@ from common.settings import ServiceSettings
 
 
 class Hold(BaseModel):
-    """Where a camera is held while passpoints are collected (None: where it is)."""
+    """Where a camera is held while passpoints are collected (None: from the camera's home
+    position, its home preset)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 

@@ -2,9 +2,15 @@
 run through the marker detector and published with its capture time.
 
 A collector asks for the mode with ``CalibrationMode`` requests and renews them; the mode ends
-when it says so or its lease runs out, so a collector that dies frees the camera. Detections
-are published only while the camera stands still (its position unchanged since the previous
-snapshot, and where the request holds it), so that no passpoint comes from a moving camera.
+when it says so or its lease runs out, so a collector that dies frees the camera.
+
+The camera is held where the request says; what the request leaves open comes from the
+camera's home position (VAPIX ``move=home``: the home preset a lab sets to look into the
+crater), never from wherever someone left it. Once it stands there, that is the hold. Moved
+away (another client, someone at the camera's page), it is sent back to the hold at most
+once a second. Detections are published only while the camera stands still at the hold (its
+position unchanged since the previous snapshot), so that no passpoint comes from a moving
+camera or a foreign view.
 """
 
 from __future__ import annotations
@@ -22,10 +28,16 @@ from services.ptz.camera import PtzCamera, decode_jpeg
 log = logging.getLogger(__name__)
 STILL_DEG = 0.01
 AT_TARGET_DEG = 0.05
+HOME_SETTLE_S = 1.0  # after move=home: longer than a command's latency before it moves
+REHOLD_S = 1.0  # a camera moved away from the hold is sent back at most this often
 
 
 def _wrap(angle_deg: float) -> float:
     return (angle_deg + 180.0) % 360.0 - 180.0
+
+
+def _asked(msg: m.CalibrationMode) -> tuple[float | None, float | None, int | None]:
+    return msg.pan_deg, msg.tilt_deg, msg.zoom
 
 
 def _within(msg: m.CalibrationMode, limits: Limits) -> m.CalibrationMode:
@@ -44,6 +56,9 @@ def _within(msg: m.CalibrationMode, limits: Limits) -> m.CalibrationMode:
 REASSERT_INFRARED_S = 1.0
 
 
+Hold = tuple[float, float, int]
+
+
 @dataclass
 class CalibrationMode:
     camera: PtzCamera
@@ -52,9 +67,13 @@ class CalibrationMode:
     max_markers: int = 8
     request: m.CalibrationMode | None = None
     expires_at: float = 0.0
+    hold: Hold | None = None  # where the camera is held; None until it stood at home
+    rehold_count: int = 0  # times the camera was found moved away and sent back
     _last_position: tuple[float, float, int] | None = None
     _seq: int = 0
     _infrared_asserted: float = 0.0  # monotonic time the IR-cut filter was last set off
+    _homed_at: float = 0.0  # monotonic time of the last move=home
+    _rehold_at: float = 0.0  # monotonic time from which a re-hold may be sent
 
     def active(self, now: float) -> bool:
         return self.request is not None and now < self.expires_at
@@ -69,24 +88,56 @@ class CalibrationMode:
             return
         msg = _within(msg, limits)
         entering = not self.active(now)
+        moved = self.request is None or _asked(msg) != _asked(self.request)
         self.request, self.expires_at = msg, now + msg.lease_s
         if entering:
             log.info("%s: calibration mode (pan %s, tilt %s, zoom %s)", self.camera.name,
                      msg.pan_deg, msg.tilt_deg, msg.zoom)
             self._last_position = None
             self._infrared()
-            if msg.pan_deg is not None or msg.tilt_deg is not None or msg.zoom is not None:
-                self.camera.move_to(msg.pan_deg, msg.tilt_deg, msg.zoom)
+        if entering or moved:
+            self._go_to_hold(msg)
 
-    def _at_requested(self, pan: float, tilt: float, zoom: int) -> bool:
-        """True once the camera stands where the request holds it (a move takes effect only
-        after the camera's command latency: standing still is not enough)."""
-        r = self.request
-        if r is None:
+    def _go_to_hold(self, msg: m.CalibrationMode) -> None:
+        """Command the hold: the request's pan, tilt and zoom; home for what it leaves open."""
+        if None not in _asked(msg):
+            self.hold = (msg.pan_deg, msg.tilt_deg, msg.zoom)  # type: ignore[assignment]
+        else:
+            self.hold, self._homed_at = None, time.monotonic()
+            self.camera.home()
+        if any(v is not None for v in _asked(msg)):
+            self.camera.move_to(msg.pan_deg, msg.tilt_deg, msg.zoom)
+
+    def _at_hold(self, pan: float, tilt: float, zoom: int) -> bool:
+        """True once the camera stands at the hold (a move takes effect only after the
+        camera's command latency: standing still is not enough)."""
+        if self.hold is None:
             return False
-        return ((r.pan_deg is None or abs(_wrap(pan - r.pan_deg)) < AT_TARGET_DEG)
-                and (r.tilt_deg is None or abs(tilt - r.tilt_deg) < AT_TARGET_DEG)
-                and (r.zoom is None or zoom == r.zoom))
+        hold_pan, hold_tilt, hold_zoom = self.hold
+        return (abs(_wrap(pan - hold_pan)) < AT_TARGET_DEG
+                and abs(tilt - hold_tilt) < AT_TARGET_DEG and zoom == hold_zoom)
+
+    def _keep_hold(self, position: Hold, still: bool) -> bool:
+        """Learn the hold once the camera stands at home; send it back when it stands
+        elsewhere. True when it stands at the hold now."""
+        if not still:
+            return False
+        if self.hold is None:
+            if time.monotonic() - self._homed_at >= HOME_SETTLE_S:
+                self.hold = position
+                log.info("%s: held at pan %.2f°, tilt %.2f°, zoom %d", self.camera.name,
+                         *position)
+            return self.hold is not None
+        if self._at_hold(*position):
+            return True
+        if time.monotonic() >= self._rehold_at:
+            self.rehold_count += 1
+            log.warning("%s: moved away from its calibration hold (now pan %.1f°, tilt "
+                        "%.1f°): sent back to pan %.1f°, tilt %.1f°", self.camera.name,
+                        position[0], position[1], self.hold[0], self.hold[1])
+            self.camera.move_to(*self.hold)
+            self._rehold_at = time.monotonic() + REHOLD_S
+        return False
 
     def _infrared(self) -> None:
         self.camera.set_ir_cut_filter("off")
@@ -111,7 +162,7 @@ class CalibrationMode:
             and abs(now_position[1] - self._last_position[1]) < STILL_DEG
             and now_position[2] == self._last_position[2])
         self._last_position = now_position
-        still = still and self._at_requested(*now_position)
+        still = self._keep_hold(now_position, still)
         image = decode_jpeg(jpeg, self.camera.name)
         height, width = image.shape
         self._seq += 1

@@ -36,6 +36,8 @@ class PtzCamera(Protocol):
                 zoom: int | None = None, speed: int | None = None,
                 measured_s: float | None = None) -> None: ...
 
+    def home(self) -> None: ...
+
     def position(self) -> vapix.Position: ...
 
     def limits(self) -> Limits: ...
@@ -65,6 +67,10 @@ class AxisPtzCamera:
 
     def stop(self) -> None:
         self._request(vapix.PTZ_PATH, {"move": "stop"})
+
+    def home(self) -> None:
+        """To the camera's home position (its home preset)."""
+        self._request(vapix.PTZ_PATH, {"move": "home"})
 
     def position(self) -> vapix.Position:
         return vapix.parse_position(self._request(vapix.PTZ_PATH, {"query": "position"}).text)

@@ -5,12 +5,17 @@ from __future__ import annotations
 
 import time
 
+import httpx
+import numpy as np
 import pytest
 
 from common import keys
 from common import messages as m
 from services.ptz.aim import Limits
 from services.ptz.calibration import CalibrationMode
+from services.ptz.camera import AxisPtzCamera, http_client
+from services.sim.camera_server import CameraServer, SimCamera
+from services.sim.lab import Lab
 from tests.conftest import wait_for
 from tests.ptz.test_service import _camera_server
 
@@ -29,6 +34,9 @@ class RecordingCamera:
     def set_ir_cut_filter(self, mode: str) -> None:
         self.ir_cut.append(mode)
 
+    def home(self) -> None:
+        self.moves.append("home")
+
 
 def _request(pan: float | None, tilt: float | None, zoom: int | None = None,
              active: bool = True) -> m.CalibrationMode:
@@ -39,7 +47,7 @@ def _request(pan: float | None, tilt: float | None, zoom: int | None = None,
 @pytest.mark.parametrize(("asked", "held"), [
     ((175.0, 10.0, 5), (170.0, 10.0, 5)),
     ((-180.0, -90.0, 20000 - 1), (-170.0, -80.0, 9999)),
-    ((None, 95.0 - 10, None), (None, 80.0, None)),
+    ((None, 95.0 - 10, None), ("home", (None, 80.0, None))),
     ((12.0, 3.0, 1), (12.0, 3.0, 1)),
 ])
 def test_a_request_outside_the_cameras_limits_is_held_at_them(asked: tuple, held: tuple) -> None:
@@ -47,7 +55,11 @@ def test_a_request_outside_the_cameras_limits_is_held_at_them(asked: tuple, held
     mode = CalibrationMode(camera, lambda _d: None, lambda _f: None)  # type: ignore[arg-type]
     limits = Limits(min_tilt=-80.0, max_tilt=80.0)
     mode.on_request(_request(*asked), 100.0, limits)
-    assert camera.moves == [held]
+    if held[0] == "home":  # what the request leaves open comes from home
+        assert camera.moves == list(held)
+        held = held[-1]
+    else:
+        assert camera.moves == [held]
     assert mode.request is not None
     assert (mode.request.pan_deg, mode.request.tilt_deg, mode.request.zoom) == held
 
@@ -77,3 +89,49 @@ def test_a_burst_of_requests_is_coalesced_not_queued(service: dict) -> None:
     late = [t - sent for t in moves if t > sent + 0.5]
     assert not late, f"the camera still moved {max(late):.1f} s after the last request"
 
+
+
+def test_the_hold_is_home_and_a_camera_moved_away_is_sent_back(lab: Lab) -> None:
+    """Left looking elsewhere before calibration, and moved by another client during it, the
+    camera is held at its home position: no passpoint comes from a foreign view."""
+    cam = lab.settings.cameras[0]
+    t0 = time.monotonic()
+    sim = SimCamera(cam.name, lab.heads[cam.name], lambda: lab.bright_points(0.0), [],
+                    lambda: time.monotonic() - t0, np.random.default_rng(0), cam.user,
+                    cam.password)
+    server = CameraServer(sim, "127.0.0.1", 0).start()
+    url = f"http://127.0.0.1:{server.port}"
+    other = httpx.Client(base_url=url, auth=httpx.DigestAuth(cam.user, cam.password), timeout=3)
+    detections: list[m.MarkerDetections] = []
+    mode = CalibrationMode(AxisPtzCamera(http_client(url, cam.user, cam.password), cam.name),
+                           detections.append, lambda _f: None)
+    try:
+        other.get("/axis-cgi/com/ptz.cgi", params={"pan": "60", "tilt": "20"})
+        time.sleep(1.0)  # someone left it looking elsewhere
+        mode.on_request(_request(None, None), time.time(), Limits())
+
+        def cycles(seconds: float) -> list[bool]:
+            """Whether each cycle published detections while the camera was off its hold."""
+            wrong = []
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                before = len(detections)
+                mode.cycle()
+                assert mode._last_position is not None
+                off = mode.hold is None or not mode._at_hold(*mode._last_position)
+                wrong.append(off and len(detections) > before)
+                time.sleep(0.1)
+            return wrong
+
+        assert not any(cycles(2.5))
+        assert mode.hold == (0.0, 0.0, 1), "held at home, not where it was left"
+        held = len(detections)
+        assert held > 0, "detections while it stands at the hold"
+        other.get("/axis-cgi/com/ptz.cgi", params={"pan": "40"})
+        assert not any(cycles(3.0))
+        assert mode.rehold_count >= 1
+        assert mode._at_hold(*mode._last_position), "back at its hold"
+        assert len(detections) > held, "and collecting again"
+    finally:
+        other.close()
+        server.close()
