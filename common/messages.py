@@ -119,7 +119,8 @@ class MarkerDetections(Message):
 
 # --- PTZ ----------------------------------------------------------------------------------------
 
-PtzStatus = Literal["waiting_for_pose", "tracking", "idle", "calibrating", "camera_unreachable"]
+PtzStatus = Literal["waiting_for_pose", "tracking", "idle", "calibrating", "camera_unreachable",
+                    "manual"]
 
 
 class PtzState(Message):

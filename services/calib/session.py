@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import OrderedDict, deque
+from collections import Counter, OrderedDict, deque
 from collections.abc import Callable
 
 import cv2
@@ -94,6 +94,7 @@ class Session:
     def _collect(self) -> bool:
         deadline = self._started + self.timeout_s
         renew_at = progress_at = 0.0
+        gained = (0, self._started, Counter(self.collector.skipped))  # passpoints, when, skips
         while not self.node.stop.is_set():
             now = time.time()
             if self._cancel.is_set():
@@ -103,6 +104,11 @@ class Session:
                 self._finish("failed", f"timed out after {self.timeout_s:g} s with "
                              f"{len(self.collector.times)} of {self.collector.target} "
                              f"passpoints ({self._skipped_text()})")
+                return False
+            if len(self.collector.times) != gained[0]:
+                gained = (len(self.collector.times), now, Counter(self.collector.skipped))
+            elif now - gained[1] > self.settings.stall_s:
+                self._finish("failed", self._stalled_text(gained[2]))
                 return False
             if now >= renew_at:
                 self._calibration_mode(active=True)
@@ -206,6 +212,17 @@ class Session:
             passpoints=len(c.times), target=c.target, snapshots=c.snapshots,
             skipped=dict(c.skipped), message=self.message[:500],
             mean_error_px=self.mean_error_px), camera=self.camera)
+
+    def _stalled_text(self, skipped_before: Counter[str]) -> str:
+        since = self.collector.skipped - skipped_before
+        seen = ", ".join(f"{n} {why}" for why, n in since.most_common()) or "no snapshot at all"
+        hint = {"no marker": "the wand is not in the camera's view (or the IR cut filter is "
+                "on)", "too many": "more bright spots than the wand (reflections, markers)",
+                "not moved": "the wand does not move"}
+        why = hint.get(since.most_common(1)[0][0], "") if since else \
+            "the PTZ service sends no detections (is it running, is the camera still?)"
+        return (f"no passpoint for {self.settings.stall_s:g} s ({len(self.collector.times)} of "
+                f"{self.collector.target}; since the last: {seen})" + (f": {why}" if why else ""))
 
     def _skipped_text(self) -> str:
         skipped = self.collector.skipped

@@ -7,7 +7,8 @@ Publishes:  stb/ptz/{camera}/state (PtzState: pan, tilt, zoom, status, aim error
             pointing check's measured error from the previews), state_hz
             in calibration mode: stb/ptz/{camera}/detections and .../snapshot per snapshot
             otherwise stb/ptz/{camera}/preview (PtzPreview), preview_hz, for people to look at
-Drives:     the camera over VAPIX (pan/tilt/zoom), at most command_hz, with a dead band
+Drives:     the camera over VAPIX (pan/tilt/zoom), at most command_hz, with a dead band;
+            a move by someone else pauses following for manual_pause_s (status manual)
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from services.ptz.aim import Limits, aim_error_deg
 from services.ptz.calibration import CalibrationMode
 from services.ptz.camera import AxisPtzCamera, PtzCamera, PtzError, http_client
 from services.ptz.follow import Follower
+from services.ptz.override import ManualOverride
 from services.ptz.pointing import NOT_SEEN, PointingCheck
 from services.ptz.preview import PreviewLoop
 from services.ptz.settings import PtzSettings
@@ -98,6 +100,8 @@ class _Loop:
             max_markers=settings.calibration_max_markers)
         self.state_due = 0.0
         self.pointing = PointingCheck(settings.pointing_tolerance_deg, settings.pointing_persist)
+        self.override = ManualOverride(settings.manual_deg, settings.manual_pause_s)
+        self.manual = False  # following paused for someone else's move
 
     def on_preview(self, preview: m.PtzPreview, focal_mm: float, infrared: bool) -> None:
         """Publish it, and judge from it how well the camera points (services/ptz/pointing)."""
@@ -137,7 +141,7 @@ class _Loop:
             pose = _pose(self.pose)
             now = time.time()
             if (pose is None or self.limits is None or now < self.retry_at
-                    or self.calibration.active(now)):
+                    or self.calibration.active(now) or self.override.paused(now)):
                 return
             command = self.follower.command(now, _xyz(msg), _velocity(msg), msg.measured_s,
                                             pose)
@@ -146,6 +150,7 @@ class _Loop:
             try:
                 self.camera.move_to(command.pan_deg, command.tilt_deg, command.zoom,
                                     self.settings.speed, measured_s=command.measured_s)
+                self.override.commanded(now, command.pan_deg, command.tilt_deg)
             except PtzError as err:
                 self._unreachable(now, err)
 
@@ -196,9 +201,12 @@ class _Loop:
             pose, robot = _pose(self.pose), self.robot
             calibrating = self.calibration.active(now)
             pointing_error, problem = self.pointing.error_deg, self.pointing.problem() or ""
+            manual = self._watch_hands(now, position.pan_deg, position.tilt_deg, calibrating)
         status = "waiting_for_pose" if pose is None else ("tracking" if robot else "idle")
         if calibrating:
             status = "calibrating"
+        elif manual:
+            status = "manual"
         if pose is None:
             self.node.set_status("degraded", "waiting for a camera pose from calib")
         else:
@@ -208,6 +216,23 @@ class _Loop:
             error = aim_error_deg(_xyz(robot), pose, position.pan_deg, position.tilt_deg)
         self._publish(status, position.pan_deg, position.tilt_deg, position.zoom, error, now,
                       pointing_error if pointing_error != NOT_SEEN else None, problem)
+
+    def _watch_hands(self, now: float, pan: float, tilt: float, calibrating: bool) -> bool:
+        """Whether following is paused for someone else's move (``self.lock`` held)."""
+        if calibrating:  # calibration mode moves the camera itself; nothing to compare with
+            self.override.forget()
+            self.manual = False
+            return False
+        if self.override.observe(now, pan, tilt) and not self.manual:
+            log.warning("%s: moved by someone else (now pan %.1f°, tilt %.1f°): following "
+                        "paused for %g s", self.camera.name, pan, tilt,
+                        self.settings.manual_pause_s)
+        paused = self.override.paused(now)
+        if self.manual and not paused:
+            log.info("%s: following again after a manual move", self.camera.name)
+            self.follower.forget()  # the next sample sends a fresh command
+        self.manual = paused
+        return paused
 
     def _publish(self, status: str, pan: float, tilt: float, zoom: int, error: float,
                  now: float, pointing_error: float | None = None, problem: str = "") -> None:

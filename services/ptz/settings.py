@@ -42,6 +42,11 @@ class PtzSettings(ServiceSettings):
         None, gt=0, description="if set: zoom so that this size fills image_fraction")
     image_fraction: float = Field(0.3, gt=0, le=1)
     speed: int = Field(100, ge=1, le=100, description="VAPIX pan/tilt speed")
+    manual_pause_s: float = Field(30.0, ge=0, description="a move that did not come from this "
+                                  "service pauses following this long (status manual), longer "
+                                  "while the camera keeps moving; 0 = never pause")
+    manual_deg: float = Field(5.0, gt=0, description="a camera this far off the path of our "
+                              "commands was moved by someone else")
     pointing_tolerance_deg: float = Field(
         3.0, gt=0, le=90, description="the pointing check (docs/operator.md): a preview whose "
         "robot marker is farther than this from where the pose puts it disagrees")

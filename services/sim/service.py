@@ -78,20 +78,30 @@ def run(node: Node) -> None:
 def _start_robot_once_calibrated(node: Node, lab: Lab, cameras: list[str], clock: Clock
                                  ) -> None:
     """The demo's order of things: the wand until every listed camera has a pose on the bus
-    (from the calib service — the sim never hands out its own poses), then the robot."""
+    (from the calib service — the sim never hands out its own poses) or its collection failed
+    (that camera stays uncalibrated: the demo carries on), then the robot."""
     calibrated: set[str] = set()
     lock = threading.Lock()
 
-    def on_pose(pose: m.CameraPose) -> None:
+    def settled(camera: str, failed: str = "") -> None:
         with lock:
-            calibrated.add(pose.camera)
+            if camera not in cameras or camera in calibrated:
+                return
+            if failed:
+                log.warning("%s: calibration %s; the robot starts without it", camera, failed)
+            calibrated.add(camera)
             if calibrated >= set(cameras):
                 lab.start_robot(clock())
 
+    def on_progress(progress: m.CollectProgress) -> None:
+        if progress.state in ("failed", "cancelled"):
+            settled(progress.camera, f"{progress.state}: {progress.message}")
+
     log.info("calibration phase: the wand moves until %s have poses", ", ".join(cameras))
-    node.bus.subscribe(keys.CALIB_POSE, on_pose, latest=False)
+    node.bus.subscribe(keys.CALIB_POSE, lambda pose: settled(pose.camera), latest=False)
+    node.bus.subscribe(keys.CALIB_PROGRESS, on_progress, latest=False)
     for pose in node.bus.query_latest(keys.CALIB_POSE, timeout_s=1.0):
-        on_pose(pose)
+        settled(pose.camera)
 
 
 def start_cameras(lab: Lab, settings: SimSettings, clock: Clock) -> list[CameraServer]:

@@ -31,8 +31,8 @@ from services.web.settings import WebSettings
 from services.web.state import LiveState
 
 log = logging.getLogger(__name__)
-TOPICS = (keys.TRACKER_ROBOT, keys.GANTRY_STATE, keys.GANTRY_ESTIMATE, keys.GANTRY_OFFLOAD,
-          keys.PTZ_STATE, keys.PTZ_PREVIEW, keys.TRUTH_ROBOT)
+TOPICS = (keys.TRACKER_ROBOT, keys.CALIB_PROGRESS, keys.GANTRY_STATE, keys.GANTRY_ESTIMATE,
+          keys.GANTRY_OFFLOAD, keys.PTZ_STATE, keys.PTZ_PREVIEW, keys.TRUTH_ROBOT)
 
 
 def run(node: Node) -> None:

@@ -62,6 +62,7 @@ class LiveState:
     ptz: dict[str, m.PtzState] = field(default_factory=dict)
     poses: dict[str, m.CameraPose] = field(default_factory=dict)
     previews: dict[str, m.PtzPreview] = field(default_factory=dict)
+    collections: dict[str, m.CollectProgress] = field(default_factory=dict)
 
     def on_alive(self, service: str, instance: str, alive: bool) -> None:
         (self.alive.add if alive else self.alive.discard)((service, instance))
@@ -89,6 +90,8 @@ class LiveState:
                 _keep(self.poses, msg.camera, msg, MAX_CAMERAS)
         elif isinstance(msg, m.PtzPreview):
             _keep(self.previews, msg.camera, msg, MAX_CAMERAS)
+        elif isinstance(msg, m.CollectProgress):
+            _keep(self.collections, msg.camera, msg, MAX_CAMERAS)
         elif isinstance(msg, m.ServiceHealth):
             _keep(self.health, (msg.service, msg.instance), msg, MAX_SERVICES)
         elif isinstance(msg, m.RobotTruth):
@@ -137,7 +140,8 @@ class LiveState:
 
     def _cameras(self) -> dict[str, dict[str, Any]]:
         out: dict[str, dict[str, Any]] = {}
-        for camera in sorted(set(self.ptz) | set(self.poses) | set(self.previews)):
+        for camera in sorted(set(self.ptz) | set(self.poses) | set(self.previews)
+                             | set(self.collections)):
             state, pose, preview = (self.ptz.get(camera), self.poses.get(camera),
                                     self.previews.get(camera))
             entry: dict[str, Any] = {"status": state.status if state else "",
@@ -147,7 +151,8 @@ class LiveState:
                                      "pointing_error_deg":
                                          state.pointing_error_deg if state else None,
                                      "pointing_problem": state.pointing_problem if state else "",
-                                     "position": None, "looking_at": None, "preview": None}
+                                     "position": None, "looking_at": None, "preview": None,
+                                     "calibration": _collection(self.collections.get(camera))}
             if pose is not None:
                 entry["position"] = [pose.x_mm, pose.y_mm, pose.z_mm]
                 entry["pose_error_px"] = pose.mean_error_px
@@ -165,3 +170,12 @@ class LiveState:
     def preview_jpeg(self, camera: str) -> bytes | None:
         preview = self.previews.get(camera)
         return None if preview is None else preview.jpeg
+
+
+def _collection(progress: m.CollectProgress | None) -> dict[str, Any] | None:
+    """The camera's latest passpoint collection, as the page shows it."""
+    if progress is None:
+        return None
+    return {"state": progress.state, "passpoints": progress.passpoints,
+            "target": progress.target, "message": progress.message,
+            "mean_error_px": progress.mean_error_px}

@@ -70,3 +70,41 @@ def test_fresh_lab_calibrates_both_cameras_then_the_robot_starts(tmp_path: Path)
         if session is not None:
             session.close()
         assert _stop(up, signal.SIGINT, timeout=15) == 0
+
+
+def test_a_collection_that_sees_nothing_fails_saying_why_and_the_robot_starts(
+        tmp_path: Path) -> None:
+    """ptz1 held looking at the sky: no passpoint comes; after ``stall_s`` the collection fails
+    with the snapshots' story, and the sim starts the robot with ptz1 uncalibrated."""
+    lab, endpoint = _lab_for_up(tmp_path)
+    env = {"STB_SIM__CALIBRATE_FIRST": '["ptz1"]', "STB_CALIB__COLLECT_MISSING": "true",
+           "STB_CALIB__CAMERAS": '["ptz1"]', "STB_CALIB__STALL_S": "4",
+           "STB_CALIB__HOLD": '{"ptz1": {"pan_deg": 0, "tilt_deg": 85, "zoom": 1}}'}
+    up = stb_process("up", "--lab", str(lab), "--no-view", env=env)
+    session = None
+    try:
+        session = _open_when_up(endpoint)
+        bus = Bus(session, client_settings(endpoint))
+        progress: list[m.CollectProgress] = []
+        bus.subscribe(keys.CALIB_PROGRESS, progress.append, latest=False)
+        robot: list[m.RobotTruth] = []
+        bus.subscribe(keys.TRUTH_ROBOT, robot.append, latest=False)
+        states: dict[str, m.PtzState] = {}
+        bus.subscribe(keys.PTZ_STATE, lambda s: states.__setitem__(s.camera, s), latest=False)
+        wait_for(lambda: robot and progress, timeout=30)
+        first = np.array([robot[0].x_mm, robot[0].y_mm])
+        failed = wait_for(lambda: next((p for p in progress if p.state == "failed"), None),
+                          timeout=30)
+        print(failed.message)
+        assert failed.camera == "ptz1" and failed.passpoints == 0
+        assert "no passpoint for 4 s" in failed.message and "no marker" in failed.message
+        assert "not in the camera's view" in failed.message
+        wait_for(lambda: np.hypot(robot[-1].x_mm - first[0], robot[-1].y_mm - first[1]) > 100,
+                 timeout=15)  # the demo carries on
+        wait_for(lambda: states.get("ptz1") is not None
+                 and states["ptz1"].status == "waiting_for_pose", timeout=10)
+        bus.close()
+    finally:
+        if session is not None:
+            session.close()
+        assert _stop(up, signal.SIGINT, timeout=15) == 0

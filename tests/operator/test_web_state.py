@@ -99,6 +99,22 @@ def _get(web: WebServer, path: str) -> tuple[int, bytes, str]:
         return err.code, b"", ""
 
 
+def test_a_cameras_collection_shows_its_progress_and_why_it_failed() -> None:
+    state = LiveState()
+    state.on_message(m.CollectProgress(measured_s=10.0, camera="ptz1", state="collecting",
+                                       passpoints=34, target=100, snapshots=80, skipped={}))
+    assert state.view(11.0)["cameras"]["ptz1"]["calibration"] == {
+        "state": "collecting", "passpoints": 34, "target": 100, "message": "",
+        "mean_error_px": None}
+    why = "no passpoint for 60 s (34 of 100; since the last: 600 no marker)"
+    state.on_message(m.CollectProgress(measured_s=70.0, camera="ptz1", state="failed",
+                                       passpoints=34, target=100, snapshots=680,
+                                       skipped={"no marker": 600}, message=why))
+    shown = state.view(71.0)["cameras"]["ptz1"]
+    assert shown["calibration"]["state"] == "failed" and shown["calibration"]["message"] == why
+    assert shown["position"] is None, "uncalibrated: no pose"
+
+
 def test_the_server_serves_the_page_the_state_and_events(server: tuple) -> None:
     web, _ = server
     status, body, kind = _get(web, "/")

@@ -8,6 +8,7 @@ import time
 from collections.abc import Callable, Iterator
 
 import cv2
+import httpx
 import numpy as np
 import pytest
 
@@ -287,3 +288,41 @@ def test_a_wrong_pose_is_caught_by_the_pointing_check(service: dict) -> None:
     _publish_pose(service["world"])  # the calibration service's true pose again
     wait_for(lambda: judged(lambda s: s.pointing_problem == ""), timeout=8, period=0.1)
     assert node.health().status == "ok"
+
+
+def test_a_move_by_someone_else_pauses_following_then_it_follows_again(service: dict) -> None:
+    """Frigate's manual override: the camera moved by another client is left alone for
+    ``manual_pause_s`` (status manual), then the service takes it back to the robot."""
+    service["node"].settings = service["node"].settings.model_copy(
+        update={"manual_pause_s": 2.0})
+    server = _camera_server(service["port"])
+    service["servers"].append(server)
+    service["thread"].start()
+    world, states = service["world"], service["states"]
+    wait_for(lambda: states)  # the service is up and listening
+    _publish_pose(world)
+
+    def following() -> bool:
+        _publish_robot(world, TARGET)
+        return bool(states) and states[-1].status == "tracking" and \
+            states[-1].aim_error_deg < 0.5
+
+    wait_for(following, timeout=5, period=0.05)
+    with httpx.Client(base_url=f"http://127.0.0.1:{server.port}", timeout=2,
+                      auth=httpx.DigestAuth("root", "pass")) as operator:
+        operator.get("/axis-cgi/com/ptz.cgi", params={"rpan": "30", "rtilt": "-10"})
+    moved_at = time.monotonic()
+
+    def manual() -> bool:
+        _publish_robot(world, TARGET)
+        return states[-1].status == "manual"
+
+    wait_for(manual, timeout=2, period=0.05)
+    during = []
+    while time.monotonic() - moved_at < 1.5:  # the robot's samples keep coming: left alone
+        _publish_robot(world, TARGET)
+        during.append(states[-1])
+        time.sleep(0.05)
+    assert all(s.aim_error_deg > 10 for s in during[-10:]), "left where it was put"
+    wait_for(following, timeout=5, period=0.05)
+    assert time.monotonic() - moved_at >= 2.0, "the pause lasted"

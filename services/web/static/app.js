@@ -161,11 +161,17 @@ function drawCameras(state) {
       div.innerHTML = `<div class="caption"></div><canvas width="352" height="288"></canvas>`;
       box.appendChild(div);
     }
+    const cal = cam.calibration;
+    const collecting = cal && (cal.state === "collecting" || cal.state === "solving");
+    const calFailed = cal && cal.state === "failed" && !cam.position;
     div.querySelector(".caption").textContent =
       `${name}: ${cam.status || "—"}, pan ${fmt(cam.pan_deg, 1, "°")}, tilt ${fmt(cam.tilt_deg, 1, "°")}, ` +
-      `aim error ${fmt(cam.aim_error_deg, 2, "°")}, seen ${fmt(cam.pointing_error_deg, 1, "°")} off` +
+      (collecting ? `calibrating: ${cal.passpoints} of ${cal.target} passpoints` +
+        (cal.state === "solving" ? ", solving" : "")
+       : `aim error ${fmt(cam.aim_error_deg, 2, "°")}, seen ${fmt(cam.pointing_error_deg, 1, "°")} off`) +
+      (calFailed ? ` — uncalibrated: ${cal.message}` : "") +
       (cam.pointing_problem ? ` — ${cam.pointing_problem}` : "");
-    div.classList.toggle("alarm", Boolean(cam.pointing_problem));
+    div.classList.toggle("alarm", Boolean(cam.pointing_problem) || Boolean(calFailed));
     const p = cam.preview;
     if (p && previewSeq[name] !== p.seq) {
       previewSeq[name] = p.seq;

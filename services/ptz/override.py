@@ -1,0 +1,68 @@
+"""Someone else's hand on a following camera (pure): a move that did not come from us pauses
+following for a while, as Frigate's autotracker does on a manual move.
+
+Our commands send the camera along a path: from each command to the next it moves both axes
+at their own speed, so it stays within the box the two commands span. A camera found farther
+than ``tolerance_deg`` outside every such box of the last ``window_s`` (and the command in
+force before) was moved by someone else: following pauses for ``pause_s``, longer while the
+camera keeps moving. ``pause_s`` = 0 never pauses.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+
+@dataclass
+class ManualOverride:
+    tolerance_deg: float = 5.0
+    pause_s: float = 30.0
+    window_s: float = 1.0
+    still_deg: float = 0.5  # moves below this between two looks are not someone's hand
+    paused_until: float = 0.0
+    _commands: deque[tuple[float, float, float]] = field(default_factory=deque)
+    _last_seen: tuple[float, float] | None = None
+
+    def commanded(self, now: float, pan_deg: float, tilt_deg: float) -> None:
+        """We sent the camera here (from where it was last seen; unseen yet: no judging)."""
+        if not self._commands:
+            if self._last_seen is None:
+                return
+            self._commands.append((now, *self._last_seen))
+        self._commands.append((now, pan_deg, tilt_deg))
+        while len(self._commands) > 2 and self._commands[1][0] < now - self.window_s:
+            self._commands.popleft()  # keep the one in force before the window
+
+    def forget(self) -> None:
+        """The camera was moved by us otherwise (calibration mode): no pause, no reference."""
+        self._commands.clear()
+        self._last_seen, self.paused_until = None, 0.0
+
+    def paused(self, now: float) -> bool:
+        return now < self.paused_until
+
+    def observe(self, now: float, pan_deg: float, tilt_deg: float) -> bool:
+        """Where the camera is now; True when this look started (or extended) a pause."""
+        moved = self._last_seen is not None and max(
+            abs(pan_deg - self._last_seen[0]), abs(tilt_deg - self._last_seen[1])) > self.still_deg
+        self._last_seen = (pan_deg, tilt_deg)
+        if self.pause_s <= 0:
+            return False
+        if self.paused(now):
+            if moved:  # still in someone's hands
+                self.paused_until = now + self.pause_s
+            return moved
+        if not self._commands or self._on_our_path(pan_deg, tilt_deg):
+            return False
+        self.paused_until = now + self.pause_s
+        self._commands.clear()  # what we sent before is no reference after the pause
+        return True
+
+    def _on_our_path(self, pan: float, tilt: float) -> bool:
+        points = list(self._commands)
+        pairs = list(zip(points, points[1:], strict=False)) or [(points[0], points[0])]
+        margin = self.tolerance_deg
+        return any(min(a[1], b[1]) - margin <= pan <= max(a[1], b[1]) + margin
+                   and min(a[2], b[2]) - margin <= tilt <= max(a[2], b[2]) + margin
+                   for a, b in pairs)
