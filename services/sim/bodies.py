@@ -35,13 +35,18 @@ ROBOT_POINTS_MM = np.array([[0.0, 0.0, 0.0], [150.0, 0.0, -60.0], [-90.0, 100.0,
 WAND_POINTS_MM = np.array([[0.0, 0.0, 0.0], [250.0, 0.0, 0.0], [0.0, 150.0, 0.0]])
 
 
-def heading_rotation(velocity_mm_s: np.ndarray, ahead_mm: np.ndarray) -> np.ndarray:
-    """World-from-body rotation of a level body whose x axis points where it moves (its
-    velocity, or when it stands, the way its path goes on: ``ahead_mm``; else along +x)."""
+def heading_rad(velocity_mm_s: np.ndarray, ahead_mm: np.ndarray) -> float:
+    """Where a body's x axis points: where it moves (its velocity, or when it stands, the way
+    its path goes on: ``ahead_mm``; else along +x)."""
     for direction in (velocity_mm_s, ahead_mm):
         if float(np.hypot(direction[0], direction[1])) > 1e-3:
-            return rot_z(float(np.arctan2(direction[1], direction[0])))
-    return np.eye(3)
+            return float(np.arctan2(direction[1], direction[0]))
+    return 0.0
+
+
+def heading_rotation(velocity_mm_s: np.ndarray, ahead_mm: np.ndarray) -> np.ndarray:
+    """World-from-body rotation of a level body turned to its heading (``heading_rad``)."""
+    return rot_z(heading_rad(velocity_mm_s, ahead_mm))
 
 
 def place(points_mm: np.ndarray, position_mm: np.ndarray, rotation: np.ndarray) -> np.ndarray:

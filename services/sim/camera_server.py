@@ -10,6 +10,7 @@ import hmac
 import io
 import logging
 import secrets
+import socket
 import threading
 import time
 from collections import deque
@@ -28,6 +29,7 @@ from services.sim import vapix
 from services.sim.arrival import StampedReader
 from services.sim.ptz import PtzHead
 from services.sim.render import Glint, draw, glint_blobs, marker_blobs
+from services.sim.scene import DAY, INFRARED, GroundView, chassis_outline, compose
 from services.sim.vapix_device import Device, api_discovery
 from services.sim.vapix_ptz import CameraMemory, handle_ptz
 
@@ -53,17 +55,31 @@ class SimCamera:
     auth: Literal["digest", "basic", "none"] = "digest"
     jpeg_quality: int = 90
     mjpeg_fps: float = 2.0  # video.cgi's rate when the request names none
+    ground: GroundView | None = None  # the crater as this camera sees it; None: a plain field
+    robots: Callable[[], list[tuple[np.ndarray, float, float]]] = lambda: []
+    """(marker position, heading, ground height) of each robot now: their chassis are drawn"""
     memory: CameraMemory = field(default_factory=CameraMemory)
     commands: deque[tuple[float, float]] = field(default_factory=lambda: deque(maxlen=100_000))
     """(arrival wall time, X-STB-Measured) of every traced PTZ command: latency figures. The
     arrival is the kernel's receive time of the bytes carrying the request line."""
 
     def snapshot(self, width: int, height: int) -> np.ndarray:
+        """What the camera sees now: the crater and the robots (with a ``ground``; else a
+        plain field), the markers — bright with the IR cut filter off — and the reflections."""
         now = self.clock()
         pose = self.head.pose(now)
         intr = Intrinsics(self.head.focal_mm(now), width_px=width, height_px=height)
         ir_visible = self.head.ir_cut_filter == "off"
-        peak, background = (255.0, 16.0) if ir_visible else (70.0, 55.0)
+        background: float | np.ndarray
+        if self.ground is not None:
+            look = INFRARED if ir_visible else DAY
+            chassis = [hull for marker, heading, ground in self.robots()
+                       if (hull := chassis_outline(marker, heading, ground, pose, intr))
+                       is not None]
+            background = compose(self.ground.brightness(pose, intr), look, chassis)
+            peak = look.marker_peak
+        else:
+            peak, background = (255.0, 16.0) if ir_visible else (70.0, 55.0)
         blobs = marker_blobs(self.scene(), pose, intr, peak=peak)
         if ir_visible:
             blobs += glint_blobs(self.glints, pose, intr)
@@ -165,6 +181,9 @@ class CameraServer:
 
             def setup(self) -> None:
                 super().setup()
+                # Headers and body go out in two writes: without this, the body waits for
+                # the client's delayed ACK of the headers (40 ms per snapshot back to back).
+                self.connection.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
                 self.rfile.close()  # the plain reader: its reference would keep the socket open
                 self._stamps = StampedReader(self.connection)
                 self.rfile = io.BufferedReader(self._stamps)

@@ -13,13 +13,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from common.camera import Pose
+from common.camera import Pose, rot_z
 from services.sim.bodies import (
     ROBOT_POINTS_MM,
     WAND_POINTS_MM,
     BodyDefinition,
     fit,
-    heading_rotation,
+    heading_rad,
     place,
 )
 from services.sim.crane import CraneModel
@@ -136,6 +136,13 @@ class Lab:
             return np.zeros(3)
         return self.trajectory.velocity(self.scenario_time(t))
 
+    def robot_pose(self, t: float) -> tuple[np.ndarray, float, float]:
+        """(marker position, heading in radians, ground height under it) at ``t``: what a
+        camera's picture draws of the robot."""
+        marker = self.robot(t)
+        heading = heading_rad(self.robot_velocity(t), self.robot(t + 0.5) - marker)
+        return marker, heading, float(self.crater.height_at(marker[0], marker[1]))
+
     def wand_position(self, t: float) -> np.ndarray | None:
         """The calibration wand's marker while the robot waits (looping), else None."""
         if self.robot_start_s is not None and t >= self.robot_start_s:
@@ -224,8 +231,8 @@ class Lab:
 
     def _body_pose(self, name: str, t: float) -> tuple[np.ndarray, np.ndarray] | None:
         if name == self.settings.mocap.robot_body:
-            ahead = self.robot(t + 0.5) - self.robot(t)
-            return self.robot(t), heading_rotation(self.robot_velocity(t), ahead)
+            marker, heading, _ = self.robot_pose(t)
+            return marker, rot_z(heading)
         wand = self.wand_position(t)
         return None if wand is None else (wand, np.eye(3))
 

@@ -57,11 +57,15 @@ class NoiseBank:
 
 
 def draw(blobs: list[Blob], width: int, height: int, rng: np.random.Generator, *,
-         background: float = 16.0, noise_sigma: float = 2.5, noise: NoiseBank | None = None
-         ) -> np.ndarray:
-    """An 8-bit gray image of ``blobs`` on a noisy background (``noise`` if given, else
-    ``noise_sigma`` drawn from ``rng``), edges anti-aliased, moving blobs smeared."""
-    image = np.full((height, width), background, dtype=np.float32)
+         background: float | np.ndarray = 16.0, noise_sigma: float = 2.5,
+         noise: NoiseBank | None = None) -> np.ndarray:
+    """An 8-bit gray image of ``blobs`` on a background (a gray level, or a picture: float32,
+    height × width), with noise (``noise`` if given, else ``noise_sigma`` drawn from ``rng``),
+    edges anti-aliased, moving blobs smeared."""
+    if isinstance(background, np.ndarray):
+        image = background.astype(np.float32, copy=True)
+    else:
+        image = np.full((height, width), background, dtype=np.float32)
     for blob in blobs:
         _draw_blob(image, blob)
     if noise is not None:

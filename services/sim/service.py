@@ -27,6 +27,7 @@ from services.sim.camera_server import CameraServer, SimCamera
 from services.sim.crane_server import CraneServer
 from services.sim.lab import Lab
 from services.sim.mocap_server import MocapServer, MocapSource
+from services.sim.scene import GroundView
 from services.sim.settings import SimSettings
 
 log = logging.getLogger(__name__)
@@ -109,7 +110,9 @@ def start_cameras(lab: Lab, settings: SimSettings, clock: Clock) -> list[CameraS
     for i, cam in enumerate(settings.cameras):
         sim_camera = SimCamera(cam.name, lab.heads[cam.name], lambda: lab.bright_points(clock()),
                                lab.ptz_glints, clock, np.random.default_rng((settings.seed, 3, i)),
-                               cam.user, cam.password, cam.auth, mjpeg_fps=cam.mjpeg_fps)
+                               cam.user, cam.password, cam.auth, mjpeg_fps=cam.mjpeg_fps,
+                               ground=GroundView.of(lab.crater, settings.seed),
+                               robots=lambda: [lab.robot_pose(clock())])
         try:
             servers.append(CameraServer(sim_camera, settings.host_of(cam.host), cam.port).start())
         except OSError as err:

@@ -11,8 +11,10 @@ import numpy as np
 import pytest
 
 from common.camera import Intrinsics, project
+from common.markers import detect
 from services.sim.camera_server import CameraServer, SimCamera
 from services.sim.lab import Lab
+from services.sim.scene import DAY, GroundView
 
 PTZ = "/axis-cgi/com/ptz.cgi"
 IMAGE = "/axis-cgi/jpg/image.cgi"
@@ -33,7 +35,8 @@ def servers(lab: Lab) -> Iterator[dict[str, tuple[CameraServer, httpx.Client]]]:
     for i, cam in enumerate(lab.settings.cameras):
         # A still scene (the robot at its start), so a snapshot and a prediction agree.
         sim = SimCamera(cam.name, lab.heads[cam.name], lambda: lab.bright_points(0.0),
-                        lab.ptz_glints, clock, np.random.default_rng(i), cam.user, cam.password)
+                        lab.ptz_glints, clock, np.random.default_rng(i), cam.user, cam.password,
+                        ground=GroundView.of(lab.crater), robots=lambda: [lab.robot_pose(0.0)])
         server = CameraServer(sim, "127.0.0.1", cam.port).start()
         client = httpx.Client(base_url=f"http://127.0.0.1:{server.port}", timeout=3,
                               auth=httpx.DigestAuth(cam.user, cam.password))
@@ -155,9 +158,31 @@ def _bright_spots(image: np.ndarray, threshold: int = 128) -> list[tuple[float, 
 def test_ir_lit_marker_is_visible_only_with_the_ir_cut_filter_off(servers: dict) -> None:
     _, client = servers["ptz1"]
     client.get(PTZ, params={"ircutfilter": "on"})
-    assert _snapshot(client).max() < 128
+    day = _snapshot(client)
+    assert day.max() < 203, "nothing in the day view reaches the detector's lowest threshold"
+    assert detect(day).markers == ()
     client.get(PTZ, params={"ircutfilter": "off"})
-    assert _snapshot(client).max() > 200
+    infrared = _snapshot(client)
+    assert infrared.max() > 200
+    assert np.median(infrared) < np.median(day) - 40, "the IR view is the dark one"
+
+
+@pytest.mark.parametrize("camera", ["ptz1", "ptz2"])
+def test_the_picture_shows_the_crater_and_the_robot(servers: dict, lab: Lab,
+                                                    camera: str) -> None:
+    server, client = servers[camera]
+    client.get(PTZ, params={"ircutfilter": "auto"})
+    image = _snapshot(client, compression="0").astype(float)
+    low, high = np.percentile(image, [5, 95])
+    assert high - low > 40, "shaded ground, not a flat field"
+    head, now = lab.heads[camera], server.camera.clock()
+    marker, _, ground = lab.robot_pose(0.0)
+    below = marker - [0.0, 0.0, (marker[2] - ground) / 2]  # the middle of its chassis
+    u, v = project(below[None, :], head.pose(now), Intrinsics(head.focal_mm(now)))[0]
+    assert 0 < u < 704 and 0 < v < 576, "the robot is in this camera's view"
+    chassis = image[int(v) - 1:int(v) + 2, int(u) - 1:int(u) + 2].mean()
+    around = np.median(image[max(int(v) - 60, 0):int(v) + 60, max(int(u) - 60, 0):int(u) + 60])
+    assert chassis < DAY.chassis + 15 and around - chassis > 40, (chassis, around)
 
 
 @pytest.mark.parametrize("camera", ["ptz1", "ptz2"])
