@@ -27,6 +27,7 @@ from pydantic import (
 )
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from common.errors import ConfigError
 from common.keys import DEFAULT_PREFIX, check_prefix
 
 S = TypeVar("S", bound="ServiceSettings")
@@ -144,10 +145,6 @@ class ServiceSettings(BaseSettings):
         # Environment and files are merged by load_settings() in a documented order;
         # constructing with keywords (tests) reads nothing else.
         return (init_settings,)
-
-
-class ConfigError(Exception):
-    """Bad configuration: the message names every bad field and where it may come from."""
 
 
 def load_settings(

@@ -5,13 +5,11 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
-import threading
 from collections.abc import Sequence
 from pathlib import Path
 
-from common.node import configure_logging, stop_on_signals
-from common.settings import ConfigError, load_settings, read_lab_file
-from services.entry import EXIT_CONFIG, base_parser, overrides_from
+from common.errors import ConfigError
+from services.args import EXIT_CONFIG
 from services.registry import SERVICES, TOOLS, settings_class
 
 
@@ -25,8 +23,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         return importlib.import_module(f"services.{command}.__main__").main(rest)
     if command in TOOLS and TOOLS[command].main:
         return importlib.import_module(TOOLS[command].main).main(rest)
-    if command == "up":
-        return _up(rest)
     if command == "config":
         return _config(rest)
     print(f"stb: unknown command {command!r}\n\n{_usage()}", file=sys.stderr)
@@ -41,31 +37,6 @@ def _usage() -> str:
     return "\n".join(lines)
 
 
-def _up(argv: list[str]) -> int:
-    from services import supervisor
-
-    parser = base_parser("stb up", supervisor.__doc__ or "")
-    parser.add_argument("--only", help="comma-separated services, e.g. router,sim")
-    parser.add_argument("--no-view", action="store_true", help="log lines instead of a live table")
-    args = parser.parse_args(argv)
-    try:
-        overrides = overrides_from(args)
-        if args.only:
-            overrides["services"] = args.only.split(",")
-        settings = load_settings(supervisor.UpSettings, args.lab, overrides)
-    except ConfigError as err:
-        print(f"stb up: {err}", file=sys.stderr)
-        return EXIT_CONFIG
-    configure_logging(settings.log_level)
-    stop = threading.Event()
-    restore = stop_on_signals(stop)
-    try:
-        view = not args.no_view and sys.stdout.isatty()
-        return supervisor.run(settings, args.lab, stop, view=view)
-    finally:
-        restore()
-
-
 def _config(argv: list[str]) -> int:
     """``stb config check --lab FILE``: validate every section a service would read."""
     parser = argparse.ArgumentParser(
@@ -76,6 +47,8 @@ def _config(argv: list[str]) -> int:
     parser.add_argument("--lab", type=Path, required=True, metavar="FILE",
                         help="the lab file (TOML), e.g. config/lab.toml")
     args = parser.parse_args(argv)
+    from common.settings import load_settings, read_lab_file
+
     try:
         sections = read_lab_file(args.lab)
     except ConfigError as err:

@@ -8,10 +8,6 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-import cv2
-
-from common.markers import annotate, detect
-
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="stb detect", description=__doc__)
@@ -42,6 +38,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _one(path: Path, args: argparse.Namespace) -> dict:
+    import cv2  # after the flags are parsed: --help answers at once
+
+    from common.markers import annotate, detect
+
     image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if image is None:
         raise ValueError("not a readable image file")

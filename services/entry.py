@@ -1,13 +1,12 @@
-"""The command line every service shares: ``--lab FILE``, ``--instance``, ``--set k=v``."""
+"""Running a service or a tool from its parsed command line (the flags themselves, light to
+import, are in ``services.args``): settings loaded and checked, logging, the node, errors."""
 
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import sys
 from collections.abc import Callable, Sequence
-from pathlib import Path
 from typing import Any, TypeVar
 
 import zenoh
@@ -15,71 +14,19 @@ import zenoh
 from common.bus import BusUnreachable, open_session
 from common.node import EXIT_UNREACHABLE, Node, configure_logging, run_node
 from common.settings import ConfigError, ServiceSettings, load_settings
+from services.args import EXIT_CONFIG, overrides_from
 
 S = TypeVar("S", bound=ServiceSettings)
-EXIT_CONFIG = 2
 
 log = logging.getLogger(__name__)
 
 
-def base_parser(prog: str, description: str) -> argparse.ArgumentParser:
-    """A command's parser with the common flags; ``description`` (a module docstring) is
-    shown as written, its RST literals as plain text."""
-    parser = argparse.ArgumentParser(prog=prog, description=plain(description),
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--lab", type=Path, metavar="FILE",
-                        help="lab config file (TOML); default: $STB_LAB, else built-in defaults")
-    parser.add_argument("--instance", help="instance name (default: from config, else 'main')")
-    parser.add_argument("--connect", action="append", metavar="ENDPOINT",
-                        help="router endpoint, e.g. tcp/10.0.0.2:7447 (repeatable)")
-    parser.add_argument("--log-level", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
-    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                        help="override one setting, e.g. --set bus.max_age_s=0.2 (JSON values)")
-    return parser
-
-
-def plain(text: str) -> str:
-    """Docstring text for a terminal: ``literal`` → literal."""
-    return text.replace("``", "")
-
-
-def overrides_from(args: argparse.Namespace) -> dict[str, Any]:
-    """The settings that flags override, as a nested dict."""
-    out: dict[str, Any] = {}
-    for item in args.set:
-        path, sep, raw = item.partition("=")
-        if not sep or not path:
-            raise ConfigError(f"--set {item!r}: expected FIELD=VALUE")
-        *parents, leaf = path.split(".")
-        target = out
-        for p in parents:
-            target = target.setdefault(p, {})
-        try:
-            target[leaf] = json.loads(raw)
-        except json.JSONDecodeError:
-            target[leaf] = raw
-    if args.instance:
-        out["instance"] = args.instance
-    if args.log_level:
-        out["log_level"] = args.log_level
-    if args.connect:
-        out.setdefault("bus", {}).setdefault("zenoh", {})["connect"] = args.connect
-    return out
-
-
-def service_main(name: str, settings_cls: type[S], body: Callable[[Node], None],
-                 argv: Sequence[str] | None = None, description: str = "",
-                 flags: Callable[[argparse.ArgumentParser], None] | None = None,
-                 flag_overrides: Callable[[argparse.Namespace], dict[str, Any]] | None = None,
-                 ) -> int:
-    """Parse flags, load and validate settings, then run the service until stopped.
-
-    ``flags`` adds service-specific flags; ``flag_overrides`` turns them into settings.
-    """
-    parser = base_parser(f"stb {name}", description)
-    if flags:
-        flags(parser)
-    args = parser.parse_args(argv)
+def run_service(name: str, settings_cls: type[S], body: Callable[[Node], None],
+                args: argparse.Namespace,
+                flag_overrides: Callable[[argparse.Namespace], dict[str, Any]] | None = None,
+                ) -> int:
+    """Load and validate settings from parsed flags (``services.args.service_args``), then
+    run the service until stopped. ``flag_overrides`` turns its own flags into settings."""
     try:
         overrides = overrides_from(args)
         if flag_overrides:

@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import importlib
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from common.settings import ServiceSettings
+if TYPE_CHECKING:  # the registry is read by ``stb --help``: nothing heavy at import
+    from common.settings import ServiceSettings
 
 
 @dataclass(frozen=True)
@@ -41,16 +43,18 @@ SERVICES: dict[str, ServiceInfo] = {
 
 TOOLS: dict[str, ServiceInfo] = {
     "up": ServiceInfo("run the router and every service as supervised processes",
-                      "services.supervisor:UpSettings"),
+                      "services.supervisor:UpSettings", "services.up_cli"),
     "monitor": ServiceInfo("live table of alive services and every key's latest value; --raw",
                            "services.monitor.settings:MonitorSettings",
                            "services.monitor.__main__"),
     "record": ServiceInfo("record the bus to MCAP (+ a JSON copy for Foxglove): "
                           "stb record OUT.mcap [KEYEXPR...]",
-                          "services.recording.record:RecordSettings", "services.recording.record"),
+                          "services.recording.record:RecordSettings",
+                          "services.recording.record_cli"),
     "replay": ServiceInfo("put a recording back on the bus with its timing: "
                           "stb replay IN.mcap [--speed X]",
-                          "services.recording.replay:ReplaySettings", "services.recording.replay"),
+                          "services.recording.replay:ReplaySettings",
+                          "services.recording.replay_cli"),
     "report": ServiceInfo("plots and a one-page HTML summary of a recording: "
                           "stb report IN.mcap --out DIR", "", "services.report.cli"),
     "config": ServiceInfo("check a lab config file: stb config check --lab FILE", ""),

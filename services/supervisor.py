@@ -1,10 +1,5 @@
-"""``stb up``: the router and every service as separate processes, restarted when they die.
-
-Like compose's ``restart: unless-stopped``: a process that exits is started again after a delay
-that doubles from ``restart_initial_s`` up to ``restart_max_s`` and goes back to the start once a
-process has run for ``stable_after_s``. Ctrl-C (or SIGTERM) stops the services, then the router.
-Each child's output goes to ``<log_dir>/<service>-<instance>.log``.
-"""
+"""The supervisor behind ``stb up`` (services/up_cli.py has the command): each service a
+process of its own, restarted with back-off when it dies; the live table or log lines."""
 
 from __future__ import annotations
 

@@ -7,8 +7,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 
-from services.calib.settings import CalibSettings
-from services.entry import service_main
+from services.args import service_args
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -21,9 +20,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         from services.calib.collect_cli import main as collect_main
 
         return collect_main(argv[1:])
+    args = service_args("calib", __doc__ or "", argv)
     from services.calib.service import run
+    from services.calib.settings import CalibSettings
+    from services.entry import run_service
 
-    return service_main("calib", CalibSettings, run, argv, __doc__ or "")
+    return run_service("calib", CalibSettings, run, args)
 
 
 if __name__ == "__main__":

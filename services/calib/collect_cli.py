@@ -12,14 +12,14 @@ import sys
 import threading
 import time
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
-from common import keys
-from common import messages as m
-from common.bus import Bus, BusUnreachable, open_session
-from common.node import configure_logging, stop_on_signals
-from common.settings import ConfigError, load_settings
-from services.calib.settings import CalibSettings
-from services.entry import EXIT_CONFIG, base_parser, overrides_from
+from common.errors import ConfigError
+from services.args import EXIT_CONFIG, base_parser, overrides_from
+
+if TYPE_CHECKING:  # imported once the flags are parsed: --help answers at once
+    from common import messages as m
+    from common.bus import Bus
 
 EXIT_NO_SERVICE = 3
 EXIT_FAILED = 4
@@ -32,6 +32,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--count", type=int, help="passpoints (default: calib.count)")
     parser.add_argument("--timeout", type=float, help="seconds (default: calib.timeout_s)")
     args = parser.parse_args(argv)
+    from common import messages as m
+    from common.bus import Bus, BusUnreachable, open_session
+    from common.node import configure_logging, stop_on_signals
+    from common.settings import load_settings
+    from services.calib.settings import CalibSettings
+
     try:
         settings = load_settings(CalibSettings, args.lab, overrides_from(args))
         request = m.CollectRequest(measured_s=time.time(), camera=args.camera,
@@ -58,6 +64,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _collect(bus: Bus, request: m.CollectRequest, stop: threading.Event) -> int:
+    from common import keys
+
     alive = list(bus.session.liveliness().get(
         keys.alive_key(bus.prefix, "calib", "*"), timeout=2.0))
     if not any(r.ok is not None for r in alive):

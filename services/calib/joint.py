@@ -11,8 +11,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from common.camera import Intrinsics, Pose, project
 from services.calib.passpoints import Passpoints, Track
@@ -56,6 +54,9 @@ def refine_jointly(pose: Pose, points: Passpoints, intr: Intrinsics, *, fit_foca
         t0 = float(points.times_s.min())
         points = Passpoints(points.world_mm, points.pixels, points.times_s - t0)
         track = Track(track.times_s - t0, track.xyz_mm)
+    from scipy.optimize import least_squares  # 0.4 s to import: only for a joint fit
+    from scipy.spatial.transform import Rotation
+
     start = np.concatenate([Rotation.from_matrix(pose.rotation).as_rotvec(), pose.position,
                             [intr.focal_mm] if fit_focal else [],
                             [time_offset_s] if fit_offset else []])

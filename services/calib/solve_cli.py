@@ -13,10 +13,10 @@ import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from common.camera import Pose
-from services.calib.passpoints import CalibrationError, read_passpoints, read_track
-from services.calib.solve import Options, solve
+if TYPE_CHECKING:  # imported once the flags are parsed: --help answers at once
+    from common.camera import Pose
 
 EXIT_BAD_INPUT = 2
 EXIT_NO_POSE = 3
@@ -45,6 +45,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="write fitness.png (searches) and residuals.png here")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     args = parser.parse_args(argv)
+    from services.calib.passpoints import CalibrationError, read_passpoints, read_track
+    from services.calib.solve import Options, solve
+
     try:
         points = read_passpoints(args.passpoints)
         options = Options(method=args.method, initial=_parse_pose(args.initial),
@@ -70,6 +73,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _parse_pose(text: str | None) -> Pose | None:
+    from common.camera import Pose
+
     if text is None:
         return None
     try:

@@ -6,14 +6,16 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 
-from services.camera.settings import CameraSettings
-from services.entry import service_main
+from services.args import service_args
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    args = service_args("camera", __doc__ or "", argv)
     from services.camera.service import run
+    from services.camera.settings import CameraSettings
+    from services.entry import run_service
 
-    return service_main("camera", CameraSettings, run, argv, __doc__ or "")
+    return run_service("camera", CameraSettings, run, args)
 
 
 if __name__ == "__main__":

@@ -18,13 +18,16 @@ import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from common.settings import ConfigError, load_settings
-from services.entry import plain
+from common.errors import ConfigError
+from services.args import plain
 from services.experiment.paper import TABLES
-from services.gantry.predict import ALGORITHMS
-from services.gantry.settings import GantrySettings
-from services.sim.settings import SimSettings
+from services.gantry.algorithms import ALGORITHMS
+
+if TYPE_CHECKING:  # imported once the flags are parsed: --help answers at once
+    from services.gantry.settings import GantrySettings
+    from services.sim.settings import SimSettings
 
 PROG = "stb experiment"
 EXIT_USAGE = 2
@@ -36,6 +39,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return EXIT_USAGE
+    from common.settings import load_settings
+    from services.gantry.settings import GantrySettings
+    from services.sim.settings import SimSettings
+
     try:
         gantry = load_settings(GantrySettings, args.lab)
         sim = load_settings(SimSettings, args.lab)

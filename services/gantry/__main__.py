@@ -12,8 +12,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 
-from services.entry import service_main
-from services.gantry.settings import GantrySettings
+from services.args import service_args
 
 COMMANDS = ("arm", "disarm", "stop", "reset")
 
@@ -28,9 +27,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         from services.gantry.commission_cli import main as identify_main
 
         return identify_main(argv[1:])
+    args = service_args("gantry", __doc__ or "", argv)
+    from services.entry import run_service
     from services.gantry.service import run
+    from services.gantry.settings import GantrySettings
 
-    return service_main("gantry", GantrySettings, run, argv, __doc__ or "")
+    return run_service("gantry", GantrySettings, run, args)
 
 
 if __name__ == "__main__":

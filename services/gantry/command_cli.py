@@ -19,13 +19,13 @@ import socket
 import sys
 import time
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
-from common import keys
-from common import messages as m
-from common.bus import Bus
-from services.entry import base_parser, tool_main, tool_session, tool_settings
+from services.args import base_parser
 from services.gantry.__main__ import COMMANDS
-from services.gantry.settings import GantrySettings
+
+if TYPE_CHECKING:  # imported once the flags are parsed: --help answers at once
+    from common.bus import Bus
 
 EXIT_REFUSED, EXIT_NO_SERVICE = 1, 3
 
@@ -39,10 +39,16 @@ def main(argv: Sequence[str]) -> int:
     parser.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the "
                         "gantry's answer")
     args = parser.parse_args(argv)
+    from services.entry import tool_main
+
     return tool_main(f"gantry {args.command}", lambda: _send(args))
 
 
 def _send(args: argparse.Namespace) -> int:
+    from common.bus import Bus
+    from services.entry import tool_session, tool_settings
+    from services.gantry.settings import GantrySettings
+
     settings = tool_settings(GantrySettings, args)
     session = tool_session(settings)
     bus = Bus(session, settings.bus)
@@ -54,6 +60,9 @@ def _send(args: argparse.Namespace) -> int:
 
 
 def send(bus: Bus, command: str, operator: str, reason: str, timeout_s: float) -> int:
+    from common import keys
+    from common import messages as m
+
     replies: queue.Queue[m.GantryCommandReply] = queue.Queue()
     bus.subscribe(keys.GANTRY_COMMAND_REPLY, replies.put, latest=False)
     ident = f"cli-{os.getpid()}-{time.monotonic_ns() % 10**9}"

@@ -21,12 +21,11 @@ from typing import TYPE_CHECKING, Literal, Protocol
 
 import numpy as np
 
+from services.gantry.algorithms import ALGORITHMS, AlgorithmName  # noqa: F401 - one definition
+
 if TYPE_CHECKING:  # filterpy (with scipy.stats) takes 0.8 s to import: only the IMM needs it
     from filterpy.kalman import IMMEstimator, KalmanFilter
 
-AlgorithmName = Literal["basic", "pf-position", "pf-position-gauss", "pf-velocity", "default"]
-ALGORITHMS: tuple[AlgorithmName, ...] = ("basic", "pf-position", "pf-position-gauss",
-                                         "pf-velocity", "default")
 
 
 @dataclass(frozen=True)

@@ -6,9 +6,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 
-from services.entry import service_main
-from services.ptz.service import run
-from services.ptz.settings import PtzSettings
+from services.args import service_args
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -17,7 +15,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         from services.ptz.aim_cli import main as aim_main
 
         return aim_main(argv[1:])
-    return service_main("ptz", PtzSettings, run, argv, __doc__ or "")
+    args = service_args("ptz", __doc__ or "", argv)
+    from services.entry import run_service
+    from services.ptz.service import run
+    from services.ptz.settings import PtzSettings
+
+    return run_service("ptz", PtzSettings, run, args)
 
 
 if __name__ == "__main__":

@@ -7,11 +7,10 @@ import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
-
-from common.camera import Pose
-from services.ptz.aim import Limits, aim_at
+if TYPE_CHECKING:  # imported once the flags are parsed: --help answers at once
+    from common.camera import Pose
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -26,6 +25,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="camera mounting; AXIS keeps the camera frame the same for both")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(_joined(sys.argv[1:] if argv is None else list(argv)))
+    import numpy as np
+
+    from services.ptz.aim import Limits, aim_at
+
     try:
         pose = _read_pose(args.pose)
         target = np.array([float(v) for v in args.target.split(",")])
@@ -53,6 +56,8 @@ def _joined(argv: list[str]) -> list[str]:
 
 
 def _read_pose(path: Path) -> Pose:
+    from common.camera import Pose
+
     data = json.loads(path.read_text())
     if "pose" in data:  # the calib service's pose.json: the CameraPose message's fields
         p = data["pose"]

@@ -1,15 +1,5 @@
-"""``stb record OUT.mcap [KEYEXPR ...]``: every sample of the chosen keys into an MCAP file.
-
-Default key expression: everything under the bus prefix (``stb/**``); what queryables hold
-for those keys at the start (the camera poses) is asked for once and recorded too. Each sample
-is written as it crossed the bus (msgpack) with its receive and measurement times, plus a JSON
-copy that Foxglove shows (camera images as ``foxglove.CompressedImage``); see
-``services.recording.mcap_file`` for the layout. Invalid payloads are recorded too (as bytes,
-without a JSON copy) and counted. Ctrl-C, SIGTERM or ``--duration`` end the recording cleanly.
-
-The tracking camera's raw frames (``stb/gantry/camera/frame``) are about 8 MB/s before
-compression; leave them out with ``--exclude stb/gantry/camera/frame`` when they are not needed.
-"""
+"""What ``stb record`` does once its flags are parsed (services/recording/record_cli.py has
+the command and its documentation): the bus to MCAP, and a JSON copy."""
 
 from __future__ import annotations
 
@@ -34,9 +24,7 @@ from common.node import stop_on_signals
 from common.settings import LogLevel, ServiceSettings
 from services.entry import (
     ToolError,
-    base_parser,
     checked_key_exprs,
-    tool_main,
     tool_session,
     tool_settings,
 )
@@ -145,19 +133,7 @@ def _float_or_none(value: object) -> float | None:
     return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = base_parser("stb record", __doc__ or "")
-    parser.add_argument("out", type=Path, metavar="OUT.mcap")
-    parser.add_argument("key_exprs", nargs="*", metavar="KEYEXPR",
-                        help="what to record (default: <prefix>/**)")
-    parser.add_argument("--exclude", action="append", default=[], metavar="KEYEXPR",
-                        help="leave these keys out (repeatable)")
-    parser.add_argument("--duration", type=float, help="stop after this many seconds")
-    args = parser.parse_args(argv)
-    return tool_main("record", lambda: _record(args))
-
-
-def _record(args: argparse.Namespace) -> int:
+def record(args: argparse.Namespace) -> int:
     settings = tool_settings(RecordSettings, args)
     exprs = checked_key_exprs(args.key_exprs or [f"{settings.bus.prefix}/**"])
     exclude = checked_key_exprs(args.exclude)
@@ -218,6 +194,3 @@ def _summary(stats: Stats, out: Path) -> None:
     for what, count in sorted(stats.invalid.items()):
         print(f"  invalid (recorded as bytes only) {what}: {count}", file=sys.stderr)
 
-
-if __name__ == "__main__":
-    sys.exit(main())

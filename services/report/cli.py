@@ -11,81 +11,9 @@ each recorded pose's own fit error.
 from __future__ import annotations
 
 import argparse
-import html
-import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-
-from common.heightmap import HeightMap
-from common.settings import ConfigError, load_settings
-from services.entry import EXIT_CONFIG
-from services.gantry.settings import GantrySettings
-from services.recording.mcap_file import RecordingError
-from services.report import plots
-from services.report.data import Recording, read_recording, summary
-
-FIGURES = (("errors.png", "Crane-to-robot error over time"),
-           ("tracks.png", "Tracks over the height map"),
-           ("velocity.png", "Filtered velocity"),
-           ("calibration.png", "Calibration residuals"),
-           ("aim.png", "PTZ aim error"))
-
-
-def write_report(rec: Recording, out_dir: Path, height_map: HeightMap | None,
-                 marker_label: str = "wand") -> dict[str, Path | None]:
-    """Every figure (None where there is no data), ``summary.json`` and ``index.html``."""
-    out_dir.mkdir(parents=True, exist_ok=True)
-    written = {
-        "errors.png": plots.error_plot(rec, out_dir / "errors.png"),
-        "tracks.png": plots.track_plot(rec, height_map, out_dir / "tracks.png"),
-        "velocity.png": plots.velocity_plot(rec, out_dir / "velocity.png"),
-        "calibration.png": plots.calibration_plot(rec, out_dir / "calibration.png",
-                                                  marker_label),
-        "aim.png": plots.aim_plot(rec, out_dir / "aim.png"),
-    }
-    figures = summary(rec)
-    (out_dir / "summary.json").write_text(json.dumps(figures, indent=1) + "\n")
-    (out_dir / "index.html").write_text(render_html(rec, figures, written))
-    return written
-
-
-def render_html(rec: Recording, figures: dict, written: dict[str, Path | None]) -> str:
-    rows = "\n".join(f"<tr><td>{html.escape(k)}</td><td>{html.escape(_fmt(v))}</td></tr>"
-                     for k, v in figures.items())
-    keys = "\n".join(f"<tr><td>{html.escape(k)}</td><td>{n}</td></tr>"
-                     for k, n in sorted(rec.counts.items()))
-    blocks = []
-    for name, title in FIGURES:
-        if written.get(name) is not None:
-            blocks.append(f'<figure><img src="{name}" alt="{html.escape(title)}">'
-                          f"<figcaption>{html.escape(title)}</figcaption></figure>")
-        else:
-            blocks.append(f'<p class="missing">{html.escape(title)}: no data in this '
-                          "recording.</p>")
-    unhealthy = [f"{name}: {h.status} {h.detail}" for name, h in sorted(rec.health.items())
-                 if h.status != "ok"]
-    health = ("<p>Last health of every service: ok.</p>" if rec.health and not unhealthy
-              else "".join(f"<p class='missing'>{html.escape(u)}</p>" for u in unhealthy))
-    return f"""<!doctype html>
-<html lang="en"><head><meta charset="utf-8"><title>STB run {html.escape(rec.path.name)}</title>
-<style>
-body {{ font-family: sans-serif; margin: 1.5em; max-width: 1000px; }}
-table {{ border-collapse: collapse; margin-bottom: 1em; }}
-td {{ border-bottom: 1px solid #ddd; padding: 2px 12px 2px 0; font-size: 90%; }}
-figure {{ margin: 0 0 1em 0; }} img {{ max-width: 100%; }}
-.missing {{ color: #a40; }} .cols {{ display: flex; gap: 3em; flex-wrap: wrap; }}
-</style></head><body>
-<h1>Run {html.escape(rec.path.name)}</h1>
-<div class="cols"><div><h2>Figures</h2><table id="figures">{rows}</table>{health}</div>
-<div><h2>Samples per key</h2><table id="keys">{keys}</table></div></div>
-{''.join(blocks)}
-</body></html>
-"""
-
-
-def _fmt(value: object) -> str:
-    return "—" if value is None else str(value)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -99,25 +27,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="label of the calibration marker (default: wand)")
     parser.add_argument("--prefix", default="stb", help="key prefix of the recording")
     args = parser.parse_args(argv)
-    try:
-        height_map = _height_map(args)
-        print(f"stb report: reading {args.recording} ...", file=sys.stderr, flush=True)
-        rec = read_recording(args.recording, args.prefix)
-    except (ConfigError, RecordingError, OSError, ValueError) as err:
-        print(f"stb report: {err}", file=sys.stderr)
-        return EXIT_CONFIG
-    written = write_report(rec, args.out, height_map, args.calib_marker)
-    for name, path in written.items():
-        print(f"  {path}" if path else f"  {name}: no data in this recording", file=sys.stderr)
-    print(f"stb report: {args.out / 'index.html'}", file=sys.stderr)
-    return 0
+    from services.report.page import report
+
+    return report(args)
 
 
-def _height_map(args: argparse.Namespace) -> HeightMap | None:
-    path = args.height_map
-    if path is None:
-        default = load_settings(GantrySettings, args.lab).height_map
-        if not default.exists():
-            return None
-        path = default
-    return HeightMap.load(path)
+if __name__ == "__main__":
+    sys.exit(main())

@@ -6,11 +6,12 @@ import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from common.node import Node
-from services.entry import service_main
-from services.router.settings import RouterSettings
+from services.args import service_args
+
+if TYPE_CHECKING:
+    from common.node import Node
 
 
 def _wait(node: Node) -> None:
@@ -34,8 +35,11 @@ def _overrides(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    return service_main("router", RouterSettings, _wait, argv, __doc__ or "",
-                        flags=_flags, flag_overrides=_overrides)
+    args = service_args("router", __doc__ or "", argv, flags=_flags)
+    from services.entry import run_service
+    from services.router.settings import RouterSettings
+
+    return run_service("router", RouterSettings, _wait, args, flag_overrides=_overrides)
 
 
 if __name__ == "__main__":

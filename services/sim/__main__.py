@@ -8,10 +8,8 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
-from services.entry import service_main
-from services.sim.robots import SCENARIOS
-from services.sim.service import run
-from services.sim.settings import SimSettings
+from services.args import service_args
+from services.sim.scenarios import SCENARIOS
 
 
 def _flags(parser: argparse.ArgumentParser) -> None:
@@ -29,8 +27,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         from services.sim.estop_cli import main as estop_main
 
         return estop_main(argv[1:])
-    return service_main("sim", SimSettings, run, argv, __doc__ or "", flags=_flags,
-                        flag_overrides=_overrides)
+    args = service_args("sim", __doc__ or "", argv, flags=_flags)
+    from services.entry import run_service
+    from services.sim.service import run
+    from services.sim.settings import SimSettings
+
+    return run_service("sim", SimSettings, run, args, flag_overrides=_overrides)
 
 
 if __name__ == "__main__":

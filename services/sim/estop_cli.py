@@ -11,12 +11,12 @@ Exit status: 0 done, 2 bad arguments, 3 the sim's crane controller does not answ
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
-from pymodbus.client import ModbusTcpClient
-from pymodbus.exceptions import ModbusException
+from services.args import base_parser
 
-from services.entry import ToolError, base_parser, tool_main, tool_settings
-from services.sim.settings import SimSettings
+if TYPE_CHECKING:  # imported once the flags are parsed: --help answers at once
+    from services.sim.settings import SimSettings
 
 EXIT_UNREACHABLE = 3
 
@@ -25,10 +25,18 @@ def main(argv: Sequence[str]) -> int:
     parser = base_parser("stb sim estop", __doc__ or "")
     parser.add_argument("--release", action="store_true", help="release it (close the circuit)")
     args = parser.parse_args(argv)
+    from services.entry import tool_main, tool_settings
+    from services.sim.settings import SimSettings
+
     return tool_main("sim estop", lambda: _press(args.release, tool_settings(SimSettings, args)))
 
 
 def _press(release: bool, settings: SimSettings) -> int:
+    from pymodbus.client import ModbusTcpClient
+    from pymodbus.exceptions import ModbusException
+
+    from services.entry import ToolError
+
     crane = settings.crane
     client = ModbusTcpClient(crane.host, port=crane.port, timeout=2, retries=0)
     try:

@@ -8,14 +8,12 @@ paper §3.1) follows the surface height of the crater plus the height it is moun
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
+from services.sim.scenarios import Scenario
 from services.sim.world import CraterMap
 
-Scenario = Literal["locomotive", "walker", "calibration", "parked"]
-SCENARIOS: tuple[Scenario, ...] = ("locomotive", "walker", "calibration", "parked")
 SAMPLE_HZ = 100.0
 MARKER_DIAMETER_MM = 19.0
 MARKER_HEIGHT_MM = {"locomotive": 80.0, "walker": 350.0}

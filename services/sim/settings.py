@@ -15,7 +15,8 @@ from common.crane_registers import RegisterMap
 from common.settings import ServiceSettings, above_its_minimum
 from services.sim.crane import CraneParams
 from services.sim.crane_server import ESTOP_REGISTER
-from services.sim.robots import Railway, Scenario, Walk
+from services.sim.robots import Railway, Walk
+from services.sim.scenarios import Scenario
 
 
 class _Section(BaseModel):

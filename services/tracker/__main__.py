@@ -5,13 +5,16 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 
-from services.entry import service_main
-from services.tracker.service import run
-from services.tracker.settings import TrackerSettings
+from services.args import service_args
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    return service_main("tracker", TrackerSettings, run, argv, __doc__ or "")
+    args = service_args("tracker", __doc__ or "", argv)
+    from services.entry import run_service
+    from services.tracker.service import run
+    from services.tracker.settings import TrackerSettings
+
+    return run_service("tracker", TrackerSettings, run, args)
 
 
 if __name__ == "__main__":

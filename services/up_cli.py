@@ -1,0 +1,47 @@
+"""``stb up``: the router and every service as separate processes, restarted when they die.
+
+Like compose's ``restart: unless-stopped``: a process that exits is started again after a delay
+that doubles from ``restart_initial_s`` up to ``restart_max_s`` and goes back to the start once a
+process has run for ``stable_after_s``. Ctrl-C (or SIGTERM) stops the services, then the router.
+Each child's output goes to ``<log_dir>/<service>-<instance>.log``.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+from collections.abc import Sequence
+
+from common.errors import ConfigError
+from services.args import EXIT_CONFIG, base_parser, overrides_from
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = base_parser("stb up", __doc__ or "")
+    parser.add_argument("--only", help="comma-separated services, e.g. router,sim")
+    parser.add_argument("--no-view", action="store_true", help="log lines instead of a live table")
+    args = parser.parse_args(argv)
+    from common.node import configure_logging, stop_on_signals
+    from common.settings import load_settings
+    from services import supervisor
+
+    try:
+        overrides = overrides_from(args)
+        if args.only:
+            overrides["services"] = args.only.split(",")
+        settings = load_settings(supervisor.UpSettings, args.lab, overrides)
+    except ConfigError as err:
+        print(f"stb up: {err}", file=sys.stderr)
+        return EXIT_CONFIG
+    configure_logging(settings.log_level)
+    stop = threading.Event()
+    restore = stop_on_signals(stop)
+    try:
+        view = not args.no_view and sys.stdout.isatty()
+        return supervisor.run(settings, args.lab, stop, view=view)
+    finally:
+        restore()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
