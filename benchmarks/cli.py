@@ -60,7 +60,7 @@ def main() -> None:
     print(f"slowest --help of all: {slowest:.3f} s")
     with tempfile.TemporaryDirectory() as tmp:
         csv = Path(tmp) / "passpoints.csv"
-        write_passpoints(csv, passpoints(PAPER_POSE, np.random.default_rng(1)))
+        write_passpoints(csv, passpoints(PAPER_POSE, np.random.default_rng(1))[0])
         guess = ",".join(str(v) for v in (*PAPER_GUESS.position, PAPER_GUESS.rx_deg,
                                           PAPER_GUESS.ry_deg, PAPER_GUESS.rz_deg))
         for method, extra in (("auto", []), ("cmaes", ["--initial", guess])):

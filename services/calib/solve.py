@@ -13,6 +13,7 @@ never returned.
 
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import dataclass, field
 from typing import Literal
@@ -84,15 +85,26 @@ class Solution:
         return out
 
 
+_warm = False
+
+
 def prepare(options: Options) -> None:
     """Import what the solve will need before it is timed (cma about 1 s with matplotlib,
-    scipy.optimize 0.4 s), so that a reported solve time is the solve's; ``auto`` without a
-    track or a focal fit needs neither."""
+    scipy.optimize 0.4 s; ``auto`` without a track or a focal fit needs neither), and once
+    per process run the closed form on a few synthetic passpoints (first calls into OpenCV
+    and numpy cost milliseconds): a reported solve time is the solve's, warm."""
+    global _warm
     if options.method == "cmaes":
         import cma  # noqa: F401
     if options.method == "simplex" or options.fit_focal or options.track is not None:
         import scipy.optimize  # noqa: F401
         import scipy.spatial.transform  # noqa: F401
+    if not _warm:
+        _warm = True
+        from services.calib.synthetic import PAPER_POSE, passpoints
+
+        with contextlib.suppress(CalibrationError):  # a warm-up only
+            solve(passpoints(PAPER_POSE, np.random.default_rng(0), count=30)[0])
 
 
 def solve(points: Passpoints, options: Options = Options()) -> Solution:
