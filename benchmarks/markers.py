@@ -2,9 +2,12 @@
 
     .venv/bin/python -m benchmarks.markers [--frames 200] [--rounds 5]
 
-Every frame is 704×576 (the AXIS 215's resolution) with 1–3 IR markers (radius 2–15 px, soft
-edges), 0–3 elongated reflections and sensor noise, made from a fixed seed. Each method runs on
-every frame of the set in turn, the methods' order rotating every round (so drift of the shared
+Every frame is 704×576 (the AXIS 215's resolution), made from a fixed seed; one set per
+kind: the mixed set (1–3 IR markers of radius 2–15 px with soft edges, 0–3 elongated
+reflections, sensor noise), and the light frames of a dark crater: empty, sensor noise only,
+one marker, three markers, one stray reflection (each with noise but the empty one). Each
+method runs on every frame of the set in turn, the methods' order rotating every round (so drift
+of the shared
 machine hits them alike), OpenCV limited to one thread:
 
 * ``detect``: ours (threshold 230, up to 5 markers);
@@ -30,23 +33,25 @@ from common.markers import detect
 THRESHOLD = 230
 
 
-def make_frames(count: int, seed: int = 7) -> list[np.ndarray]:
+def make_frames(count: int, seed: int = 7, markers: tuple[int, int] = (1, 4),
+                reflections: tuple[int, int] = (0, 4), noise: float = 2.5) -> list[np.ndarray]:
+    """``count`` frames with ``markers`` and ``reflections`` drawn from [lo, hi) each."""
     rng = np.random.default_rng(seed)
     rows, cols = np.mgrid[0:576, 0:704]
     frames = []
     for _ in range(count):
         image = np.full((576, 704), 16.0)
-        for _ in range(rng.integers(1, 4)):
+        for _ in range(rng.integers(*markers)):
             u, v, r = rng.uniform(20, 684), rng.uniform(20, 556), rng.uniform(2, 15)
             coverage = np.clip(r - np.hypot(cols - u, rows - v) + 0.5, 0, 1)
             image = np.maximum(image, 16 + coverage * 239)
-        for _ in range(rng.integers(0, 4)):
+        for _ in range(rng.integers(*reflections)):
             streak = np.zeros((576, 704), np.uint8)
             cv2.ellipse(streak, ((rng.uniform(0, 704), rng.uniform(0, 576)),
                                  (rng.uniform(10, 40), rng.uniform(2, 6)), rng.uniform(0, 180)),
                         235, -1, cv2.LINE_AA)
             image = np.maximum(image, streak)
-        image = cv2.GaussianBlur(image, (0, 0), 0.7) + rng.normal(0, 2.5, image.shape)
+        image = cv2.GaussianBlur(image, (0, 0), 0.7) + rng.normal(0, noise, image.shape)
         frames.append(np.clip(np.rint(image), 0, 255).astype(np.uint8))
     return frames
 
@@ -96,6 +101,16 @@ def run(frames: list[np.ndarray], rounds: int) -> dict[str, dict[str, float]]:
             for name, t in times.items()}
 
 
+SETS = {  # name: (markers, reflections, noise) — the light frames are the common case
+    "mixed (1-3 markers, 0-3 reflections)": ((1, 4), (0, 4), 2.5),
+    "empty": ((0, 1), (0, 1), 0.0),
+    "noise only": ((0, 1), (0, 1), 2.5),
+    "1 marker": ((1, 2), (0, 1), 2.5),
+    "3 markers": ((3, 4), (0, 1), 2.5),
+    "1 reflection": ((0, 1), (1, 2), 2.5),
+}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -103,17 +118,20 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
-    results = run(make_frames(args.frames), args.rounds)
+    results = {name: run(make_frames(args.frames, markers=m, reflections=r, noise=n),
+                         args.rounds) for name, (m, r, n) in SETS.items()}
     if args.json:
         print(json.dumps(results, indent=2))
         return
-    print(f"{args.frames} frames × {args.rounds} rounds, 704×576, OpenCV {cv2.__version__} "
-          f"(1 thread), numpy {np.__version__}, {platform.processor() or platform.machine()}")
-    print("| method | median µs | p99 µs | median / findContours |")
-    print("|---|---|---|---|")
-    for name, r in results.items():
-        print(f"| {name} | {r['median_us']:.1f} | {r['p99_us']:.1f} | "
-              f"{r['ratio_to_findContours']:.2f} |")
+    print(f"{args.frames} frames × {args.rounds} rounds per set, 704×576, OpenCV "
+          f"{cv2.__version__} (1 thread), numpy {np.__version__}, "
+          f"{platform.processor() or platform.machine()}")
+    print("| set | method | median µs | p99 µs | median / findContours |")
+    print("|---|---|---|---|---|")
+    for set_name, per_method in results.items():
+        for name, r in per_method.items():
+            print(f"| {set_name} | {name} | {r['median_us']:.1f} | {r['p99_us']:.1f} | "
+                  f"{r['ratio_to_findContours']:.2f} |")
 
 
 if __name__ == "__main__":

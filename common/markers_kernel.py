@@ -25,19 +25,23 @@ def _find(parent: np.ndarray, i: int) -> int:
 
 
 @njit(cache=True, nogil=True)
-def _row_max(row: np.ndarray) -> int:
+def _brightest(values: np.ndarray) -> int:
     top = 0
-    for value in row:
+    for value in values:  # no early exit: vectorised
         top = max(top, value)
     return top
 
 
 @njit(cache=True, nogil=True)
-def row_maxima(image: np.ndarray) -> np.ndarray:
-    """The brightest pixel of every row: the one full pass over the frame."""
+def row_maxima(image: np.ndarray, band_max: np.ndarray, band_rows: int, floor: int
+               ) -> np.ndarray:
+    """The brightest pixel of every row of a band whose brightest (``band_max``, every
+    ``band_rows`` rows) reaches ``floor``; elsewhere the band's brightest, below ``floor``, so
+    that no threshold tried looks at the row."""
     out = np.empty(image.shape[0], np.uint8)
     for y in range(image.shape[0]):
-        out[y] = _row_max(image[y])
+        top = band_max[y // band_rows]
+        out[y] = _brightest(image[y]) if top >= floor else top
     return out
 
 
