@@ -81,7 +81,7 @@ def test_a_solve_outruns_every_version_heard(make_bus: Callable[..., Bus],
     time.sleep(0.3)
     world.publish(keys.CALIB_POSE, m.CameraPose(measured_s=time.time(), version=5, **SOLVED),
                   camera="ptz1")
-    wait_for(lambda: len(heard) == 1)
+    wait_for(lambda: len(heard) == 1 and calib.seen_version.get("ptz1") == 5)  # both heard it
     calib.solved(m.CameraPose(measured_s=time.time(), **SOLVED), {"method": "test"})
     wait_for(lambda: len(heard) == 2)
     assert heard[-1].version == 6 and PoseStore(tmp_path).load("ptz1").version == 6
