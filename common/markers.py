@@ -32,7 +32,7 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 
-from common.markers_kernel import regions_kernel, row_maxima
+from common.markers_kernel import row_maxima, threshold_kernel
 from common.messages import DetectedMarker, MarkerDetections
 
 Status = Literal["ok", "none", "too_many"]
@@ -91,17 +91,16 @@ def detect(frame: np.ndarray, *, threshold: int = 230, t_lim: int = 203, step: i
     if brightest < t_lim:  # the common frame: nothing reaches even the lowest threshold
         return Detection("none", t_lim, (), regions)
     row_max = row_maxima(image, bands, BAND_ROWS, t_lim)
-    for t in _thresholds(threshold, t_lim, step):
-        if t > brightest:
-            continue
-        regions = _regions(image, row_max, t, l_min)
-        markers = tuple(r for r in regions
-                        if r.roundness < r_lim and min_area <= r.area <= max_area)
-        if len(markers) > max_markers:
-            return Detection("too_many", t, markers, regions)
-        if markers:
-            return Detection("ok", t, markers, regions)
-    return Detection("none", t_lim, (), regions)
+    thresholds = np.array(_thresholds(threshold, t_lim, step), np.int64)
+    found, t, table = threshold_kernel(image, row_max, thresholds, l_min, _SMALL_AREA,
+                                       float(r_lim), min_area, max_area, max_markers)
+    regions = tuple(Marker(u, v, long_r, short_r, angle, roundness, int(area))
+                    for u, v, long_r, short_r, angle, roundness, area in table.tolist())
+    if not found:
+        return Detection("none", t_lim, (), regions)
+    markers = tuple(r for r in regions if r.roundness < r_lim and min_area <= r.area <= max_area)
+    return Detection("too_many" if len(markers) > max_markers else "ok", int(t), markers,
+                     regions)
 
 
 def warm_up() -> float:
@@ -160,13 +159,6 @@ def _band_maxima(image: np.ndarray) -> np.ndarray:
 def _thresholds(threshold: int, t_lim: int, step: int) -> list[int]:
     out = list(range(threshold, t_lim, -step))
     return [*out, t_lim]
-
-
-def _regions(image: np.ndarray, row_max: np.ndarray, threshold: int,
-             l_min: int) -> tuple[Marker, ...]:
-    table = regions_kernel(image, row_max, threshold, l_min, _SMALL_AREA)
-    return tuple(Marker(u, v, long_r, short_r, angle, roundness, int(area))
-                 for u, v, long_r, short_r, angle, roundness, area in table.tolist())
 
 
 # --- annotated images ----------------------------------------------------------------------------

@@ -228,3 +228,28 @@ def weighted_ellipse(image: np.ndarray, u: float, v: float, reach: int, threshol
     out[3] = 2 * np.sqrt(max(mean - spread, 1e-12))
     out[4] = angle + 180 if angle <= -90 else angle
     return out
+
+
+@njit(cache=True, nogil=True)
+def threshold_kernel(image: np.ndarray, row_max: np.ndarray, thresholds: np.ndarray,
+                     l_min: int, small_area: int, r_lim: float, min_area: int, max_area: int,
+                     max_markers: int) -> tuple:
+    """The paper's threshold loop in one call: from the first threshold down, the regions at
+    each threshold the frame reaches, until one has a marker (roundness below ``r_lim``, area
+    within bounds). Returns (markers found, threshold, regions table); (0, last threshold,
+    the last table) when none has, an empty table when the frame reaches none."""
+    brightest = 0
+    for value in row_max:
+        brightest = max(brightest, value)
+    table = np.empty((0, 7))
+    for t in thresholds:
+        if t > brightest:
+            continue
+        table = regions_kernel(image, row_max, t, l_min, small_area)
+        found = 0
+        for k in range(table.shape[0]):
+            if table[k, 5] < r_lim and min_area <= table[k, 6] <= max_area:
+                found += 1
+        if found:
+            return found, t, table
+    return 0, thresholds[-1], table
