@@ -92,13 +92,13 @@ def detect(frame: np.ndarray, *, threshold: int = 230, t_lim: int = 203, step: i
         return Detection("none", t_lim, (), regions)
     row_max = row_maxima(image, bands, BAND_ROWS, t_lim)
     thresholds = np.array(_thresholds(threshold, t_lim, step), np.int64)
-    found, t, table = threshold_kernel(image, row_max, thresholds, l_min, _SMALL_AREA,
-                                       float(r_lim), min_area, max_area, max_markers)
+    t, table, is_marker = threshold_kernel(image, row_max, thresholds, l_min, _SMALL_AREA,
+                                           float(r_lim), min_area, max_area)
     regions = tuple(Marker(u, v, long_r, short_r, angle, roundness, int(area))
                     for u, v, long_r, short_r, angle, roundness, area in table.tolist())
-    if not found:
+    markers = tuple(r for r, marker in zip(regions, is_marker.tolist(), strict=True) if marker)
+    if not markers:
         return Detection("none", t_lim, (), regions)
-    markers = tuple(r for r in regions if r.roundness < r_lim and min_area <= r.area <= max_area)
     return Detection("too_many" if len(markers) > max_markers else "ok", int(t), markers,
                      regions)
 

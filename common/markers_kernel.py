@@ -232,24 +232,25 @@ def weighted_ellipse(image: np.ndarray, u: float, v: float, reach: int, threshol
 
 @njit(cache=True, nogil=True)
 def threshold_kernel(image: np.ndarray, row_max: np.ndarray, thresholds: np.ndarray,
-                     l_min: int, small_area: int, r_lim: float, min_area: int, max_area: int,
-                     max_markers: int) -> tuple:
+                     l_min: int, small_area: int, r_lim: float, min_area: int,
+                     max_area: int) -> tuple:
     """The paper's threshold loop in one call: from the first threshold down, the regions at
     each threshold the frame reaches, until one has a marker (roundness below ``r_lim``, area
-    within bounds). Returns (markers found, threshold, regions table); (0, last threshold,
-    the last table) when none has, an empty table when the frame reaches none."""
+    within bounds). Returns (threshold, regions table, which regions are markers); the last
+    threshold and table with no marker when none has one, an empty table when the frame
+    reaches none."""
     brightest = 0
     for value in row_max:
         brightest = max(brightest, value)
     table = np.empty((0, 7))
+    is_marker = np.zeros(0, np.bool_)
     for t in thresholds:
         if t > brightest:
             continue
         table = regions_kernel(image, row_max, t, l_min, small_area)
-        found = 0
+        is_marker = np.empty(table.shape[0], np.bool_)
         for k in range(table.shape[0]):
-            if table[k, 5] < r_lim and min_area <= table[k, 6] <= max_area:
-                found += 1
-        if found:
-            return found, t, table
-    return 0, thresholds[-1], table
+            is_marker[k] = table[k, 5] < r_lim and min_area <= table[k, 6] <= max_area
+        if is_marker.any():
+            return t, table, is_marker
+    return thresholds[-1], table, is_marker

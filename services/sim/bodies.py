@@ -15,8 +15,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from common.camera import rot_z
-
 MIN_MARKERS = 3
 
 
@@ -42,11 +40,6 @@ def heading_rad(velocity_mm_s: np.ndarray, ahead_mm: np.ndarray) -> float:
         if float(np.hypot(direction[0], direction[1])) > 1e-3:
             return float(np.arctan2(direction[1], direction[0]))
     return 0.0
-
-
-def heading_rotation(velocity_mm_s: np.ndarray, ahead_mm: np.ndarray) -> np.ndarray:
-    """World-from-body rotation of a level body turned to its heading (``heading_rad``)."""
-    return rot_z(heading_rad(velocity_mm_s, ahead_mm))
 
 
 def place(points_mm: np.ndarray, position_mm: np.ndarray, rotation: np.ndarray) -> np.ndarray:

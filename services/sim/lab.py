@@ -136,12 +136,16 @@ class Lab:
             return np.zeros(3)
         return self.trajectory.velocity(self.scenario_time(t))
 
+    def robot_heading(self, t: float, marker: np.ndarray) -> float:
+        """Where the robot (its marker at ``marker`` at ``t``) faces, radians."""
+        return heading_rad(self.robot_velocity(t), self.robot(t + 0.5) - marker)
+
     def robot_pose(self, t: float) -> tuple[np.ndarray, float, float]:
         """(marker position, heading in radians, ground height under it) at ``t``: what a
         camera's picture draws of the robot."""
         marker = self.robot(t)
-        heading = heading_rad(self.robot_velocity(t), self.robot(t + 0.5) - marker)
-        return marker, heading, float(self.crater.height_at(marker[0], marker[1]))
+        return (marker, self.robot_heading(t, marker),
+                float(self.crater.height_at(marker[0], marker[1])))
 
     def wand_position(self, t: float) -> np.ndarray | None:
         """The calibration wand's marker while the robot waits (looping), else None."""
@@ -231,8 +235,8 @@ class Lab:
 
     def _body_pose(self, name: str, t: float) -> tuple[np.ndarray, np.ndarray] | None:
         if name == self.settings.mocap.robot_body:
-            marker, heading, _ = self.robot_pose(t)
-            return marker, rot_z(heading)
+            marker = self.robot(t)
+            return marker, rot_z(self.robot_heading(t, marker))
         wand = self.wand_position(t)
         return None if wand is None else (wand, np.eye(3))
 

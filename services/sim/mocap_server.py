@@ -17,7 +17,7 @@ import logging
 import struct
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import IntEnum
 
@@ -117,7 +117,7 @@ NOT_AVAILABLE = ("analog", "force", "gazevector", "eyetracker", "image", "skelet
 
 
 def parameters_xml(labels: list[str], frequency_hz: float,
-                   bodies: list[tuple[BodyDefinition, list[str]]] = (),  # type: ignore[assignment]
+                   bodies: Sequence[tuple[BodyDefinition, list[str]]] = (),
                    groups: tuple[str, ...] = PARAMETER_GROUPS) -> str:
     """The parameters of ``groups`` (general, 3d, 6d); each body with its points' labels."""
     parts = ["<QTM_Parameters_Ver_1.25>"]

@@ -66,12 +66,15 @@ class Preset:
     zoom: float
 
 
+HOME = Preset("Home", 0.0, 0.0, 1.0)  # preset 1, where move=home goes
+
+
 @dataclass
 class CameraMemory:
     """What the camera keeps beside the head's motion: its server presets and its lens."""
 
     presets: dict[int, Preset] = field(
-        default_factory=lambda: {1: Preset("Home", 0.0, 0.0, 1.0)})
+        default_factory=lambda: {1: HOME})
     autofocus: bool = True
     autoiris: bool = True
     focus: int = 5000
@@ -213,7 +216,7 @@ def _move(args: Mapping[str, str], head: PtzHead, memory: CameraMemory, now: flo
 def _named_move(where: str, head: PtzHead, memory: CameraMemory, now: float,
                 speed: float | None) -> None:
     if where == "home":
-        home = memory.presets.get(1, Preset("Home", 0.0, 0.0, 1.0))
+        home = memory.presets.get(1, HOME)
         head.absolute(now, home.pan, home.tilt, home.zoom, speed=speed)
     elif where == "stop":
         head.stop(now)

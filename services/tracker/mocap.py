@@ -14,7 +14,7 @@ import math
 import threading
 import time
 import xml.etree.ElementTree as ET
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Protocol
 
 import numpy as np
@@ -66,7 +66,7 @@ class ClockSync:
 
 
 def frame_from_packet(packet: qtm_rt.QRTPacket, labels: list[str], measured_s: float,
-                      body_names: list[str] = ()) -> MarkerFrame:  # type: ignore[assignment]
+                      body_names: Sequence[str] = ()) -> MarkerFrame:
     """A MarkerFrame from a QTM data packet; lost (NaN) markers and bodies are left out."""
     markers = []
     labelled = packet.get_3d_markers()
@@ -83,7 +83,7 @@ def frame_from_packet(packet: qtm_rt.QRTPacket, labels: list[str], measured_s: f
                        bodies=_bodies(packet, body_names) if body_names else [])
 
 
-def _bodies(packet: qtm_rt.QRTPacket, names: list[str]) -> list[RigidBody]:
+def _bodies(packet: qtm_rt.QRTPacket, names: Sequence[str]) -> list[RigidBody]:
     six_d = packet.get_6d()
     if six_d is None:
         return []
