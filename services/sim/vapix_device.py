@@ -4,8 +4,8 @@
 The parameter groups (Brand, Properties, PTZ, ImageSource, IOPort, StreamProfile) follow the
 layout real AXIS cameras list; the values are this camera's: its limits, presets, IR cut filter
 and the configured user. The product is the paper's AXIS 215 PTZ; its I/O ports (one input,
-one output) are listed, not wired; the firmware version says it is simulated. The serial number is derived from the camera's name,
-so it is the same at every start.
+one output) are listed, not wired; the firmware version says it is simulated. The serial
+number is derived from the camera's name, so it is the same at every start.
 """
 
 from __future__ import annotations
