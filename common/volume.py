@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,8 +27,9 @@ class Volume:
                 raise ValueError(f"{axis}_max_mm ({high:g}) must be greater than "
                                  f"{axis}_min_mm ({low:g})")
 
-    def contains(self, xyz: np.ndarray) -> bool:
-        x, y, z = xyz
-        return bool(np.all(np.isfinite(xyz)) and self.x_min_mm <= x <= self.x_max_mm
-                    and self.y_min_mm <= y <= self.y_max_mm
-                    and self.z_min_mm <= z <= self.z_max_mm)
+    def contains(self, xyz: Sequence[float] | np.ndarray) -> bool:
+        """Inside, with every coordinate finite (up to QTM's rate: plain floats, no numpy)."""
+        x, y, z = (float(c) for c in xyz)
+        return (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
+                and self.x_min_mm <= x <= self.x_max_mm and self.y_min_mm <= y <= self.y_max_mm
+                and self.z_min_mm <= z <= self.z_max_mm)

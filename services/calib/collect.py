@@ -50,7 +50,7 @@ class Collector:
         return len(self.times) >= self.target
 
     def on_frame(self, frame: m.MarkerFrame) -> None:
-        seen = [Seen(mk.label, mk.id, np.array([mk.x_mm, mk.y_mm, mk.z_mm]))
+        seen = [Seen(mk.label, mk.id, (mk.x_mm, mk.y_mm, mk.z_mm))
                 for mk in frame.markers]
         found = self.picker.update(frame.measured_s, seen)
         if found is None or (self.track_t and frame.measured_s <= self.track_t[-1]):

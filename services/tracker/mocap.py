@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import struct
 import threading
 import time
 import xml.etree.ElementTree as ET
@@ -19,6 +20,7 @@ from typing import Protocol
 
 import numpy as np
 import qtm_rt
+from qtm_rt.packet import QRTComponentType
 
 from common.camera import quaternion_wxyz
 from common.messages import Marker, MarkerFrame, RigidBody
@@ -65,20 +67,42 @@ class ClockSync:
         return stamp_s + self._offset
 
 
+# a 3D component: its header (marker count, 2D drop rate, out-of-sync rate), then per marker
+# x, y, z (float32) — and, without labels, an id (int32); QTM RT protocol, little endian
+_3D_HEADER = struct.Struct("<Ihh")
+_NO_LABEL = np.dtype([("xyz", "<f4", 3), ("id", "<i4")])
+
+
+def _component(packet: qtm_rt.QRTPacket, kind: QRTComponentType, dtype: np.dtype | str,
+               width: int) -> np.ndarray | None:
+    """A 3D component's markers as one array (read in one go: at QTM's full rate, reading
+    them one struct at a time was the tracker's largest cost), or None when not sent."""
+    position = packet.components.get(kind)
+    if position is None:
+        return None
+    count = _3D_HEADER.unpack_from(packet.data, position)[0]
+    return np.frombuffer(packet.data, dtype, count * width, position + _3D_HEADER.size)
+
+
 def frame_from_packet(packet: qtm_rt.QRTPacket, labels: list[str], measured_s: float,
                       body_names: Sequence[str] = ()) -> MarkerFrame:
     """A MarkerFrame from a QTM data packet; lost (NaN) markers and bodies are left out."""
     markers = []
-    labelled = packet.get_3d_markers()
+    labelled = _component(packet, QRTComponentType.Component3d, "<f4", 3)
     if labelled is not None:
-        for label, m in zip(labels, labelled[1], strict=False):
-            if all(math.isfinite(c) for c in (m.x, m.y, m.z)):
-                markers.append(Marker(label=label, x_mm=m.x, y_mm=m.y, z_mm=m.z))
-    unlabelled = packet.get_3d_markers_no_label()
+        xyz = labelled.reshape(-1, 3).astype(float)
+        finite = np.isfinite(xyz).all(axis=1).tolist()
+        for label, (x, y, z), ok in zip(labels, xyz.tolist(), finite, strict=False):
+            if ok:
+                markers.append(Marker(label=label, x_mm=x, y_mm=y, z_mm=z))
+    unlabelled = _component(packet, QRTComponentType.Component3dNoLabels, _NO_LABEL, 1)
     if unlabelled is not None:
-        for m in unlabelled[1]:
-            if all(math.isfinite(c) for c in (m.x, m.y, m.z)) and m.id >= 0:
-                markers.append(Marker(id=m.id, x_mm=m.x, y_mm=m.y, z_mm=m.z))
+        xyz = unlabelled["xyz"].astype(float)
+        finite = np.isfinite(xyz).all(axis=1).tolist()
+        for (x, y, z), marker_id, ok in zip(xyz.tolist(), unlabelled["id"].tolist(), finite,
+                                           strict=True):
+            if ok and marker_id >= 0:
+                markers.append(Marker(id=marker_id, x_mm=x, y_mm=y, z_mm=z))
     return MarkerFrame(measured_s=measured_s, frame=packet.framenumber, markers=markers[:1000],
                        bodies=_bodies(packet, body_names) if body_names else [])
 

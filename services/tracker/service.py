@@ -14,8 +14,6 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
-
 from common import codec, keys
 from common import messages as m
 from common.node import Node
@@ -46,11 +44,10 @@ def run(node: Node, mocap: MocapSource | None = None) -> None:
         body = next((b for b in frame.bodies if b.name == settings.robot_body), None) \
             if settings.robot_body else None
         if settings.robot_body:
-            seen = [] if body is None else [Seen(body.name, 0, np.array([body.x_mm, body.y_mm,
-                                                                         body.z_mm]))]
+            seen = [] if body is None else [Seen(body.name, 0, (body.x_mm, body.y_mm,
+                                                                body.z_mm))]
         else:
-            seen = [Seen(mk.label, mk.id, np.array([mk.x_mm, mk.y_mm, mk.z_mm]))
-                    for mk in frame.markers]
+            seen = [Seen(mk.label, mk.id, (mk.x_mm, mk.y_mm, mk.z_mm)) for mk in frame.markers]
         robot = picker.update(frame.measured_s, seen)
         age = time.time() - frame.measured_s  # since capture (QTM's stamp on our clock)
         if robot is not None and age > settings.bus.max_age_s:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from common.volume import Volume
-from services.tracker.robot import RobotPicker, Seen
+from services.tracker.robot import RobotPicker, Seen, SlidingSlope
 
 
 def _frames(rng: np.random.Generator, seconds: float = 3.0, hz: float = 100.0):
@@ -67,3 +67,42 @@ def test_velocity_survives_a_short_occlusion(rng: np.random.Generator) -> None:
         if n == 180:
             assert out is not None
             np.testing.assert_allclose(out[1], [200.0, 0.0, 0.0], atol=40.0)
+
+
+def _least_squares(samples: list[tuple[float, float, float, float]]) -> np.ndarray:
+    array = np.array(samples)
+    times = array[:, 0] - array[:, 0].mean()
+    return times @ (array[:, 1:] - array[:, 1:].mean(axis=0)) / (times @ times)
+
+
+def test_the_sliding_slope_is_the_least_squares_fit_of_its_window(
+        rng: np.random.Generator) -> None:
+    """Running sums against a fit of the window from scratch: at QTM's rate with jitter, across
+    re-bases, on the wall clock's seconds (1.7e9), with gaps that empty the window."""
+    slope, t, pushed = SlidingSlope(0.1), 1.7e9, []
+    for n in range(3500):
+        t += 0.001 + rng.uniform(0, 0.0002) + (0.3 if n in (1200, 2500) else 0.0)
+        sample = (t, 5000.0 * np.sin(t), -4000.0 + 290.0 * (t - 1.7e9), rng.normal(0, 0.5))
+        slope.push(sample)
+        pushed.append(sample)
+        window = [s for s in pushed if t - s[0] <= 0.1]
+        found = slope.slope()
+        if len(window) < 3:
+            assert found is None
+        else:
+            np.testing.assert_allclose(found, _least_squares(window), rtol=1e-6, atol=1e-6)
+    assert slope.REBASE_EVERY < 3500
+
+
+def test_velocity_at_qtms_full_rate_with_an_occlusion(rng: np.random.Generator) -> None:
+    picker = RobotPicker(label="robot")
+    for n in range(2000):
+        t = 1.7e9 + n / 1000
+        if 1000 <= n < 1400:  # lost by QTM for 0.4 s
+            continue
+        xyz = np.array([290.0 * (t - 1.7e9), 30.0, 100.0]) + rng.normal(0, 0.5, 3)
+        out = picker.update(t, [Seen("robot", 0, tuple(xyz))])
+        assert out is not None
+        if n == 1400:  # back: bridged over the occlusion with the last three samples
+            np.testing.assert_allclose(out[1], [290.0, 0.0, 0.0], atol=40.0)
+    np.testing.assert_allclose(out[1], [290.0, 0.0, 0.0], atol=25.0)

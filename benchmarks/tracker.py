@@ -1,0 +1,192 @@
+"""The tracker at QTM's full rate: frames dropped, frame → publish latency, CPU per process.
+
+    .venv/bin/python -m benchmarks.tracker [--seconds 20] [--rate 1000] [--markers 20]
+
+Runs the real path as separate processes on loopback: the sim's QTM RT server (its
+"devices" part, with the crane, as in ``benchmarks.ptz``) streaming at ``--rate`` Hz with
+about ``--markers`` markers a frame (static markers added to the sim's robot, wand, bodies
+and ghosts), ``stb router`` and ``stb tracker``. This process is the monitor: a plain Zenoh
+subscriber on ``stb/tracker/robot`` and ``stb/tracker/markers`` that stamps each sample when
+it arrives and decodes it only after the phase.
+
+Measured over one phase of ``--seconds``:
+
+* frames the sim wrote, marker frames and robot samples that reached the monitor, and the
+  frames missing from the marker frames' numbers between the first and the last received;
+* frame → publish: from the sim writing a frame to the tracker's socket (its time just before
+  the write) to the marker frame with that number reaching the monitor — an upper bound of
+  the tracker's own frame → publish time, since it includes the router's hop; p50 / p99;
+* CPU of the tracker, the sim's QTM process, the router and this monitor: their user + system
+  time over the phase (/proc), as a share of one core.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.ptz import _open, _sim_process, _stb
+from common import codec, keys
+from common import messages as m
+from services.sim.lab import Lab
+from services.sim.settings import CraneSettings, MocapSettings, SimSettings
+from tests.ports import free_port
+
+TICKS = os.sysconf("SC_CLK_TCK")
+
+
+def _cpu_s(pid: int) -> float:
+    """User + system CPU seconds of a process (and its threads) so far."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / TICKS
+
+
+def _markers_per_frame(settings: SimSettings) -> int:
+    lab = Lab.build(settings)
+    frame = lab.mocap_frame(1)
+    return int(np.isfinite(frame.labelled).all(axis=1).sum()) + len(frame.unlabelled)
+
+
+def _settings(workdir: Path, rate_hz: float, markers: int) -> SimSettings:
+    """The sim streaming at ``rate_hz`` with static markers added to reach ``markers``."""
+    base = SimSettings(crater_file=workdir / "crater.npz", loop=True,
+                       mocap=MocapSettings(port=free_port(), rate_hz=rate_hz),
+                       crane=CraneSettings(port=free_port()), cameras=[])
+    others = _markers_per_frame(base) - base.mocap.static_markers
+    static = min(20, max(0, markers - others))
+    return base.model_copy(update={"mocap": base.mocap.model_copy(
+        update={"static_markers": static})})
+
+
+class Monitor:
+    """Arrival time and payload of every sample on the tracker's two keys; decoded later."""
+
+    def __init__(self, session, prefix: str = "stb") -> None:  # noqa: ANN001 - zenoh.Session
+        self.robot: list[tuple[float, bytes]] = []
+        self.markers: list[tuple[float, bytes]] = []
+        self.recording = threading.Event()
+        self._subs = [
+            session.declare_subscriber(keys.TRACKER_ROBOT.key(prefix), self._into(self.robot)),
+            session.declare_subscriber(keys.TRACKER_MARKERS.key(prefix),
+                                       self._into(self.markers))]
+
+    def _into(self, store: list):  # noqa: ANN202
+        def on_sample(sample) -> None:  # noqa: ANN001
+            if self.recording.is_set():
+                store.append((time.time(), bytes(sample.payload.to_bytes())))
+        return on_sample
+
+    def close(self) -> None:
+        for sub in self._subs:
+            sub.undeclare()
+
+
+def run(seconds: float, rate_hz: float, markers: int, workdir: Path,
+        profile: Path | None = None) -> dict:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    settings = _settings(workdir, rate_hz, markers)
+    Lab.build(settings)  # writes the crater file once, before the sim process reads it
+    t0 = time.monotonic() + 3.0
+    parent, child = mp.Pipe()
+    sim = mp.get_context("spawn").Process(
+        target=_sim_process, args=(settings.model_dump_json(), "devices", t0, child))
+    sim.start()
+    parent.recv()
+    lab_file = workdir / "lab.toml"
+    lab_file.write_text(f'[bus.zenoh]\nconnect = ["{endpoint}"]\n'
+                        f"[tracker]\nqtm_port = {settings.mocap.port}\n")
+    procs = [_stb("router", "--listen", endpoint, lab=lab_file)]
+    session = _open(endpoint)
+    monitor = Monitor(session)
+    try:
+        if profile is None:
+            procs.append(_stb("tracker", lab=lab_file))
+        else:  # the same command under cProfile
+            procs.append(subprocess.Popen(
+                [sys.executable, "-m", "cProfile", "-o", str(profile), "-m", "services.cli",
+                 "tracker", "--lab", str(lab_file)], stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL))
+        time.sleep(max(0.0, t0 - time.monotonic()) + 3.0)  # start-up, streaming
+        pids = {"tracker": procs[1].pid, "sim (QTM)": sim.pid, "router": procs[0].pid,
+                "monitor": os.getpid()}
+        before = {name: _cpu_s(pid) for name, pid in pids.items()}
+        parent.send("start")
+        monitor.recording.set()
+        started = time.monotonic()
+        time.sleep(seconds)
+        monitor.recording.clear()
+        elapsed = time.monotonic() - started
+        cpu = {name: (_cpu_s(pid) - before[name]) / elapsed for name, pid in pids.items()}
+        parent.send("stop")
+        sent = dict(parent.recv()["mocap_sent"])
+        parent.send("end")
+        return _summary(seconds, rate_hz, sent, monitor, cpu)
+    finally:
+        monitor.close()
+        for proc in procs[::-1]:
+            proc.terminate()
+        for proc in procs[::-1]:
+            proc.wait(10)
+        session.close()
+        sim.join(10)
+
+
+def _summary(seconds: float, rate_hz: float, sent: dict[int, float], monitor: Monitor,
+             cpu: dict[str, float]) -> dict:
+    frames = [(arrived, codec.decode(m.MarkerFrame, payload))
+              for arrived, payload in monitor.markers]
+    numbers = sorted({f.frame for _, f in frames})
+    expected = set(range(numbers[0], numbers[-1] + 1)) if numbers else set()
+    latency_ms = np.array([(arrived - sent[f.frame]) * 1e3 for arrived, f in frames
+                           if f.frame in sent])
+    return {
+        "rate_hz": rate_hz, "seconds": seconds,
+        "markers_per_frame": float(np.mean([len(f.markers) for _, f in frames]))
+        if frames else 0.0,
+        "frames_sent": len(sent), "marker_frames": len(frames),
+        "robot_samples": len(monitor.robot),
+        "missing_frames": len(expected - set(numbers)),
+        "latency_ms_p50": float(np.percentile(latency_ms, 50)) if latency_ms.size else None,
+        "latency_ms_p99": float(np.percentile(latency_ms, 99)) if latency_ms.size else None,
+        "cpu_share": {name: round(share, 3) for name, share in cpu.items()},
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--seconds", type=float, default=20.0)
+    parser.add_argument("--rate", type=float, default=1000.0, help="QTM frame rate, Hz")
+    parser.add_argument("--markers", type=int, default=20, help="markers a frame (about)")
+    parser.add_argument("--profile", type=Path, metavar="FILE",
+                        help="run the tracker under cProfile, its statistics into FILE")
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        result = run(args.seconds, args.rate, args.markers, Path(tmp), args.profile)
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return
+    r = result
+    print(f"{r['rate_hz']:.0f} Hz, {r['markers_per_frame']:.1f} markers a frame, "
+          f"{r['seconds']:.0f} s: the sim wrote {r['frames_sent']} frames; the monitor got "
+          f"{r['marker_frames']} marker frames ({r['missing_frames']} missing) and "
+          f"{r['robot_samples']} robot samples")
+    print(f"frame written → marker frame at the monitor: p50 {r['latency_ms_p50']:.2f} ms, "
+          f"p99 {r['latency_ms_p99']:.2f} ms")
+    print("CPU (share of one core): " + ", ".join(
+        f"{name} {share:.0%}" for name, share in r["cpu_share"].items()))
+
+
+if __name__ == "__main__":
+    main()
