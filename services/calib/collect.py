@@ -17,8 +17,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from common import messages as m
+from common.robot_picker import RobotPicker
 from services.calib.passpoints import Passpoints, Track
-from services.tracker.robot import RobotPicker, Seen
 
 STATIC_WINDOW_S = 4.0
 STATIC_SHARE = 0.8
@@ -50,9 +50,7 @@ class Collector:
         return len(self.times) >= self.target
 
     def on_frame(self, frame: m.MarkerFrame) -> None:
-        seen = [Seen(mk.label, mk.id, (mk.x_mm, mk.y_mm, mk.z_mm))
-                for mk in frame.markers]
-        found = self.picker.update(frame.measured_s, seen)
+        found = self.picker.update(frame.measured_s, frame.markers)
         if found is None or (self.track_t and frame.measured_s <= self.track_t[-1]):
             return
         self.track_t.append(frame.measured_s)

@@ -37,9 +37,10 @@ class MocapSource(Protocol):
 
 
 def labels_from_xml(xml: bytes | str) -> list[str]:
-    """The 3D labels from a ``getparameters 3d`` reply, in QTM's order."""
+    """The 3D labels from a ``getparameters 3d`` reply, in QTM's order (at most the 64
+    characters a message's label may have: a longer one must not stop every frame)."""
     root = ET.fromstring(xml)
-    return [(label.findtext("Name") or "").strip() for label in root.iter("Label")]
+    return [(label.findtext("Name") or "").strip()[:64] for label in root.iter("Label")]
 
 
 def bodies_from_xml(xml: bytes | str) -> list[str]:

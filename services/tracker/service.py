@@ -17,8 +17,8 @@ import time
 from common import codec, keys
 from common import messages as m
 from common.node import Node
+from common.robot_picker import RobotPicker, Seen
 from services.tracker.mocap import MocapSource, QualisysMocap
-from services.tracker.robot import RobotPicker, Seen
 from services.tracker.settings import TrackerSettings
 
 
@@ -44,11 +44,10 @@ def run(node: Node, mocap: MocapSource | None = None) -> None:
         body = next((b for b in frame.bodies if b.name == settings.robot_body), None) \
             if settings.robot_body else None
         if settings.robot_body:
-            seen = [] if body is None else [Seen(body.name, 0, (body.x_mm, body.y_mm,
-                                                                body.z_mm))]
+            seen = [] if body is None else [Seen(body.name, 0, body.x_mm, body.y_mm, body.z_mm)]
+            robot = picker.update(frame.measured_s, seen)
         else:
-            seen = [Seen(mk.label, mk.id, (mk.x_mm, mk.y_mm, mk.z_mm)) for mk in frame.markers]
-        robot = picker.update(frame.measured_s, seen)
+            robot = picker.update(frame.measured_s, frame.markers)
         age = time.time() - frame.measured_s  # since capture (QTM's stamp on our clock)
         if robot is not None and age > settings.bus.max_age_s:
             # a backlog (the tracker stalled): the robot sample is control input, never sent

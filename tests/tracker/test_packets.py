@@ -47,3 +47,15 @@ def test_a_packet_without_3d_components_has_no_markers() -> None:
     frame = MocapFrame(1, 0, np.zeros((0, 3)), [])
     packet = qtm_rt.QRTPacket(data_packet(frame, set())[8:])
     assert frame_from_packet(packet, [], measured_s=0.0).markers == []
+
+
+def test_a_label_longer_than_a_message_allows_is_cut_not_a_failure_per_frame() -> None:
+    from services.tracker.mocap import labels_from_xml
+    long = "x" * 80
+    xml = f"<QTM_Parameters_Ver_1.25><The_3D><Label><Name>{long}</Name></Label>" \
+          "</The_3D></QTM_Parameters_Ver_1.25>"
+    labels = labels_from_xml(xml)
+    assert labels == ["x" * 64]
+    frame = MocapFrame(1, 0, np.array([[1.0, 2.0, 3.0]]), [])
+    packet = qtm_rt.QRTPacket(data_packet(frame, {COMPONENT_3D})[8:])
+    assert frame_from_packet(packet, labels, measured_s=0.0).markers[0].label == "x" * 64

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from common.robot_picker import RobotPicker, Seen, SlidingSlope
 from common.volume import Volume
-from services.tracker.robot import RobotPicker, Seen, SlidingSlope
 
 
 def _frames(rng: np.random.Generator, seconds: float = 3.0, hz: float = 100.0):
@@ -13,9 +13,9 @@ def _frames(rng: np.random.Generator, seconds: float = 3.0, hz: float = 100.0):
     for n in range(int(seconds * hz)):
         t = n / hz
         robot = np.array([200.0 * t, 50.0, 100.0]) + rng.normal(0, 0.5, 3)
-        yield t, [Seen("", 1, np.array([1000.0, 0, 0]) + rng.normal(0, 0.5, 3)),
-                  Seen("", 2, np.array([-800.0, 300, 20]) + rng.normal(0, 0.5, 3)),
-                  Seen("", 7, robot)]
+        yield t, [Seen.at("", 1, np.array([1000.0, 0, 0]) + rng.normal(0, 0.5, 3)),
+                  Seen.at("", 2, np.array([-800.0, 300, 20]) + rng.normal(0, 0.5, 3)),
+                  Seen.at("", 7, robot)]
 
 
 def test_unlabelled_robot_is_the_moving_marker(rng: np.random.Generator) -> None:
@@ -42,19 +42,19 @@ def test_the_robot_is_kept_when_it_stops(rng: np.random.Generator) -> None:
         picker.update(t, seen)
     stopped = np.array([600.0, 50.0, 100.0])
     for n in range(300):
-        out = picker.update(3.0 + n / 100, [Seen("", 1, np.array([1000.0, 0, 0])),
-                                            Seen("", 7, stopped + rng.normal(0, 0.5, 3))])
+        out = picker.update(3.0 + n / 100, [Seen.at("", 1, np.array([1000.0, 0, 0])),
+                                            Seen.at("", 7, stopped + rng.normal(0, 0.5, 3))])
     assert picker.chosen == 7 and out is not None
     assert np.linalg.norm(out[1]) < 30
 
 
 def test_labelled_robot_and_bad_positions(rng: np.random.Generator) -> None:
     picker = RobotPicker(label="robot", volume=Volume(x_max_mm=3000))
-    good = [Seen("robot", 0, np.array([10.0, 20.0, 30.0])), Seen("static_1", 0, np.zeros(3))]
+    good = [Seen.at("robot", 0, np.array([10.0, 20.0, 30.0])), Seen.at("static_1", 0, np.zeros(3))]
     assert np.allclose(picker.update(0.0, good)[0], [10, 20, 30])
-    assert picker.update(0.01, [Seen("robot", 0, np.array([np.nan, 0, 0]))]) is None
-    assert picker.update(0.02, [Seen("robot", 0, np.array([9000.0, 0, 0]))]) is None
-    assert picker.update(0.03, [Seen("static_1", 0, np.zeros(3))]) is None
+    assert picker.update(0.01, [Seen.at("robot", 0, np.array([np.nan, 0, 0]))]) is None
+    assert picker.update(0.02, [Seen.at("robot", 0, np.array([9000.0, 0, 0]))]) is None
+    assert picker.update(0.03, [Seen.at("static_1", 0, np.zeros(3))]) is None
 
 
 def test_velocity_survives_a_short_occlusion(rng: np.random.Generator) -> None:
@@ -101,7 +101,7 @@ def test_velocity_at_qtms_full_rate_with_an_occlusion(rng: np.random.Generator) 
         if 1000 <= n < 1400:  # lost by QTM for 0.4 s
             continue
         xyz = np.array([290.0 * (t - 1.7e9), 30.0, 100.0]) + rng.normal(0, 0.5, 3)
-        out = picker.update(t, [Seen("robot", 0, tuple(xyz))])
+        out = picker.update(t, [Seen.at("robot", 0, xyz)])
         assert out is not None
         if n == 1400:  # back: bridged over the occlusion with the last three samples
             np.testing.assert_allclose(out[1], [290.0, 0.0, 0.0], atol=40.0)

@@ -11,19 +11,42 @@ from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from itertools import islice
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
 from common.volume import Volume
 
 
+class Located(Protocol):
+    """A marker in one frame: its label ("" if unidentified), its id, and where it is — a
+    mocap frame's ``Marker`` as it is (no copy per marker at QTM's rate), or a ``Seen``."""
+
+    @property
+    def label(self) -> str: ...
+    @property
+    def id(self) -> int: ...
+    @property
+    def x_mm(self) -> float: ...
+    @property
+    def y_mm(self) -> float: ...
+    @property
+    def z_mm(self) -> float: ...
+
+
 class Seen(NamedTuple):
-    """A marker in one frame: its label ("" if unidentified), its id, and where it is."""
+    """A marker made up for the picker: a 6DOF body's origin, or a test's marker."""
 
     label: str
     id: int
-    xyz_mm: Sequence[float]
+    x_mm: float
+    y_mm: float
+    z_mm: float
+
+    @classmethod
+    def at(cls, label: str, marker_id: int, xyz_mm: Sequence[float]) -> Seen:
+        x, y, z = (float(c) for c in xyz_mm)
+        return cls(label, marker_id, x, y, z)
 
 
 @dataclass
@@ -40,14 +63,15 @@ class RobotPicker:
     _slope: SlidingSlope | None = None  # the chosen marker's velocity window
     _slope_key: int | None = None
 
-    def update(self, t_s: float, markers: Sequence[Seen]) -> tuple[np.ndarray, np.ndarray] | None:
+    def update(self, t_s: float, markers: Sequence[Located]
+               ) -> tuple[np.ndarray, np.ndarray] | None:
         """The robot's (position, velocity) in this frame, or None if it is not seen."""
-        seen = {self._key(m): m.xyz_mm for m in markers
+        seen = {self._key(m): xyz for m in markers
                 if (m.label == self.label if self.label else not m.label)
-                and self.volume.contains(m.xyz_mm)}
+                and self.volume.contains(xyz := (m.x_mm, m.y_mm, m.z_mm))}
         for key, (x, y, z) in seen.items():
             history = self._history.setdefault(key, deque())
-            history.append((t_s, float(x), float(y), float(z)))
+            history.append((t_s, x, y, z))
             while history and t_s - history[0][0] > self.motion_window_s:
                 history.popleft()
         for key in [k for k, h in self._history.items() if t_s - h[-1][0] > self.motion_window_s]:
@@ -59,10 +83,10 @@ class RobotPicker:
         history = self._history[self.chosen]
         return np.array(history[-1][1:]), self._velocity(history)
 
-    def _key(self, marker: Seen) -> int:
+    def _key(self, marker: Located) -> int:
         return 0 if self.label else marker.id
 
-    def _pick(self, seen: dict[int, Sequence[float]]) -> int | None:
+    def _pick(self, seen: dict[int, tuple[float, float, float]]) -> int | None:
         if self.label:
             return 0 if 0 in seen else None
         moving = {key: _extent(self._history[key]) for key in seen}
