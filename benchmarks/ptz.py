@@ -60,7 +60,8 @@ def _sim_process(settings_json: str, part: str, t0: float,
     and crane ("devices"), or the cameras, so that rendering snapshots cannot delay mocap
     frames (a real QTM is not slowed down by a camera). For each measuring phase it sends back
     the cameras' command logs and when each mocap frame was written."""
-    from services.sim.service import Clock, DeviceLoop, start_cameras
+    from services.sim.clock import Clock
+    from services.sim.service import DeviceLoop, start_cameras
 
     settings = SimSettings.model_validate_json(settings_json)
     lab = Lab.build(settings)

@@ -146,24 +146,80 @@ def run(seconds: float, rate_hz: float, markers: int, workdir: Path,
         sim.join(10)
 
 
+def run_loaded(seconds: float, rate_hz: float, markers: int, workdir: Path) -> dict:
+    """The same measurement on the whole simulated lab under ``stb up`` (sim with its cameras,
+    tracker, calib, both PTZ services, gantry, web) with the sim's QTM at ``rate_hz``."""
+    from benchmarks.faults.lab import open_when_up, running_lab
+    from common.settings import ZenohSettings
+
+    static = _settings(workdir, rate_hz, markers).mocap.static_markers
+    with running_lab(workdir, mocap={"rate_hz": rate_hz, "static_markers": static}) as (
+            up, _lab, endpoint):
+        session = open_when_up(ZenohSettings(connect=[endpoint], connect_timeout_ms=0))
+        monitor = Monitor(session)
+        try:
+            if not monitor.flowing.wait(120):
+                raise RuntimeError("no marker frame from the tracker within 120 s")
+            time.sleep(10.0)  # the other services started and following
+            pids = _lab_processes(up.pid)
+            pids["monitor"] = os.getpid()
+            before = {name: _cpu_s(pid) for name, pid in pids.items()}
+            monitor.recording.set()
+            started = time.monotonic()
+            time.sleep(seconds)
+            monitor.recording.clear()
+            elapsed = time.monotonic() - started
+            cpu = {name: (_cpu_s(pid) - before[name]) / elapsed for name, pid in pids.items()}
+        finally:
+            monitor.close()
+            session.close()
+    result = _summary(seconds, rate_hz, {}, monitor, cpu)
+    result["lab"] = "whole lab (stb up)"
+    return result
+
+
+def _lab_processes(up_pid: int) -> dict[str, int]:
+    """Every service process under ``stb up`` by name (``ptz:ptz1``), and the sim's QTM
+    process (a child of the sim's)."""
+    from benchmarks.faults.lab import children, cmdline
+
+    pids = {}
+    for pid in children(up_pid):
+        words = cmdline(pid).split()
+        module = next((w for w in words if w.startswith("services.")), "")
+        name = module.removeprefix("services.")
+        instance = words[words.index("--instance") + 1] if "--instance" in words else "main"
+        pids[name if instance == "main" else f"{name}:{instance}"] = pid
+        if name == "sim":
+            for child in children(pid):
+                pids["sim's QTM"] = child
+    return pids
+
+
 def _summary(seconds: float, rate_hz: float, sent: dict[int, float], monitor: Monitor,
              cpu: dict[str, float]) -> dict:
     frames = [(arrived, codec.decode(m.MarkerFrame, payload))
               for arrived, payload in monitor.markers]
     numbers = sorted({f.frame for _, f in frames})
+    sent = sent or {}
     expected = set(range(numbers[0], numbers[-1] + 1)) if numbers else set()
     latency_ms = np.array([(arrived - sent[f.frame]) * 1e3 for arrived, f in frames
                            if f.frame in sent])
     # the bus stamps sent_s just before the put: the tracker's own frame → publish
     publish_ms = np.array([(f.sent_s - sent[f.frame]) * 1e3 for _, f in frames
                            if f.frame in sent])
+    # the same without the sim's log: from the frame's capture time on the tracker's clock
+    # (QTM's stamp plus the smallest transport delay seen) to the put
+    capture_ms = np.array([(f.sent_s - f.measured_s) * 1e3 for _, f in frames])
     return {
         "rate_hz": rate_hz, "seconds": seconds,
         "markers_per_frame": float(np.mean([len(f.markers) for _, f in frames]))
         if frames else 0.0,
-        "frames_sent": len(sent), "marker_frames": len(frames),
+        "frames_sent": len(sent) or None, "marker_frames": len(frames),
         "robot_samples": len(monitor.robot),
         "missing_frames": len(expected - set(numbers)),
+        "capture_to_publish_ms_p50": _percentile(capture_ms, 50),
+        "capture_to_publish_ms_p99": _percentile(capture_ms, 99),
         "publish_ms_p50": _percentile(publish_ms, 50),
         "publish_ms_p99": _percentile(publish_ms, 99),
         "monitor_ms_p50": _percentile(latency_ms, 50),
@@ -182,23 +238,30 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=20.0)
     parser.add_argument("--rate", type=float, default=1000.0, help="QTM frame rate, Hz")
     parser.add_argument("--markers", type=int, default=20, help="markers a frame (about)")
+    parser.add_argument("--lab", action="store_true",
+                        help="on the whole simulated lab under stb up (every service running)")
     parser.add_argument("--profile", type=Path, metavar="FILE",
                         help="run the tracker under cProfile, its statistics into FILE")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        result = run(args.seconds, args.rate, args.markers, Path(tmp), args.profile)
+        result = (run_loaded(args.seconds, args.rate, args.markers, Path(tmp)) if args.lab
+                  else run(args.seconds, args.rate, args.markers, Path(tmp), args.profile))
     if args.json:
         print(json.dumps(result, indent=2))
         return
     r = result
-    print(f"{r['rate_hz']:.0f} Hz, {r['markers_per_frame']:.1f} markers a frame, "
-          f"{r['seconds']:.0f} s: the sim wrote {r['frames_sent']} frames; the monitor got "
-          f"{r['marker_frames']} marker frames ({r['missing_frames']} missing) and "
+    sent = "" if r["frames_sent"] is None else f"the sim wrote {r['frames_sent']} frames; "
+    print(f"{r.get('lab', 'sim, router, tracker')}: {r['rate_hz']:.0f} Hz, "
+          f"{r['markers_per_frame']:.1f} markers a frame, {r['seconds']:.0f} s: {sent}the monitor "
+          f"got {r['marker_frames']} marker frames ({r['missing_frames']} missing) and "
           f"{r['robot_samples']} robot samples")
-    print(f"frame written → published by the tracker: p50 {r['publish_ms_p50']:.2f} ms, "
-          f"p99 {r['publish_ms_p99']:.2f} ms; → at the monitor: p50 {r['monitor_ms_p50']:.2f} "
-          f"ms, p99 {r['monitor_ms_p99']:.2f} ms")
+    if r["publish_ms_p50"] is not None:
+        print(f"frame written → published by the tracker: p50 {r['publish_ms_p50']:.2f} ms, "
+              f"p99 {r['publish_ms_p99']:.2f} ms; → at the monitor: "
+              f"p50 {r['monitor_ms_p50']:.2f} ms, p99 {r['monitor_ms_p99']:.2f} ms")
+    print(f"frame captured (tracker's clock) → published: p50 "
+          f"{r['capture_to_publish_ms_p50']:.2f} ms, p99 {r['capture_to_publish_ms_p99']:.2f} ms")
     print("CPU (share of one core): " + ", ".join(
         f"{name} {share:.0%}" for name, share in r["cpu_share"].items()))
 

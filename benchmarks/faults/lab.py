@@ -25,8 +25,13 @@ ALIVE = {"sim": "sim/main", "tracker": "tracker/main", "calib": "calib/main",
 
 
 @contextmanager
-def running_lab(folder: Path) -> Iterator[tuple[subprocess.Popen, Path, str]]:
+def running_lab(folder: Path, mocap: dict[str, float] | None = None
+                ) -> Iterator[tuple[subprocess.Popen, Path, str]]:
+    """``stb up`` with every service; ``mocap``: settings of the sim's QTM to change."""
     lab, endpoint, _ = write_up_lab(folder, SERVICES, pose_version=1)
+    if mocap:
+        settings = "".join(f"{name} = {value}\n" for name, value in mocap.items())
+        lab.write_text(lab.read_text().replace("[sim.mocap]\n", "[sim.mocap]\n" + settings, 1))
     with open(folder / "up.log", "w") as log:
         up = subprocess.Popen([sys.executable, "-m", "services.cli", "up", "--lab", str(lab),
                                "--no-view"], cwd=ROOT, stdout=log, stderr=subprocess.STDOUT,

@@ -15,7 +15,6 @@ import contextlib
 import itertools
 import logging
 import threading
-import time
 from collections.abc import Callable
 
 import numpy as np
@@ -24,44 +23,34 @@ from common import keys
 from common import messages as m
 from common.node import Node, StartupError, run_every
 from services.sim.camera_server import CameraServer, SimCamera
+from services.sim.clock import Clock
 from services.sim.crane_server import CraneServer
 from services.sim.lab import Lab
 from services.sim.mocap_server import MocapServer, MocapSource
+from services.sim.qtm_process import QtmProcess
 from services.sim.scene import GroundView
 from services.sim.settings import SimSettings
 
 log = logging.getLogger(__name__)
 
 
-class Clock:
-    """Sim time: seconds since start (monotonic), and the wall time of a sim instant.
-
-    ``t0_monotonic`` lets several processes share one sim time (monotonic time is
-    system-wide)."""
-
-    def __init__(self, t0_monotonic: float | None = None) -> None:
-        now_mono, now_wall = time.monotonic(), time.time()
-        self._t0 = now_mono if t0_monotonic is None else t0_monotonic
-        self._wall0 = now_wall - (now_mono - self._t0)
-
-    def __call__(self) -> float:
-        return time.monotonic() - self._t0
-
-    def wall(self, t: float) -> float:
-        return self._wall0 + t
-
-
 def run(node: Node) -> None:
     settings: SimSettings = node.settings  # type: ignore[assignment]
     lab = Lab.build(settings)
     clock = Clock()
-    cameras = start_cameras(lab, settings, clock)
-    devices = DeviceLoop(lab, settings, clock)
+    qtm = QtmProcess(settings, clock)
+    try:
+        cameras = start_cameras(lab, settings, clock)
+    except StartupError:
+        qtm.stop()
+        raise
+    devices = DeviceLoop(lab, settings, clock, serve_mocap=False)
     try:
         devices.start()
         log.info("sim running scenario %s (seed %d)", settings.scenario, settings.seed)
         if settings.calibrate_first and settings.scenario != "calibration":
-            _start_robot_once_calibrated(node, lab, settings.calibrate_first, clock)
+            _start_robot_once_calibrated(node, lab, settings.calibrate_first, clock,
+                                         also=qtm.start_robot)
         threads = [
             _every(1 / (4 * settings.tracking_camera.rate_hz), node.stop,  # on time ± 10 ms
                    _frame_publisher(node, lab, settings, clock)),
@@ -72,12 +61,13 @@ def run(node: Node) -> None:
             thread.join(timeout=2)
     finally:
         devices.stop()
+        qtm.stop()
         for server in cameras:
             server.close()
 
 
-def _start_robot_once_calibrated(node: Node, lab: Lab, cameras: list[str], clock: Clock
-                                 ) -> None:
+def _start_robot_once_calibrated(node: Node, lab: Lab, cameras: list[str], clock: Clock,
+                                 also: Callable[[float], None]) -> None:
     """The demo's order of things: the wand until every listed camera has a pose on the bus
     (from the calib service — the sim never hands out its own poses) or its collection failed
     (that camera stays uncalibrated: the demo carries on), then the robot."""
@@ -92,7 +82,9 @@ def _start_robot_once_calibrated(node: Node, lab: Lab, cameras: list[str], clock
                 log.warning("%s: calibration %s; the robot starts without it", camera, failed)
             calibrated.add(camera)
             if calibrated >= set(cameras):
-                lab.start_robot(clock())
+                now = clock()
+                lab.start_robot(now)
+                also(now)  # the QTM process's lab
 
     def on_progress(progress: m.CollectProgress) -> None:
         if progress.state in ("failed", "cancelled"):
@@ -125,13 +117,16 @@ def start_cameras(lab: Lab, settings: SimSettings, clock: Clock) -> list[CameraS
 
 
 class DeviceLoop:
-    """The asyncio devices (QTM RT server, Modbus crane) on a thread of their own."""
+    """The asyncio devices (the Modbus crane, and the QTM RT server unless it has a process of
+    its own: ``serve_mocap=False``) on a thread of their own."""
 
-    def __init__(self, lab: Lab, settings: SimSettings, clock: Clock) -> None:
+    def __init__(self, lab: Lab, settings: SimSettings, clock: Clock, *,
+                 serve_mocap: bool = True) -> None:
         m_ = settings.mocap
         source = MocapSource(lab.labels, m_.rate_hz, lab.mocap_frame, clock,
                              lab.body_points)
-        self.mocap = MocapServer(source, settings.host_of(m_.host), m_.port)
+        self.mocap = MocapServer(source, settings.host_of(m_.host), m_.port) if serve_mocap \
+            else None
         self.crane = CraneServer(lab.crane, clock, lab.crane_lock,
                                  settings.host_of(settings.crane.host), settings.crane.port,
                                  registers=settings.crane.registers,
@@ -159,11 +154,12 @@ class DeviceLoop:
         self._loop.run_forever()
 
     async def _start_servers(self) -> None:
-        try:
-            await self.mocap.start()
-        except OSError as err:
-            raise OSError(f"QTM RT: cannot listen on {self.mocap.host}:{self.mocap.port}: "
-                          f"{err.strerror}") from err
+        if self.mocap is not None:
+            try:
+                await self.mocap.start()
+            except OSError as err:
+                raise OSError(f"QTM RT: cannot listen on {self.mocap.host}:{self.mocap.port}: "
+                              f"{err.strerror}") from err
         self._crane_task = asyncio.create_task(self.crane.serve())
         await asyncio.sleep(0.05)
         if self._crane_task.done() and self._crane_task.exception() is not None:
@@ -175,7 +171,8 @@ class DeviceLoop:
             return
 
         async def shutdown() -> None:
-            await self.mocap.close()
+            if self.mocap is not None:
+                await self.mocap.close()
             with contextlib.suppress(Exception):
                 await self.crane.close()
             others = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]

@@ -1,0 +1,88 @@
+"""The sim's QTM RT server in a process of its own.
+
+A real QTM is a machine of its own: the sim's camera rendering, HTTP servers and tracking
+camera must not hold its frames back (at 1000 Hz, sharing the sim's one interpreter delayed
+frames by up to 10 ms). The process builds the same Lab from the same settings on the same sim
+time (a shared monotonic origin); the one thing decided at run time, when the robot starts,
+comes over a shared value. It ends with the sim: when told to, or when its parent is gone.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import multiprocessing as mp
+import os
+from multiprocessing.connection import Connection
+from multiprocessing.sharedctypes import Synchronized
+
+from common.node import StartupError
+from services.sim.clock import Clock
+from services.sim.lab import Lab
+from services.sim.mocap_server import MocapServer, MocapSource
+from services.sim.settings import SimSettings
+
+log = logging.getLogger(__name__)
+START_TIMEOUT_S = 60.0
+
+
+class QtmProcess:
+    """Starts the server (raising StartupError with the reason when it cannot listen)."""
+
+    def __init__(self, settings: SimSettings, clock: Clock) -> None:
+        context = mp.get_context("spawn")  # no copy of the sim's threads and sockets
+        self._robot_start = context.Value("d", math.nan, lock=False)
+        self._stop = context.Event()
+        ours, theirs = context.Pipe()
+        self._process = context.Process(
+            target=_serve, name="sim-qtm", daemon=True,
+            args=(settings.model_dump_json(), clock.t0_monotonic, self._robot_start,
+                  self._stop, theirs, os.getpid()))
+        self._process.start()
+        if not ours.poll(START_TIMEOUT_S):
+            self.stop()
+            raise StartupError(f"the QTM RT server did not start within {START_TIMEOUT_S:g} s")
+        self.port, error = ours.recv()
+        if error:
+            self.stop()
+            raise StartupError(error)
+
+    def start_robot(self, t: float) -> None:
+        self._robot_start.value = t
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._process.join(5)
+        if self._process.is_alive():
+            self._process.kill()
+            self._process.join(5)
+
+
+def _serve(settings_json: str, t0_monotonic: float, robot_start: Synchronized,
+           stop: mp.synchronize.Event, conn: Connection, parent_pid: int) -> None:
+    settings = SimSettings.model_validate_json(settings_json)
+    lab = Lab.build(settings)
+    clock = Clock(t0_monotonic)
+
+    def frame_at(number: int):  # noqa: ANN202 - a MocapFrame
+        if lab.robot_start_s is None and not math.isnan(robot_start.value):
+            lab.start_robot(robot_start.value)
+        return lab.mocap_frame(number)
+
+    m = settings.mocap
+    server = MocapServer(MocapSource(lab.labels, m.rate_hz, frame_at, clock, lab.body_points),
+                         settings.host_of(m.host), m.port)
+
+    async def main() -> None:
+        try:
+            await server.start()
+        except OSError as err:
+            conn.send((m.port, f"QTM RT: cannot listen on {m.host}:{m.port}: {err.strerror}"))
+            return
+        conn.send((server.port, ""))
+        while not stop.is_set() and os.getppid() == parent_pid:
+            await asyncio.sleep(0.2)
+        await server.close()
+
+    asyncio.run(main())
