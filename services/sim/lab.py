@@ -6,6 +6,7 @@ seed, so the live servers (real time) and fast experiments (simulated time) see 
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import threading
@@ -43,6 +44,17 @@ LOOP_PAUSE_S = 5.0
 WAND_LABEL = "wand"
 """The calibration marker on a pole: its own labelled marker, moving while the robot waits."""
 OCCLUSION_WINDOW_S = 2.0
+
+
+@functools.lru_cache(maxsize=8)
+def _occlusion_start(seed: int, window: int) -> float | None:
+    """When in its ``OCCLUSION_WINDOW_S`` window the robot's marker is hidden for 0.3 s (one
+    window in twenty), or None; the same for every frame of the window (at 1000 Hz a generator
+    made per frame cost as much as the frame's markers)."""
+    rng = np.random.default_rng((seed, 7, window))
+    if rng.random() >= 0.05:
+        return None
+    return float(rng.uniform(0, OCCLUSION_WINDOW_S - 0.3))
 
 
 def load_or_make_crater(settings: SimSettings) -> CraterMap:
@@ -191,10 +203,9 @@ class Lab:
         m = self.settings.mocap
         t = number / m.rate_hz
         rng = np.random.default_rng((self.settings.seed, number))
-        robot = self.robot(t)
+        true_robot = self.robot(t)
         occluded = self._occluded(t)
-        if occluded:
-            robot = np.full(3, np.nan)
+        robot = np.full(3, np.nan) if occluded else true_robot
         wand = self.wand_position(t)
         wand = np.full(3, np.nan) if wand is None else wand
         noisy = np.vstack([robot[None, :], wand[None, :], self.static_markers])
@@ -203,7 +214,7 @@ class Lab:
         unlabelled = [(100 + i, xyz) for i, xyz in enumerate(self.ghost_markers)
                       if rng.random() < 0.5]
         origins = {m.robot_body: noisy[0], m.wand_body: noisy[1]}
-        extra, bodies = self._body_markers(t, number, occluded, origins)
+        extra, bodies = self._body_markers(t, number, occluded, origins, true_robot)
         if m.robot_label:
             labelled = np.vstack([noisy, *extra]) if extra else noisy
         else:
@@ -213,7 +224,7 @@ class Lab:
         return MocapFrame(number, int(round(t * 1e6)), labelled, unlabelled, bodies)
 
     def _body_markers(self, t: float, number: int, occluded: bool,
-                      origins: dict[str, np.ndarray]
+                      origins: dict[str, np.ndarray], robot: np.ndarray
                       ) -> tuple[list[np.ndarray], list[tuple[np.ndarray, np.ndarray] | None]]:
         """Each body's other markers as measured (noise and dropouts from a stream of their
         own, so the other markers' are as before), and its fitted pose (None: lost)."""
@@ -221,7 +232,7 @@ class Lab:
         rng = np.random.default_rng((self.settings.seed, number, 6))
         extra, poses = [], []
         for body in self.bodies:
-            true = self._body_pose(body.name, t)
+            true = self._body_pose(body.name, t, robot)
             if true is None or (occluded and body.name == m.robot_body):
                 points = np.full(body.points_mm.shape, np.nan)
             else:
@@ -233,20 +244,18 @@ class Lab:
             poses.append(fit(body.points_mm, points))
         return extra, poses
 
-    def _body_pose(self, name: str, t: float) -> tuple[np.ndarray, np.ndarray] | None:
+    def _body_pose(self, name: str, t: float, robot: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray] | None:
+        """A body's true pose at ``t``; ``robot``: the robot's marker at ``t``."""
         if name == self.settings.mocap.robot_body:
-            marker = self.robot(t)
-            return marker, rot_z(self.robot_heading(t, marker))
+            return robot, rot_z(self.robot_heading(t, robot))
         wand = self.wand_position(t)
         return None if wand is None else (wand, np.eye(3))
 
     def _occluded(self, t: float) -> bool:
         window = int(t // OCCLUSION_WINDOW_S)
-        rng = np.random.default_rng((self.settings.seed, 7, window))
-        if rng.random() >= 0.05:
-            return False
-        start = rng.uniform(0, OCCLUSION_WINDOW_S - 0.3)
-        return start <= t - window * OCCLUSION_WINDOW_S < start + 0.3
+        start = _occlusion_start(self.settings.seed, window)
+        return start is not None and start <= t - window * OCCLUSION_WINDOW_S < start + 0.3
 
     # --- crane and its tracking camera ---------------------------------------------------------
 
