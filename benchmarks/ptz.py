@@ -16,7 +16,7 @@ Two phases of ``--seconds`` each:
   command's request line reached the camera server (the kernel's receive stamp): arrival −
   frame written, p50 and p99;
 * pointing error: 4 times a second each camera's snapshot (VAPIX image.cgi, IR cut filter
-  off) is searched for the robot's marker near where the true robot projects; its distance
+  set off just before it) is searched for the robot's marker near where the true robot projects; its distance
   from the image centre (352, 288) in pixels: median, p95, and how many snapshots lost it.
   The latency during this phase is reported too: rendering and searching the snapshots loads
   the same two cores (in the lab, the cameras render in their own hardware).
@@ -170,6 +170,9 @@ def _pointing_errors(lab: Lab, settings: SimSettings, clients: dict[str, httpx.C
     end = time.monotonic() + seconds
     while time.monotonic() < end:
         for name, client in clients.items():
+            # the PTZ service's pointing check sets the filter back to auto after each of its
+            # infrared previews (docs/operator.md): the snapshot is taken in infrared again
+            client.get(vapix.PTZ_PATH, params={"ircutfilter": "off"})
             asked = time.time()
             reply = client.get(vapix.IMAGE_PATH, params={"compression": "0"})
             position = vapix.parse_position(
