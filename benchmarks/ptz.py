@@ -16,10 +16,11 @@ Two phases of ``--seconds`` each:
   command's request line reached the camera server (the kernel's receive stamp): arrival −
   frame written, p50 and p99;
 * pointing error: 4 times a second each camera's snapshot (VAPIX image.cgi, IR cut filter
-  set off just before it) is searched for the robot's marker near where the true robot projects; its distance
-  from the image centre (352, 288) in pixels: median, p95, and how many snapshots lost it.
-  The latency during this phase is reported too: rendering and searching the snapshots loads
-  the same two cores (in the lab, the cameras render in their own hardware).
+  set off just before it) is searched for the robot's marker near where the true robot
+  projects; its distance from the image centre (352, 288) in pixels: median, p95, and how
+  many snapshots lost it. The latency during this phase is reported too: rendering and
+  searching the snapshots loads the same two cores (in the lab, the cameras render in their
+  own hardware).
 """
 
 from __future__ import annotations
