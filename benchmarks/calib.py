@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 
 from common.camera import Intrinsics, Pose, pose_distance
-from services.calib.passpoints import Passpoints
+from common.passpoints import Passpoints
 from services.calib.pnp import camera_matrix, pose_from_cv
 from services.calib.solve import Options, Solution, solve
 from services.calib.synthetic import PAPER_GUESS, PAPER_POSE, passpoints

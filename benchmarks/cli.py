@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from services.calib.passpoints import write_passpoints
+from common.passpoints import write_passpoints
 from services.calib.synthetic import PAPER_GUESS, PAPER_POSE, passpoints
 from tests.services.test_help_is_light import COMMANDS
 

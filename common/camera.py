@@ -205,3 +205,28 @@ def thin_lens_image_distance_mm(focal_mm: float, object_distance_mm: float) -> f
     if object_distance_mm <= focal_mm:
         raise ValueError(f"object at {object_distance_mm} mm is inside the focal length")
     return 1.0 / (1.0 / focal_mm - 1.0 / object_distance_mm)
+
+
+def reprojection_px(pose: Pose, world_mm: np.ndarray, pixels: np.ndarray,
+                    intr: Intrinsics) -> np.ndarray:
+    """Pixel distance per passpoint (inf where a point is behind the camera)."""
+    error = np.linalg.norm(project(world_mm, pose, intr) - pixels, axis=1)
+    return np.where(np.isfinite(error), error, np.inf)
+
+
+@dataclass(frozen=True)
+class PtzLimits:
+    """A PTZ head's travel, as the camera reports it for ``query=limits`` (degrees, zoom
+    steps)."""
+
+    min_pan: float = -170.0
+    max_pan: float = 170.0
+    min_tilt: float = -90.0
+    max_tilt: float = 90.0
+    min_zoom: int = 1
+    max_zoom: int = 9999
+
+    def clamp(self, pan: float, tilt: float, zoom: float) -> tuple[float, float, float]:
+        return (min(max(pan, self.min_pan), self.max_pan),
+                min(max(tilt, self.min_tilt), self.max_tilt),
+                min(max(zoom, self.min_zoom), self.max_zoom))

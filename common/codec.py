@@ -7,8 +7,9 @@ that the bus counts per key.
 
 from __future__ import annotations
 
+import base64
 import math
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import msgpack
 from pydantic import ValidationError
@@ -91,3 +92,19 @@ def decode(model: type[M], payload: bytes, *, max_bytes: int = DEFAULT_MAX_BYTES
 
 def _has_non_finite(value: object) -> bool:
     return isinstance(value, float) and not math.isfinite(value)
+
+
+def to_plain(msg: Message | dict) -> dict[str, Any]:
+    """A JSON-ready dict of a message; bytes become base64 strings (monitor, recordings)."""
+    data = msg.model_dump() if isinstance(msg, Message) else dict(msg)
+    return _plain(data)
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, bytes):
+        return base64.b64encode(value).decode("ascii")
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    return value

@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from common.camera import Intrinsics, Pose, project
-from services.calib.passpoints import Passpoints, Track
-from services.calib.pnp import refine_lm, reprojection_px
+from common.camera import Intrinsics, Pose, project, reprojection_px
+from common.passpoints import Passpoints, Track
+from services.calib.pnp import refine_lm
 
 OFFSET_GRID_STEP_S = 0.01
 

@@ -12,7 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from common.camera import Intrinsics, project  # noqa: E402
-from services.calib.passpoints import Passpoints  # noqa: E402
+from common.passpoints import Passpoints  # noqa: E402
 from services.calib.solve import Solution  # noqa: E402
 
 

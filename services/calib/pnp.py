@@ -11,7 +11,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from common.camera import Intrinsics, Pose, project
+from common.camera import Intrinsics, Pose, project, reprojection_px
 
 TO_CV = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
 RANSAC_ITERATIONS = 300
@@ -33,13 +33,6 @@ def pose_to_cv(pose: Pose) -> tuple[np.ndarray, np.ndarray]:
     r_cv = TO_CV @ pose.rotation.T
     rvec, _ = cv2.Rodrigues(r_cv)
     return rvec.ravel(), -(r_cv @ pose.position)
-
-
-def reprojection_px(pose: Pose, world_mm: np.ndarray, pixels: np.ndarray,
-                    intr: Intrinsics) -> np.ndarray:
-    """Pixel distance per passpoint (inf where a point is behind the camera)."""
-    error = np.linalg.norm(project(world_mm, pose, intr) - pixels, axis=1)
-    return np.where(np.isfinite(error), error, np.inf)
 
 
 def ransac_seed(world_mm: np.ndarray, pixels: np.ndarray, intr: Intrinsics,

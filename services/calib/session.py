@@ -19,13 +19,13 @@ import numpy as np
 from common import keys
 from common import messages as m
 from common.camera import mount_pose
+from common.jpeg import JpegError, decode_gray
 from common.markers import Detection, annotate, marker_of
 from common.node import Node
-from services.calib.collect import Collector
-from services.calib.passpoints import CalibrationError
+from common.passpoint_collector import Collector
+from common.passpoints import CalibrationError
 from services.calib.settings import CalibSettings
 from services.calib.store import PoseStore
-from services.ptz.camera import decode_jpeg
 
 log = logging.getLogger(__name__)
 TICK_S = 0.05
@@ -140,8 +140,8 @@ class Session:
         if jpeg is None:
             return
         try:
-            image = decode_jpeg(jpeg, self.camera)
-        except Exception:  # noqa: BLE001 - an image that does not decode is just not kept
+            image = decode_gray(jpeg)
+        except JpegError:  # an image that does not decode is just not kept
             return
         u, v = self.collector.pixels[index]
         markers = tuple(marker_of(d) for d in msg.markers)

@@ -20,11 +20,11 @@ from typing import Literal
 
 import numpy as np
 
-from common.camera import Intrinsics, Pose
+from common.camera import Intrinsics, Pose, reprojection_px
+from common.passpoints import CalibrationError, Passpoints, Track
 from services.calib.cost import Fitness
 from services.calib.joint import best_offset_on_grid, refine_jointly
-from services.calib.passpoints import CalibrationError, Passpoints, Track
-from services.calib.pnp import pose_std, ransac_seed, reprojection_px, robust_refine
+from services.calib.pnp import pose_std, ransac_seed, robust_refine
 from services.calib.search import search
 
 Method = Literal["auto", "cmaes", "simplex"]

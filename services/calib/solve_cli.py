@@ -45,7 +45,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="write fitness.png (searches) and residuals.png here")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     args = parser.parse_args(argv)
-    from services.calib.passpoints import CalibrationError, read_passpoints, read_track
+    from common.passpoints import CalibrationError, read_passpoints, read_track
     from services.calib.solve import Options, solve
 
     try:

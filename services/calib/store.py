@@ -17,7 +17,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from common import messages as m
-from services.calib.passpoints import Passpoints, Track, write_passpoints
+from common.passpoints import Passpoints, Track, write_passpoints
 
 log = logging.getLogger(__name__)
 

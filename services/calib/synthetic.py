@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from common.camera import Intrinsics, Pose, project
-from services.calib.passpoints import Passpoints, Track
+from common.passpoints import Passpoints, Track
 
 PAPER_POSE = Pose(3413.0, 1093.0, 2163.0, 197.0, 27.0, 159.0)
 """Near the paper's optimum for its camera (Table 2)."""

@@ -11,7 +11,7 @@ import numpy as np
 
 from common import codec, keys
 from common import messages as m
-from services.recording.mcap_file import RecordingError, read_samples, recorded_keys
+from common.mcap_file import RecordingError, read_samples, recorded_keys
 from services.sim.robots import Trajectory
 
 MIN_SAMPLES = 2

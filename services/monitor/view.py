@@ -2,37 +2,21 @@
 
 from __future__ import annotations
 
-import base64
 import json
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Any
 
 from pydantic import BaseModel
 
+from common import codec
+
 RATE_WINDOW_S = 5.0
-
-
-def to_plain(msg: BaseModel | dict) -> dict[str, Any]:
-    """A JSON-ready dict of a message; bytes become base64 strings."""
-    data = msg.model_dump() if isinstance(msg, BaseModel) else dict(msg)
-    return _plain(data)
-
-
-def _plain(value: Any) -> Any:
-    if isinstance(value, bytes):
-        return base64.b64encode(value).decode("ascii")
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_plain(v) for v in value]
-    return value
 
 
 def json_line(key: str, msg: BaseModel | dict) -> str:
     """One ``--raw`` output line: the key, the model name and every field."""
     kind = type(msg).__name__ if isinstance(msg, BaseModel) else "msgpack"
-    return json.dumps({"key": key, "type": kind, **to_plain(msg)}, allow_nan=False)
+    return json.dumps({"key": key, "type": kind, **codec.to_plain(msg)}, allow_nan=False)
 
 
 def summary(msg: BaseModel | dict, width: int = 60) -> str:

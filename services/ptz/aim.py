@@ -8,28 +8,13 @@ Pure: no I/O, no clock.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
-from common.camera import Pose, zoom_for_focal_mm
+from common.camera import Pose, PtzLimits, zoom_for_focal_mm
 
-
-@dataclass(frozen=True)
-class Limits:
-    """What the camera reports for ``query=limits`` (degrees, zoom steps)."""
-
-    min_pan: float = -170.0
-    max_pan: float = 170.0
-    min_tilt: float = -90.0
-    max_tilt: float = 90.0
-    min_zoom: int = 1
-    max_zoom: int = 9999
-
-    def clamp(self, pan: float, tilt: float, zoom: float) -> tuple[float, float, float]:
-        return (min(max(pan, self.min_pan), self.max_pan),
-                min(max(tilt, self.min_tilt), self.max_tilt),
-                min(max(zoom, self.min_zoom), self.max_zoom))
+DEFAULT_LIMITS = PtzLimits()
+"""The limits used where a camera has not reported its own (±170° pan, ±90° tilt, zoom 1–9999)."""
 
 
 def pan_tilt(x: float, y: float, z: float, *, current_pan_deg: float = 0.0,
@@ -54,13 +39,13 @@ def pan_tilt(x: float, y: float, z: float, *, current_pan_deg: float = 0.0,
     return pan, tilt
 
 
-def within_limits(pan_deg: float, tilt_deg: float, limits: Limits) -> tuple[float, float]:
+def within_limits(pan_deg: float, tilt_deg: float, limits: PtzLimits) -> tuple[float, float]:
     """Clamp to what the camera can reach."""
     pan, tilt, _ = limits.clamp(pan_deg, tilt_deg, limits.min_zoom)
     return pan, tilt
 
 
-def aim_at(target_world: np.ndarray, pose: Pose, limits: Limits = Limits(), *,
+def aim_at(target_world: np.ndarray, pose: Pose, limits: PtzLimits = DEFAULT_LIMITS, *,
            current_pan_deg: float = 0.0, current_tilt_deg: float = 0.0
            ) -> tuple[float, float]:
     """Pan and tilt (deg, within the limits) that put a world point (mm) on the optical axis."""
@@ -89,7 +74,7 @@ def aim_error_deg(target_world: np.ndarray, pose: Pose, pan_deg: float,
 
 
 def zoom_for_size(distance_mm: float, *, object_mm: float, image_fraction: float,
-                  chip_height_mm: float = 2.7, limits: Limits = Limits()) -> int:
+                  chip_height_mm: float = 2.7, limits: PtzLimits = DEFAULT_LIMITS) -> int:
     """Zoom step that makes an object of ``object_mm`` fill ``image_fraction`` of the image
     height at ``distance_mm`` (beyond the paper: constant apparent size)."""
     if distance_mm <= 0 or object_mm <= 0 or not 0 < image_fraction <= 1:

@@ -27,7 +27,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(_joined(sys.argv[1:] if argv is None else list(argv)))
     import numpy as np
 
-    from services.ptz.aim import Limits, aim_at
+    from common.camera import PtzLimits
+    from services.ptz.aim import aim_at
 
     try:
         pose = _read_pose(args.pose)
@@ -37,7 +38,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (OSError, ValueError, KeyError, TypeError) as err:
         print(f"stb ptz aim: {err}", file=sys.stderr)
         return 2
-    pan, tilt = aim_at(target, pose, Limits(-180.0, 180.0, -90.0, 90.0))
+    pan, tilt = aim_at(target, pose, PtzLimits(-180.0, 180.0, -90.0, 90.0))
     out = {"pan_deg": pan, "tilt_deg": tilt, "mount": args.mount}
     print(json.dumps(out) if args.json else f"pan {pan:.3f}°  tilt {tilt:.3f}°")
     return 0

@@ -21,8 +21,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from common import messages as m
+from common.camera import PtzLimits
 from common.markers import detect, to_message
-from services.ptz.aim import Limits
 from services.ptz.camera import PtzCamera, decode_jpeg
 
 log = logging.getLogger(__name__)
@@ -40,7 +40,7 @@ def _asked(msg: m.CalibrationMode) -> tuple[float | None, float | None, int | No
     return msg.pan_deg, msg.tilt_deg, msg.zoom
 
 
-def _within(msg: m.CalibrationMode, limits: Limits) -> m.CalibrationMode:
+def _within(msg: m.CalibrationMode, limits: PtzLimits) -> m.CalibrationMode:
     """The request with its pan, tilt and zoom inside the camera's limits."""
     pan, tilt, zoom = limits.clamp(msg.pan_deg if msg.pan_deg is not None else 0.0,
                                    msg.tilt_deg if msg.tilt_deg is not None else 0.0,
@@ -78,7 +78,7 @@ class CalibrationMode:
     def active(self, now: float) -> bool:
         return self.request is not None and now < self.expires_at
 
-    def on_request(self, msg: m.CalibrationMode, now: float, limits: Limits
+    def on_request(self, msg: m.CalibrationMode, now: float, limits: PtzLimits
                    ) -> None:
         """Enter, renew or leave the mode; where it holds the camera is clamped to the
         camera's ``limits``. Camera errors propagate (PtzError)."""

@@ -7,10 +7,10 @@ from typing import Protocol
 import httpx
 import numpy as np
 
+from common.camera import PtzLimits
 from common.jpeg import JpegError, decode_gray
 from common.trace import TRACE_HEADER
 from services.ptz import vapix
-from services.ptz.aim import Limits
 
 
 class PtzError(Exception):
@@ -40,7 +40,7 @@ class PtzCamera(Protocol):
 
     def position(self) -> vapix.Position: ...
 
-    def limits(self) -> Limits: ...
+    def limits(self) -> PtzLimits: ...
 
     def snapshot(self) -> np.ndarray: ...
 
@@ -75,7 +75,7 @@ class AxisPtzCamera:
     def position(self) -> vapix.Position:
         return vapix.parse_position(self._request(vapix.PTZ_PATH, {"query": "position"}).text)
 
-    def limits(self) -> Limits:
+    def limits(self) -> PtzLimits:
         return vapix.parse_limits(self._request(vapix.PTZ_PATH, {"query": "limits"}).text)
 
     def set_ir_cut_filter(self, mode: str) -> None:

@@ -7,9 +7,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from common.camera import Pose
+from common.camera import Pose, PtzLimits
 from common.volume import Volume
-from services.ptz.aim import Limits, aim_at, predict, zoom_for_size
+from services.ptz.aim import aim_at, predict, zoom_for_size
 
 
 @dataclass(frozen=True)
@@ -28,7 +28,7 @@ class Follower:
     velocity (bounded), to make up for the camera's command latency and motion.
     """
 
-    limits: Limits = Limits()
+    limits: PtzLimits = PtzLimits()
     deadband_deg: float = 0.3
     latency_s: float = 0.25
     min_interval_s: float = 0.1

@@ -21,10 +21,10 @@ import numpy as np
 
 from common import codec, keys
 from common import messages as m
-from common.camera import Pose, focal_mm_for_zoom
+from common.camera import Pose, PtzLimits, focal_mm_for_zoom
 from common.markers import warm_up
 from common.node import Node
-from services.ptz.aim import Limits, aim_error_deg
+from services.ptz.aim import aim_error_deg
 from services.ptz.calibration import CalibrationMode
 from services.ptz.camera import AxisPtzCamera, PtzCamera, PtzError, http_client
 from services.ptz.follow import Follower
@@ -90,7 +90,7 @@ class _Loop:
         self.lock = threading.Lock()
         self.pose: m.CameraPose | None = None
         self.robot: m.RobotPosition | None = None
-        self.limits: Limits | None = None
+        self.limits: PtzLimits | None = None
         self.retry_at, self.retry_s = 0.0, 0.5
         name = settings.instance
         self.calibration = CalibrationMode(
@@ -129,7 +129,7 @@ class _Loop:
         with self.lock:
             now = time.time()
             try:
-                self.calibration.on_request(msg, now, self.limits or Limits())
+                self.calibration.on_request(msg, now, self.limits or PtzLimits())
             except PtzError as err:
                 self._unreachable(now, err)
             if not self.calibration.active(now):

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from services.ptz.aim import Limits
+from common.camera import PtzLimits
 
 PTZ_PATH = "/axis-cgi/com/ptz.cgi"
 IMAGE_PATH = "/axis-cgi/jpg/image.cgi"
@@ -68,10 +68,10 @@ def parse_position(body: str) -> Position:
         raise VapixReplyError(f"not a position reply: {body[:80]!r}") from err
 
 
-def parse_limits(body: str) -> Limits:
+def parse_limits(body: str) -> PtzLimits:
     values = parse_values(body)
     try:
-        return Limits(float(values["MinPan"]), float(values["MaxPan"]),
+        return PtzLimits(float(values["MinPan"]), float(values["MaxPan"]),
                       float(values["MinTilt"]), float(values["MaxTilt"]),
                       int(float(values.get("MinZoom", "1"))),
                       int(float(values.get("MaxZoom", "9999"))))

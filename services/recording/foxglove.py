@@ -13,8 +13,8 @@ import json
 import cv2
 import numpy as np
 
+from common import codec
 from common import messages as m
-from services.monitor.view import to_plain
 
 COMPRESSED_IMAGE = ("foxglove.CompressedImage", {
     "title": "foxglove.CompressedImage", "type": "object",
@@ -32,7 +32,7 @@ def json_copy(msg: m.Message | dict) -> tuple[bytes, tuple[str, dict] | None]:
     image = _image(msg)
     if image is not None:
         return image, COMPRESSED_IMAGE
-    return json.dumps(to_plain(msg), allow_nan=False).encode(), None
+    return json.dumps(codec.to_plain(msg), allow_nan=False).encode(), None
 
 
 def _image(msg: m.Message | dict) -> bytes | None:

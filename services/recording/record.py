@@ -20,6 +20,7 @@ from pydantic import Field
 
 from common import codec, keys
 from common import messages as m
+from common.mcap_file import RecordWriter
 from common.node import stop_on_signals
 from common.settings import LogLevel, ServiceSettings
 from services.entry import (
@@ -29,7 +30,6 @@ from services.entry import (
     tool_settings,
 )
 from services.recording.foxglove import json_copy
-from services.recording.mcap_file import RecordWriter
 
 log = logging.getLogger(__name__)
 

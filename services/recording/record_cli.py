@@ -4,7 +4,7 @@ Default key expression: everything under the bus prefix (``stb/**``); what query
 for those keys at the start (the camera poses) is asked for once and recorded too. Each sample
 is written as it crossed the bus (msgpack) with its receive and measurement times, plus a JSON
 copy that Foxglove shows (camera images as ``foxglove.CompressedImage``); see
-``services.recording.mcap_file`` for the layout. Invalid payloads are recorded too (as bytes,
+``common.mcap_file`` for the layout. Invalid payloads are recorded too (as bytes,
 without a JSON copy) and counted. Ctrl-C, SIGTERM or ``--duration`` end the recording cleanly.
 
 The tracking camera's raw frames (``stb/gantry/camera/frame``) are about 8 MB/s before

@@ -15,6 +15,7 @@ import msgpack
 import zenoh
 
 from common import codec
+from common.mcap_file import RecordingError, Sample, read_samples, recorded_keys
 from common.node import stop_on_signals
 from common.settings import LogLevel, ServiceSettings
 from services.entry import (
@@ -23,7 +24,6 @@ from services.entry import (
     tool_session,
     tool_settings,
 )
-from services.recording.mcap_file import RecordingError, Sample, read_samples, recorded_keys
 
 CLOCK_FIELDS = ("measured_s", "sent_s", "started_s")
 

@@ -11,10 +11,9 @@ import numpy as np
 
 from common import codec, keys
 from common import messages as m
-from common.camera import Intrinsics, Pose, head_pose
-from services.calib.collect import Collector
-from services.calib.pnp import reprojection_px
-from services.recording.mcap_file import read_samples
+from common.camera import Intrinsics, Pose, head_pose, reprojection_px
+from common.mcap_file import read_samples
+from common.passpoint_collector import Collector
 
 STATE_MATCH_S = 0.5
 """A crane state is compared with the robot only if a robot sample lies this close."""

@@ -10,10 +10,10 @@ import sys
 from pathlib import Path
 
 from common.heightmap import HeightMap
+from common.mcap_file import RecordingError
 from common.settings import ConfigError, load_settings
 from services.entry import EXIT_CONFIG
 from services.gantry.settings import GantrySettings
-from services.recording.mcap_file import RecordingError
 from services.report import plots
 from services.report.data import Recording, read_recording, summary
 

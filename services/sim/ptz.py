@@ -11,8 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from common.camera import Pose, focal_mm_for_zoom, head_pose
-from services.ptz.aim import Limits
+from common.camera import Pose, PtzLimits, focal_mm_for_zoom, head_pose
 
 
 @dataclass
@@ -37,7 +36,7 @@ class PtzHead:
     """The moving part of a simulated PTZ camera; ``mount`` is its pose at pan = tilt = 0."""
 
     mount: Pose
-    limits: Limits = Limits()
+    limits: PtzLimits = PtzLimits()
     pan_speed_deg_s: float = 100.0
     tilt_speed_deg_s: float = 90.0
     zoom_steps_s: float = 4000.0

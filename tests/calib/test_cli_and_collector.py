@@ -10,8 +10,8 @@ import pytest
 
 from common import messages as m
 from common.camera import Intrinsics, project
-from services.calib.collect import Collector
-from services.calib.passpoints import Passpoints, format_passpoints, write_passpoints
+from common.passpoint_collector import Collector
+from common.passpoints import Passpoints, format_passpoints, write_passpoints
 from services.calib.solve_cli import main
 from services.calib.synthetic import PAPER_GUESS, PAPER_POSE, moving_marker, passpoints
 from tests.calib.test_solve import errors

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from common.camera import Intrinsics, Pose, pose_distance
-from services.calib.passpoints import CalibrationError, Passpoints
+from common.passpoints import CalibrationError, Passpoints
 from services.calib.pnp import camera_matrix, pose_from_cv
 from services.calib.solve import Options, solve
 from services.calib.synthetic import PAPER_GUESS, PAPER_POSE, moving_marker, passpoints

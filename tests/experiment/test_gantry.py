@@ -13,12 +13,12 @@ import pytest
 
 from common import codec, keys
 from common import messages as m
+from common.mcap_file import RecordWriter
 from services.experiment.cli import main
 from services.experiment.gantry import gantry_for, make_lab, run
 from services.gantry.cycle import AFTER_REPORT_S
 from services.gantry.frames import OpenCvFrames
 from services.gantry.settings import GantrySettings
-from services.recording.mcap_file import RecordWriter
 from tests.video import marker_video
 
 pytestmark = pytest.mark.usefixtures("compiled_detector")

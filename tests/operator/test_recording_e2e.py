@@ -14,7 +14,7 @@ import pytest
 from common import codec, keys
 from common import messages as m
 from common.bus import Bus
-from services.recording.mcap_file import read_samples, recorded_keys
+from common.mcap_file import read_samples, recorded_keys
 from tests.conftest import client_settings, open_when_up, stb_process, wait_for
 from tests.operator.conftest import LiveLab
 from tests.ports import free_port

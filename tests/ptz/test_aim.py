@@ -12,7 +12,7 @@ import pytest
 from common import messages as m
 from common.camera import Pose, focal_mm_for_zoom
 from services.ptz.aim import (
-    Limits,
+    PtzLimits,
     aim_at,
     aim_error_deg,
     optical_axis,
@@ -60,14 +60,14 @@ def test_aiming_puts_the_target_on_the_optical_axis(pose: Pose,
                                                     rng: np.random.Generator) -> None:
     for _ in range(50):
         target = rng.uniform([-2000, -2000, 0], [2000, 2000, 1500])
-        pan, tilt = aim_at(target, pose, Limits(-180, 180, -90, 90))
+        pan, tilt = aim_at(target, pose, PtzLimits(-180, 180, -90, 90))
         assert aim_error_deg(target, pose, pan, tilt) < 1e-4  # acos resolution near 0°
 
 
 def test_limits_clamp_the_command() -> None:
     pose = Pose(0, 0, 0, 0, 0, 0)
     assert aim_at(np.array([-1000.0, 10.0, 0.0]), pose) == (170.0, 0.0)
-    assert aim_at(np.array([10.0, 0.0, 1000.0]), pose, Limits(min_tilt=-20))[1] == -20.0
+    assert aim_at(np.array([10.0, 0.0, 1000.0]), pose, PtzLimits(min_tilt=-20))[1] == -20.0
 
 
 def test_optical_axis_inverts_equation_4(rng: np.random.Generator) -> None:

@@ -11,7 +11,7 @@ import pytest
 
 from common import keys
 from common import messages as m
-from services.ptz.aim import Limits
+from common.camera import PtzLimits
 from services.ptz.calibration import CalibrationMode
 from services.ptz.camera import AxisPtzCamera, http_client
 from services.sim.camera_server import CameraServer, SimCamera
@@ -53,7 +53,7 @@ def _request(pan: float | None, tilt: float | None, zoom: int | None = None,
 def test_a_request_outside_the_cameras_limits_is_held_at_them(asked: tuple, held: tuple) -> None:
     camera = RecordingCamera()
     mode = CalibrationMode(camera, lambda _d: None, lambda _f: None)  # type: ignore[arg-type]
-    limits = Limits(min_tilt=-80.0, max_tilt=80.0)
+    limits = PtzLimits(min_tilt=-80.0, max_tilt=80.0)
     mode.on_request(_request(*asked), 100.0, limits)
     if held[0] == "home":  # what the request leaves open comes from home
         assert camera.moves == list(held)
@@ -108,7 +108,7 @@ def test_the_hold_is_home_and_a_camera_moved_away_is_sent_back(lab: Lab) -> None
     try:
         other.get("/axis-cgi/com/ptz.cgi", params={"pan": "60", "tilt": "20"})
         time.sleep(1.0)  # someone left it looking elsewhere
-        mode.on_request(_request(None, None), time.time(), Limits())
+        mode.on_request(_request(None, None), time.time(), PtzLimits())
 
         def cycles(seconds: float) -> list[bool]:
             """Whether each cycle published detections while the camera was off its hold."""

@@ -8,9 +8,8 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from common.camera import Pose
+from common.camera import Pose, PtzLimits
 from services.ptz import vapix
-from services.ptz.aim import Limits
 from services.ptz.camera import (
     AxisPtzCamera,
     PtzRejected,
@@ -42,7 +41,7 @@ def _camera(server: CameraServer, password: str = "secret", auth: str = "digest"
 
 def test_position_limits_and_a_move(server: CameraServer) -> None:
     camera = _camera(server)
-    assert camera.limits() == Limits(-170, 170, -90, 90, 1, 9999)
+    assert camera.limits() == PtzLimits(-170, 170, -90, 90, 1, 9999)
     assert camera.position() == vapix.Position(0.0, 0.0, 1, "auto")
     camera.move_to(12.5, -7.25, zoom=400, speed=100)
     deadline = time.monotonic() + 3

@@ -16,7 +16,7 @@ from mcap.reader import make_reader
 from common import codec, keys
 from common import messages as m
 from common.bus import Bus
-from services.recording.mcap_file import RecordingError, read_samples, recorded_keys
+from common.mcap_file import RecordingError, read_samples, recorded_keys
 from services.recording.record import Recorder
 from services.recording.replay import pace, replay, retimed
 from tests.conftest import wait_for
@@ -143,7 +143,7 @@ def test_retimed_moves_clock_fields_only() -> None:
 def test_pace_stops_when_asked() -> None:
     import threading
 
-    from services.recording.mcap_file import Sample
+    from common.mcap_file import Sample
 
     samples = [Sample("k", b"", "", 100.0 + i, 100.0 + i, i + 1) for i in range(3)]
     stop = threading.Event()
@@ -178,7 +178,7 @@ def test_recorder_skips_keys_it_excludes(make_bus: Callable[..., Bus], tmp_path:
 
 def test_a_recording_that_was_never_finished_is_read_up_to_where_it_breaks_off(
         tmp_path: Path) -> None:
-    from services.recording.mcap_file import RecordWriter
+    from common.mcap_file import RecordWriter
 
     out = io.BytesIO()
     writer = RecordWriter(out)

@@ -17,8 +17,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from common import messages as m
+from common.passpoints import Passpoints, Track
 from common.robot_picker import RobotPicker
-from services.calib.passpoints import Passpoints, Track
 
 STATIC_WINDOW_S = 4.0
 STATIC_SHARE = 0.8
