@@ -9,8 +9,6 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-COLUMNS = ("u", "v", "radius_long", "radius_short", "angle_deg", "roundness", "area")
-
 
 @njit(cache=True, nogil=True)
 def _find(parent: np.ndarray, i: int) -> int:
@@ -120,9 +118,10 @@ def _label_runs(run_row: np.ndarray, run_start: np.ndarray, run_end: np.ndarray)
 @njit(cache=True, nogil=True)
 def regions_kernel(image: np.ndarray, row_max: np.ndarray, threshold: int, l_min: int,
                    small_area: int) -> np.ndarray:
-    """One row per region, columns ``COLUMNS``: the brightness-weighted centroid, and the
-    binary region's inertia ellipse (radius = 2·√eigenvalue, + 1/12 px² for a pixel's own
-    extent, so a disc of radius R gives R), its angle, roundness and area.
+    """One row per region, columns u, v, radius_long, radius_short, angle_deg, roundness, area:
+    the brightness-weighted centroid, and the binary region's inertia ellipse (radius =
+    2·√eigenvalue, + 1/12 px² for a pixel's own extent, so a disc of radius R gives R), its
+    angle, roundness and area.
 
     A region smaller than ``small_area`` leaves too few pixels for its binary shape to say
     whether it is round (three pixels make an "L"); its centroid and ellipse come from the

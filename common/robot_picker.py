@@ -51,6 +51,9 @@ class Seen(NamedTuple):
 
 @dataclass
 class RobotPicker:
+    """Follows the robot through a stream of frames: which marker it is, where it is and how
+    fast it moves (the module's docstring has the rule)."""
+
     label: str = ""
     volume: Volume = Volume()
     motion_window_s: float = 1.0

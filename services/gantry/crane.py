@@ -151,6 +151,9 @@ class RegisterCrane:
 
 
 class ModbusCrane(RegisterCrane):
+    """The crane controller over Modbus/TCP (pymodbus): the register map's reads and writes on
+    one connection, reconnecting when it drops; errors are ``CraneError``."""
+
     def __init__(self, host: str, port: int, timeout_s: float = 0.5,
                  registers: RegisterMap = DEFAULT_MAP) -> None:
         super().__init__(registers)

@@ -22,6 +22,9 @@ the range where the default does best (docs/experiments.md)."""
 
 @dataclass
 class CycleSync:
+    """Learns the phase of the controller's reports from the times they changed and says when
+    the next tick is due: ``offset_s`` after the next report."""
+
     period_s: float
     offset_s: float = AFTER_REPORT_S
     remembered: int = 8  # report times averaged (a circular mean over the period)

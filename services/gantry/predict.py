@@ -36,6 +36,9 @@ class Estimate:
 
 
 class Predictor(Protocol):
+    """One of the gantry's algorithms: fed every measured position (None when the marker was
+    not seen), it gives its estimate of where the crane should go."""
+
     name: AlgorithmName
 
     def update(self, t_s: float, measured: np.ndarray | None, horizon_s: float | None = None

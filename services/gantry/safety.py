@@ -49,6 +49,10 @@ class Decision:
 
 @dataclass
 class SetpointGuard:
+    """The last word before a setpoint is written: inside the workspace, within the crane's
+    speed and acceleration limits from where it was going, and held (frozen where the crane is
+    already going) when the estimate is missing, not finite or stale."""
+
     workspace: Workspace = Workspace()
     max_speed_mm_s: float = 450.0
     max_accel_mm_s2: float = 550.0

@@ -30,6 +30,10 @@ class PtzRejected(PtzError):
 
 
 class PtzCamera(Protocol):
+    """A PTZ camera as the PTZ service drives it: move, go home, say where it looks and how far
+    it can turn, take a snapshot, switch the IR-cut filter; errors are ``PtzError``.
+    ``AxisPtzCamera`` is VAPIX's."""
+
     name: str
 
     def move_to(self, pan_deg: float | None, tilt_deg: float | None,
@@ -64,9 +68,6 @@ class AxisPtzCamera:
         headers = {TRACE_HEADER: f"{measured_s:.6f}"} if measured_s is not None else None
         self._request(vapix.PTZ_PATH, vapix.move_params(pan_deg, tilt_deg, zoom, speed),
                       headers)
-
-    def stop(self) -> None:
-        self._request(vapix.PTZ_PATH, {"move": "stop"})
 
     def home(self) -> None:
         """To the camera's home position (its home preset)."""

@@ -31,7 +31,10 @@ FrameHandler = Callable[[MarkerFrame], None]
 StateHandler = Callable[[bool, str], None]
 
 
-class MocapSource(Protocol):
+class MotionCapture(Protocol):
+    """A motion-capture system: hands every frame to ``on_frame`` until ``stop`` is set, and
+    says on ``on_state`` whether it is connected (and why not). ``QualisysMocap`` is QTM's."""
+
     def run(self, on_frame: FrameHandler, stop: threading.Event,
             on_state: StateHandler = ...) -> None: ...
 

@@ -18,7 +18,7 @@ from common import codec, keys
 from common import messages as m
 from common.node import Node
 from common.robot_picker import RobotPicker, Seen
-from services.tracker.mocap import MocapSource, QualisysMocap
+from services.tracker.mocap import MotionCapture, QualisysMocap
 from services.tracker.settings import TrackerSettings
 
 
@@ -33,7 +33,7 @@ def make_picker(settings: TrackerSettings) -> RobotPicker:
                        velocity_window_s=settings.velocity_window_s)
 
 
-def run(node: Node, mocap: MocapSource | None = None) -> None:
+def run(node: Node, mocap: MotionCapture | None = None) -> None:
     settings: TrackerSettings = node.settings  # type: ignore[assignment]
     mocap = mocap or make_mocap(settings)
     picker = make_picker(settings)

@@ -119,20 +119,37 @@ anything = st.one_of(st.floats(allow_nan=True, allow_infinity=True), finite)
                 max_size=40),
        st.tuples(finite, finite))
 def test_setpoints_never_leave_the_workspace_nor_jump(inputs: list, crane: tuple) -> None:
-    guard = SetpointGuard(WORKSPACE, max_speed_mm_s=450, max_accel_mm_s2=550,
+    """Every setpoint inside the workspace; holds on what it must not follow; while tracking,
+    every step — also the first, from the crane, and the first after a hold, from standing —
+    within the speed limit and changing the velocity by at most the acceleration limit (but
+    where the workspace's edge stops it)."""
+    speed, accel, dt = 450.0, 550.0, 0.25
+    guard = SetpointGuard(WORKSPACE, max_speed_mm_s=speed, max_accel_mm_s2=accel,
                           stale_after_s=0.6)
-    last = None
+    previous, velocity = WORKSPACE.clamp(np.array(crane)), np.zeros(2)
     for k, (x, y, present, age) in enumerate(inputs):
-        now = 1000.0 + 0.25 * k
+        now = 1000.0 + dt * k
         desired = np.array([x, y]) if present else None
         decision = guard.decide(now, desired, now - age, np.array(crane))
         sp = decision.setpoint
         assert np.all(np.isfinite(sp)) and WORKSPACE.contains(sp)
         if not present or abs(age) > 0.6 or not np.all(np.isfinite([x, y])):
             assert decision.hold
-        if last is not None and not decision.hold and not last[1]:
-            assert np.hypot(*(sp - last[0])) <= 450 * 0.25 + 1e-6
-        last = (sp, decision.hold)
+        if decision.hold:
+            previous, velocity = sp, np.zeros(2)
+            continue
+        step = (sp - previous) / dt
+        assert np.hypot(*step) <= speed + 1e-6
+        if not _on_edge(sp):  # the edge may stop it harder: the workspace comes first
+            assert np.hypot(*(step - velocity)) <= accel * dt + 1e-6
+        previous, velocity = sp, step
+
+
+def _on_edge(xy: np.ndarray) -> bool:
+    inner = WORKSPACE.clamp(xy)
+    low = np.array([WORKSPACE.x_min_mm, WORKSPACE.y_min_mm]) + WORKSPACE.margin_mm
+    high = np.array([WORKSPACE.x_max_mm, WORKSPACE.y_max_mm]) - WORKSPACE.margin_mm
+    return bool(np.any(np.isclose(inner, low, atol=1e-6) | np.isclose(inner, high, atol=1e-6)))
 
 
 def test_particle_filters_are_reproducible_from_their_seed() -> None:

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 from services.sim.robots import (
-    MARKER_DIAMETER_MM,
     Railway,
     Walk,
     calibration,
@@ -36,7 +35,6 @@ def test_marker_follows_the_surface(crater: CraterMap, rng: np.random.Generator)
         ground = crater.height_at(track.xyz_mm[:, 0], track.xyz_mm[:, 1])
         above = track.xyz_mm[:, 2] - ground
         assert np.all(above >= height - 1e-6) and np.all(above <= height + 10.0)
-    assert MARKER_DIAMETER_MM == 19.0
 
 
 def test_walker_is_slow_sways_and_sometimes_slides_downhill(crater: CraterMap) -> None:
