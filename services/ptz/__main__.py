@@ -1,5 +1,5 @@
 """``stb ptz [--instance ptz1]``: one AXIS camera follows the robot.
-``stb ptz aim --pose POSE.json --target X,Y,Z [--mount standing|hanging] [--json]``: eq. 4."""
+``stb ptz aim --pose POSE.json --target X,Y,Z [--json]``: eq. 4."""
 
 from __future__ import annotations
 

@@ -21,8 +21,6 @@ def main(argv: Sequence[str] | None = None) -> int:
                              "(run/calib/<camera>/pose.json)")
     parser.add_argument("--target", required=True,
                         help="X,Y,Z in mm (world frame), e.g. -1200,300,0")
-    parser.add_argument("--mount", choices=["standing", "hanging"], default="standing",
-                        help="camera mounting; AXIS keeps the camera frame the same for both")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(_joined(sys.argv[1:] if argv is None else list(argv)))
     import numpy as np
@@ -39,7 +37,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"stb ptz aim: {err}", file=sys.stderr)
         return 2
     pan, tilt = aim_at(target, pose, PtzLimits(-180.0, 180.0, -90.0, 90.0))
-    out = {"pan_deg": pan, "tilt_deg": tilt, "mount": args.mount}
+    out = {"pan_deg": pan, "tilt_deg": tilt}
     print(json.dumps(out) if args.json else f"pan {pan:.3f}°  tilt {tilt:.3f}°")
     return 0
 

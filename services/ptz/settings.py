@@ -16,12 +16,11 @@ class CameraConnection(BaseModel):
     user: str = "root"
     password: SecretStr = SecretStr("pass")
     auth: Literal["digest", "basic", "none"] = "digest"
-    mount: Literal["standing", "hanging"] = "standing"
 
 
 def _default_cameras() -> dict[str, CameraConnection]:
     return {"ptz1": CameraConnection(url="http://127.0.0.1:8081"),
-            "ptz2": CameraConnection(url="http://127.0.0.1:8082", mount="hanging")}
+            "ptz2": CameraConnection(url="http://127.0.0.1:8082")}
 
 
 class PtzSettings(ServiceSettings):

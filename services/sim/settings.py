@@ -41,7 +41,6 @@ class PtzCameraSettings(_Section):
     name: str = Field(pattern=r"^[A-Za-z0-9_.-]{1,64}$")
     host: str = "127.0.0.1"
     port: int = Field(ge=0, le=65535)
-    mount: Literal["standing", "hanging"] = "standing"
     x_mm: float
     y_mm: float
     z_mm: float
@@ -61,9 +60,9 @@ class PtzCameraSettings(_Section):
 def _default_cameras() -> list[PtzCameraSettings]:
     # Near the paper's estimate for its camera (Table 2), and a second one across the crater.
     return [
-        PtzCameraSettings(name="ptz1", port=8081, mount="standing", x_mm=3550, y_mm=1090,
+        PtzCameraSettings(name="ptz1", port=8081, x_mm=3550, y_mm=1090,
                           z_mm=2190, rx_deg=180, ry_deg=30, rz_deg=165),
-        PtzCameraSettings(name="ptz2", port=8082, mount="hanging", x_mm=-3300, y_mm=-1800,
+        PtzCameraSettings(name="ptz2", port=8082, x_mm=-3300, y_mm=-1800,
                           z_mm=2600, rx_deg=164, ry_deg=-27, rz_deg=-33),
     ]
 

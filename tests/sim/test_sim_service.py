@@ -56,7 +56,6 @@ rz_deg = 165
 [[sim.cameras]]
 name = "ptz2"
 port = {ports["ptz2"]}
-mount = "hanging"
 x_mm = -3300
 y_mm = -1800
 z_mm = 2600
