@@ -124,14 +124,8 @@ def run(seconds: float, rate_hz: float, markers: int, workdir: Path,
         time.sleep(2.0)  # streaming, past the start-up
         pids = {"tracker": procs[1].pid, "sim (QTM)": sim.pid, "router": procs[0].pid,
                 "monitor": os.getpid()}
-        before = {name: _cpu_s(pid) for name, pid in pids.items()}
-        parent.send("start")
-        monitor.recording.set()
-        started = time.monotonic()
-        time.sleep(seconds)
-        monitor.recording.clear()
-        elapsed = time.monotonic() - started
-        cpu = {name: (_cpu_s(pid) - before[name]) / elapsed for name, pid in pids.items()}
+        parent.send("start")  # the sim logs what it writes from now
+        cpu = _phase(monitor, pids, seconds)
         parent.send("stop")
         sent = dict(parent.recv()["mocap_sent"])
         parent.send("end")
@@ -163,19 +157,24 @@ def run_loaded(seconds: float, rate_hz: float, markers: int, workdir: Path) -> d
             time.sleep(10.0)  # the other services started and following
             pids = _lab_processes(up.pid)
             pids["monitor"] = os.getpid()
-            before = {name: _cpu_s(pid) for name, pid in pids.items()}
-            monitor.recording.set()
-            started = time.monotonic()
-            time.sleep(seconds)
-            monitor.recording.clear()
-            elapsed = time.monotonic() - started
-            cpu = {name: (_cpu_s(pid) - before[name]) / elapsed for name, pid in pids.items()}
+            cpu = _phase(monitor, pids, seconds)
         finally:
             monitor.close()
             session.close()
     result = _summary(seconds, rate_hz, {}, monitor, cpu)
     result["lab"] = "whole lab (stb up)"
     return result
+
+
+def _phase(monitor: Monitor, pids: dict[str, int], seconds: float) -> dict[str, float]:
+    """The monitor records for ``seconds``; each process's CPU over it, a share of one core."""
+    before = {name: _cpu_s(pid) for name, pid in pids.items()}
+    monitor.recording.set()
+    started = time.monotonic()
+    time.sleep(seconds)
+    monitor.recording.clear()
+    elapsed = time.monotonic() - started
+    return {name: (_cpu_s(pid) - before[name]) / elapsed for name, pid in pids.items()}
 
 
 def _lab_processes(up_pid: int) -> dict[str, int]:
