@@ -40,8 +40,9 @@ BAND_ROWS = 16  # rows per band of the first pass over the frame
 _SMALL_AREA = 30  # below this (radius ≲ 3 px) the binary shape is too coarse to judge
 
 
-class Marker(NamedTuple):
-    """One region: centroid (px), inertia ellipse (px, deg), roundness, area (px)."""
+class Spot(NamedTuple):
+    """One bright region of an image: centroid (px), inertia ellipse (px, deg), roundness, area
+    (px); a marker when it passes the paper's filters (``DetectedMarker`` on the bus)."""
 
     u: float
     v: float
@@ -59,8 +60,8 @@ class Detection:
 
     status: Status
     threshold: int
-    markers: tuple[Marker, ...]
-    regions: tuple[Marker, ...] = ()
+    markers: tuple[Spot, ...]
+    regions: tuple[Spot, ...] = ()
 
 
 def detect(frame: np.ndarray, *, threshold: int = 230, t_lim: int = 203, step: int = 5,
@@ -87,14 +88,14 @@ def detect(frame: np.ndarray, *, threshold: int = 230, t_lim: int = 203, step: i
         return Detection("none", t_lim, ())
     bands = _band_maxima(image)
     brightest = int(bands.max())
-    regions: tuple[Marker, ...] = ()
+    regions: tuple[Spot, ...] = ()
     if brightest < t_lim:  # the common frame: nothing reaches even the lowest threshold
         return Detection("none", t_lim, (), regions)
     row_max = row_maxima(image, bands, BAND_ROWS, t_lim)
     thresholds = np.array(_thresholds(threshold, t_lim, step), np.int64)
     t, table, is_marker = threshold_kernel(image, row_max, thresholds, l_min, _SMALL_AREA,
                                            float(r_lim), min_area, max_area)
-    regions = tuple(Marker(u, v, long_r, short_r, angle, roundness, int(area))
+    regions = tuple(Spot(u, v, long_r, short_r, angle, roundness, int(area))
                     for u, v, long_r, short_r, angle, roundness, area in table.tolist())
     markers = tuple(r for r, marker in zip(regions, is_marker.tolist(), strict=True) if marker)
     if not markers:
@@ -114,8 +115,8 @@ def warm_up() -> float:
     return time.perf_counter() - started
 
 
-def closest(markers: tuple[Marker, ...] | list[Marker], u: float, v: float,
-            max_distance_px: float = float("inf")) -> Marker | None:
+def closest(markers: tuple[Spot, ...] | list[Spot], u: float, v: float,
+            max_distance_px: float = float("inf")) -> Spot | None:
     """The marker nearest to a last known position (the gantry's choice, §3.1), or None."""
     best = min(markers, key=lambda m: (m.u - u) ** 2 + (m.v - v) ** 2, default=None)
     if best is None or np.hypot(best.u - u, best.v - v) > max_distance_px:
@@ -203,7 +204,7 @@ def to_message(result: Detection, camera: str, measured_s: float, width_px: int,
                  for mk in result.markers[:256]])
 
 
-def marker_of(d: DetectedMarker) -> Marker:
+def marker_of(d: DetectedMarker) -> Spot:
     """A detected marker from the bus back as the detector's own tuple (to annotate, say)."""
-    return Marker(d.u_px, d.v_px, d.radius_long_px, d.radius_short_px, d.angle_deg,
+    return Spot(d.u_px, d.v_px, d.radius_long_px, d.radius_short_px, d.angle_deg,
                   d.roundness, d.area_px)

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from common.heightmap import HeightMap
-from common.markers import Detection, Marker, closest, detect
+from common.markers import Detection, Spot, closest, detect
 from services.gantry.frames import Frame
 from services.gantry.locate import TrackingOptics, locate
 from services.gantry.predict import Estimate, make_predictor, prediction_horizon
@@ -194,7 +194,7 @@ class Controller:
         off = float(np.hypot(*(xyz[:2] - self._fix.xy_mm)))
         return off if off > gate else None
 
-    def _world(self, marker: Marker, crane_xy: np.ndarray) -> np.ndarray:
+    def _world(self, marker: Spot, crane_xy: np.ndarray) -> np.ndarray:
         return locate(marker.u, marker.v, crane_xy, self.optics, self.heights,
                       self.settings.marker_height_mm)
 

@@ -60,7 +60,7 @@ Hold = tuple[float, float, int]
 
 
 @dataclass
-class CalibrationMode:
+class CalibrationHold:
     camera: PtzCamera
     publish_detections: Callable[[m.MarkerDetections], None]
     publish_snapshot: Callable[[m.CameraFrame], None]

@@ -25,7 +25,7 @@ from common.camera import Pose, PtzLimits, focal_mm_for_zoom
 from common.markers import warm_up
 from common.node import Node
 from services.ptz.aim import aim_error_deg
-from services.ptz.calibration import CalibrationMode
+from services.ptz.calibration import CalibrationHold
 from services.ptz.camera import AxisPtzCamera, PtzCamera, PtzError, http_client
 from services.ptz.follow import Follower
 from services.ptz.override import ManualOverride
@@ -93,7 +93,7 @@ class _Loop:
         self.limits: PtzLimits | None = None
         self.retry_at, self.retry_s = 0.0, 0.5
         name = settings.instance
-        self.calibration = CalibrationMode(
+        self.calibration = CalibrationHold(
             camera,
             lambda msg: node.bus.publish(keys.PTZ_DETECTIONS, msg, camera=name),
             lambda msg: node.bus.publish(keys.PTZ_SNAPSHOT, msg, camera=name),

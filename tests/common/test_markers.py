@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from common.markers import Detection, Marker, annotate, closest, detect
+from common.markers import Detection, Spot, annotate, closest, detect
 
 H, W = 576, 704
 
@@ -106,7 +106,7 @@ def test_l_min_drops_stray_bright_pixels(rng: np.random.Generator) -> None:
 
 
 def test_closest_marker_to_the_last_known_position() -> None:
-    markers = [Marker(100, 100, 3, 3, 0, 1, 28), Marker(200, 120, 3, 3, 0, 1, 28)]
+    markers = [Spot(100, 100, 3, 3, 0, 1, 28), Spot(200, 120, 3, 3, 0, 1, 28)]
     assert closest(markers, 190, 100) is markers[1]
     assert closest(markers, 100, 90, max_distance_px=5) is None
     assert closest([], 0, 0) is None

@@ -12,7 +12,7 @@ import pytest
 from common import keys
 from common import messages as m
 from common.camera import PtzLimits
-from services.ptz.calibration import CalibrationMode
+from services.ptz.calibration import CalibrationHold
 from services.ptz.camera import AxisPtzCamera, http_client
 from services.sim.camera_server import CameraServer, SimCamera
 from services.sim.lab import Lab
@@ -52,7 +52,7 @@ def _request(pan: float | None, tilt: float | None, zoom: int | None = None,
 ])
 def test_a_request_outside_the_cameras_limits_is_held_at_them(asked: tuple, held: tuple) -> None:
     camera = RecordingCamera()
-    mode = CalibrationMode(camera, lambda _d: None, lambda _f: None)  # type: ignore[arg-type]
+    mode = CalibrationHold(camera, lambda _d: None, lambda _f: None)  # type: ignore[arg-type]
     limits = PtzLimits(min_tilt=-80.0, max_tilt=80.0)
     mode.on_request(_request(*asked), 100.0, limits)
     if held[0] == "home":  # what the request leaves open comes from home
@@ -103,7 +103,7 @@ def test_the_hold_is_home_and_a_camera_moved_away_is_sent_back(lab: Lab) -> None
     url = f"http://127.0.0.1:{server.port}"
     other = httpx.Client(base_url=url, auth=httpx.DigestAuth(cam.user, cam.password), timeout=3)
     detections: list[m.MarkerDetections] = []
-    mode = CalibrationMode(AxisPtzCamera(http_client(url, cam.user, cam.password), cam.name),
+    mode = CalibrationHold(AxisPtzCamera(http_client(url, cam.user, cam.password), cam.name),
                            detections.append, lambda _f: None)
     try:
         other.get("/axis-cgi/com/ptz.cgi", params={"pan": "60", "tilt": "20"})
