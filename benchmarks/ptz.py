@@ -165,7 +165,7 @@ def _phase(pipes: list, body: Callable[[], object]) -> dict:
 
 def _pointing_errors(lab: Lab, settings: SimSettings, clients: dict[str, httpx.Client],
                      t0_wall: float, seconds: float) -> dict[str, list[float]]:
-    mounts = {c.name: Pose(c.x_mm, c.y_mm, c.z_mm, c.rx_deg, c.ry_deg, c.rz_deg)
+    mounts = {c.name: Pose.of(c)
               for c in settings.cameras}
     errors: dict[str, list[float]] = {name: [] for name in clients}
     end = time.monotonic() + seconds
@@ -257,8 +257,7 @@ def _percentile(values: np.ndarray, q: float) -> float | None:
 
 
 def _true_pose(cam: PtzCameraSettings) -> m.CameraPose:
-    return m.CameraPose(measured_s=time.time(), camera=cam.name, x_mm=cam.x_mm, y_mm=cam.y_mm,
-                        z_mm=cam.z_mm, rx_deg=cam.rx_deg, ry_deg=cam.ry_deg, rz_deg=cam.rz_deg,
+    return m.CameraPose(measured_s=time.time(), camera=cam.name, **Pose.of(cam).fields(),
                         focal_mm=3.8, mean_error_px=0.0, passpoints=0)
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Protocol
 
 import numpy as np
 
@@ -74,6 +75,23 @@ def quaternion_wxyz(rotation: np.ndarray) -> tuple[float, float, float, float]:
     return tuple(float(c) for c in np.clip(quat, -1.0, 1.0))  # type: ignore[return-value]
 
 
+class PoseFields(Protocol):
+    """Anything that names a pose with the six fields (messages, settings)."""
+
+    @property
+    def x_mm(self) -> float: ...
+    @property
+    def y_mm(self) -> float: ...
+    @property
+    def z_mm(self) -> float: ...
+    @property
+    def rx_deg(self) -> float: ...
+    @property
+    def ry_deg(self) -> float: ...
+    @property
+    def rz_deg(self) -> float: ...
+
+
 @dataclass(frozen=True)
 class Pose:
     """T_world_camera: where a camera is (mm) and how it is turned (deg, R = Rx·Ry·Rz)."""
@@ -94,10 +112,15 @@ class Pose:
         return np.array([self.x_mm, self.y_mm, self.z_mm])
 
     @classmethod
-    def of(cls, fields: object) -> Pose:
-        """The pose named by an object's ``x_mm … rz_deg`` fields (a CameraPose message)."""
-        f = fields
-        return cls(f.x_mm, f.y_mm, f.z_mm, f.rx_deg, f.ry_deg, f.rz_deg)  # type: ignore[attr-defined]
+    def of(cls, f: PoseFields) -> Pose:
+        """The pose named by an object's ``x_mm … rz_deg`` fields (a CameraPose message, a sim
+        camera's settings)."""
+        return cls(f.x_mm, f.y_mm, f.z_mm, f.rx_deg, f.ry_deg, f.rz_deg)
+
+    def fields(self) -> dict[str, float]:
+        """``x_mm … rz_deg`` as keyword arguments (for a CameraPose message)."""
+        return {"x_mm": self.x_mm, "y_mm": self.y_mm, "z_mm": self.z_mm,
+                "rx_deg": self.rx_deg, "ry_deg": self.ry_deg, "rz_deg": self.rz_deg}
 
     @classmethod
     def from_matrix(cls, rotation: np.ndarray, position: np.ndarray) -> Pose:

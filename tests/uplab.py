@@ -20,10 +20,9 @@ def store_poses(data_dir: Path, version: int = 0) -> None:
     """The cameras' poses as a finished calibration leaves them on disk."""
     store = PoseStore(data_dir)
     for camera, mount in MOUNTS.items():
-        store.save(m.CameraPose(measured_s=time.time(), camera=camera, x_mm=mount.x_mm,
-                                y_mm=mount.y_mm, z_mm=mount.z_mm, rx_deg=mount.rx_deg,
-                                ry_deg=mount.ry_deg, rz_deg=mount.rz_deg, focal_mm=3.8,
-                                mean_error_px=1.5, passpoints=100, version=version),
+        store.save(m.CameraPose(measured_s=time.time(), camera=camera, **mount.fields(),
+                                focal_mm=3.8, mean_error_px=1.5, passpoints=100,
+                                version=version),
                    {"method": "stored"})
 
 

@@ -121,10 +121,9 @@ class BusFaults:
         mount = MOUNTS["ptz1"]
         start = time.monotonic()
         self.bus.publish(keys.CALIB_POSE, m.CameraPose(
-            measured_s=time.time(), camera="ptz1", x_mm=mount.x_mm, y_mm=mount.y_mm,
-            z_mm=mount.z_mm, rx_deg=mount.rx_deg, ry_deg=mount.ry_deg,
-            rz_deg=mount.rz_deg + 40.0, focal_mm=3.8, mean_error_px=0.5, passpoints=100,
-            version=held_version), camera="ptz1")
+            measured_s=time.time(), camera="ptz1",
+            **(mount.fields() | {"rz_deg": mount.rz_deg + 40.0}), focal_mm=3.8,
+            mean_error_px=0.5, passpoints=100, version=held_version), camera="ptz1")
 
         def answered() -> float | None:
             return next((t - start for t, p in list(self.meters.poses)

@@ -172,8 +172,7 @@ class Session:
             return
         mount = mount_pose(solution.pose, state.pan_deg, state.tilt_deg)
         pose = m.CameraPose(
-            measured_s=time.time(), camera=self.camera, x_mm=mount.x_mm, y_mm=mount.y_mm,
-            z_mm=mount.z_mm, rx_deg=mount.rx_deg, ry_deg=mount.ry_deg, rz_deg=mount.rz_deg,
+            measured_s=time.time(), camera=self.camera, **mount.fields(),
             focal_mm=solution.focal_mm, mean_error_px=solution.mean_error_px,
             passpoints=len(solution.inliers), time_offset_s=solution.time_offset_s or 0.0)
         report = solution.report() | {"pan_deg": state.pan_deg, "tilt_deg": state.tilt_deg,

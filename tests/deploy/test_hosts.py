@@ -18,6 +18,7 @@ import pytest
 from common import keys
 from common import messages as m
 from common.bus import Bus
+from common.camera import Pose
 from common.settings import BusSettings
 from services.gantry.crane import CraneError, ModbusCrane
 from services.sim.settings import SimSettings
@@ -131,8 +132,7 @@ def lab(tmp_path: Path, crater_file: Path) -> Iterator[dict]:
 def _publish_true_pose(calib: Bus) -> None:
     cam = SimSettings().cameras[0]
     calib.publish(keys.CALIB_POSE, m.CameraPose(
-        measured_s=time.time(), camera=cam.name, x_mm=cam.x_mm, y_mm=cam.y_mm, z_mm=cam.z_mm,
-        rx_deg=cam.rx_deg, ry_deg=cam.ry_deg, rz_deg=cam.rz_deg, focal_mm=3.8,
+        measured_s=time.time(), camera=cam.name, **Pose.of(cam).fields(), focal_mm=3.8,
         mean_error_px=0.5, passpoints=100), camera=cam.name)
 
 

@@ -22,9 +22,8 @@ from tests.calib.test_demo_calibration import MOUNTS
 
 def _pose(camera: str = "ptz1") -> m.CameraPose:
     mount = MOUNTS[camera]
-    return m.CameraPose(measured_s=1.0, camera=camera, x_mm=mount.x_mm, y_mm=mount.y_mm,
-                        z_mm=mount.z_mm, rx_deg=mount.rx_deg, ry_deg=mount.ry_deg,
-                        rz_deg=mount.rz_deg, focal_mm=3.8, mean_error_px=1.2, passpoints=90)
+    return m.CameraPose(measured_s=1.0, camera=camera, **mount.fields(), focal_mm=3.8,
+                        mean_error_px=1.2, passpoints=90)
 
 
 def _robot(t: float, x: float) -> m.RobotPosition:

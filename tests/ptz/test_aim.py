@@ -100,9 +100,8 @@ def test_the_aim_command_takes_a_negative_target_and_the_calib_services_pose_fil
 
     mount = Pose(3550.0, 1090.0, 2190.0, 180.0, 30.0, 165.0)
     stored = PoseStore(tmp_path).save(m.CameraPose(
-        measured_s=1.0, camera="ptz1", x_mm=mount.x_mm, y_mm=mount.y_mm, z_mm=mount.z_mm,
-        rx_deg=mount.rx_deg, ry_deg=mount.ry_deg, rz_deg=mount.rz_deg, focal_mm=3.8,
-        mean_error_px=0.5, passpoints=100), {"method": "auto"})
+        measured_s=1.0, camera="ptz1", **mount.fields(), focal_mm=3.8, mean_error_px=0.5,
+        passpoints=100), {"method": "auto"})
     solved = tmp_path / "solved.json"
     solved.write_text(json.dumps({"position_mm": [mount.x_mm, mount.y_mm, mount.z_mm],
                                   "orientation_deg": [mount.rx_deg, mount.ry_deg,
