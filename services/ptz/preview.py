@@ -18,6 +18,7 @@ import numpy as np
 from common import messages as m
 from common.camera import Intrinsics, Pose, focal_mm_for_zoom, head_pose, project
 from common.markers import detect, to_message
+from services.ptz.aim import predict
 from services.ptz.camera import PtzCamera, PtzError, decode_jpeg
 
 log = logging.getLogger(__name__)
@@ -30,9 +31,9 @@ def robot_pixel(mount: Pose | None, robot: m.RobotPosition | None, pan_deg: floa
     pose or a robot, or when it is behind the camera."""
     if mount is None or robot is None:
         return None
-    ahead = min(max(at_s - robot.measured_s, 0.0), 1.0)
-    xyz = np.array([robot.x_mm + robot.vx_mm_s * ahead, robot.y_mm + robot.vy_mm_s * ahead,
-                    robot.z_mm + robot.vz_mm_s * ahead])
+    xyz = predict(np.array([robot.x_mm, robot.y_mm, robot.z_mm]),
+                  np.array([robot.vx_mm_s, robot.vy_mm_s, robot.vz_mm_s]),
+                  at_s - robot.measured_s, max_ahead_s=1.0)
     intr = Intrinsics(focal_mm, width_px=width_px, height_px=height_px)
     u, v = project(xyz[None, :], head_pose(mount, pan_deg, tilt_deg), intr)[0]
     if not (np.isfinite(u) and np.isfinite(v)):

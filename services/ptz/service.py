@@ -17,24 +17,21 @@ import logging
 import threading
 import time
 
-import numpy as np
-
 from common import codec, keys
 from common import messages as m
-from common.camera import Pose, PtzLimits, focal_mm_for_zoom
+from common.camera import PtzLimits, focal_mm_for_zoom
 from common.markers import warm_up
 from common.node import Node
-from services.ptz.aim import aim_error_deg
 from services.ptz.calibration import CalibrationHold
 from services.ptz.camera import AxisPtzCamera, PtzCamera, PtzError, http_client
+from services.ptz.control import PtzControl
 from services.ptz.follow import Follower
 from services.ptz.override import ManualOverride
-from services.ptz.pointing import NOT_SEEN, PointingCheck
+from services.ptz.pointing import PointingCheck
 from services.ptz.preview import PreviewLoop
 from services.ptz.settings import PtzSettings
 
 log = logging.getLogger(__name__)
-RETRY_MAX_S = 5.0
 
 
 def make_camera(settings: PtzSettings) -> AxisPtzCamera:
@@ -63,7 +60,7 @@ def run(node: Node, camera: PtzCamera | None = None) -> None:
         preview = PreviewLoop(
             make_camera(settings), 1 / settings.preview_hz,  # its own client: never in the way
             loop.on_preview,
-            mount=lambda: _pose(loop.pose), robot=lambda: loop.robot,
+            mount=lambda: loop.control.pose, robot=lambda: loop.control.robot,
             paused=lambda: loop.calibration.active(time.time()), stop=node.stop,
             infrared_every_s=settings.pointing_infrared_s)
         preview.start()
@@ -76,22 +73,22 @@ def run(node: Node, camera: PtzCamera | None = None) -> None:
 
 class _Loop:
     """Commands go out as robot samples arrive (no polling delay); camera state is queried
-    and published ``state_hz`` times a second. One lock serialises the commands and guards the
-    loop's state; it is not held while the state query waits for the camera."""
+    and published ``state_hz`` times a second. The rules are ``PtzControl``'s
+    (services/ptz/control.py); one lock serialises the commands and guards it; it is not held
+    while the state query waits for the camera."""
 
     def __init__(self, node: Node, settings: PtzSettings, camera: PtzCamera,
                  queries: PtzCamera) -> None:
         self.node, self.settings, self.camera, self.queries = node, settings, camera, queries
-        self.follower = Follower(deadband_deg=settings.deadband_deg,
-                                 latency_s=settings.latency_s,
-                                 min_interval_s=1 / settings.command_hz, zoom=settings.zoom,
-                                 target_size_mm=settings.target_size_mm,
-                                 image_fraction=settings.image_fraction)
+        self.control = PtzControl(
+            Follower(deadband_deg=settings.deadband_deg, latency_s=settings.latency_s,
+                     min_interval_s=1 / settings.command_hz, zoom=settings.zoom,
+                     target_size_mm=settings.target_size_mm,
+                     image_fraction=settings.image_fraction),
+            ManualOverride(settings.manual_deg, settings.manual_pause_s),
+            PointingCheck(settings.pointing_tolerance_deg, settings.pointing_persist),
+            name=camera.name, max_future_s=settings.bus.max_future_s)
         self.lock = threading.Lock()
-        self.pose: m.CameraPose | None = None
-        self.robot: m.RobotPosition | None = None
-        self.limits: PtzLimits | None = None
-        self.retry_at, self.retry_s = 0.0, 0.5
         name = settings.instance
         self.calibration = CalibrationHold(
             camera,
@@ -99,58 +96,44 @@ class _Loop:
             lambda msg: node.bus.publish(keys.PTZ_SNAPSHOT, msg, camera=name),
             max_markers=settings.calibration_max_markers)
         self.state_due = 0.0
-        self.pointing = PointingCheck(settings.pointing_tolerance_deg, settings.pointing_persist)
-        self.override = ManualOverride(settings.manual_deg, settings.manual_pause_s)
-        self.manual = False  # following paused for someone else's move
 
     def on_preview(self, preview: m.PtzPreview, focal_mm: float, infrared: bool) -> None:
         """Publish it, and judge from it how well the camera points (services/ptz/pointing)."""
         self.node.bus.publish(keys.PTZ_PREVIEW, preview, camera=self.settings.instance)
         with self.lock:
-            self.pointing.observe(preview, focal_mm, infrared)
+            self.control.pointing.observe(preview, focal_mm, infrared)
 
     def on_pose(self, msg: m.CameraPose) -> None:
-        ahead_s = msg.measured_s - time.time()
-        if ahead_s > self.settings.bus.max_future_s:  # one such pose used to win for good
-            key = keys.CALIB_POSE.key(self.node.bus.prefix, camera=msg.camera)
-            self.node.bus.count_drop(key, codec.FROM_FUTURE, f"pose measured {ahead_s:.0f} s "
-                                     "in the future: refused")
-            return
+        now = time.time()
         with self.lock:
-            # newer: a higher version from the calibration service, or the same one measured
-            # later (the calibration service out-versions a pose on its key it did not send)
-            if self.pose is None or _order(msg) >= _order(self.pose):
-                log.info("camera pose received (fit error %.2f px)", msg.mean_error_px)
-                if msg != self.pose:
-                    self.pointing.forget()
-                self.pose = msg
+            taken = self.control.take_pose(msg, now)
+        if taken == "future":
+            key = keys.CALIB_POSE.key(self.node.bus.prefix, camera=msg.camera)
+            self.node.bus.count_drop(key, codec.FROM_FUTURE, f"pose measured "
+                                     f"{msg.measured_s - now:.0f} s in the future: refused")
+        elif taken == "taken":
+            log.info("camera pose received (fit error %.2f px)", msg.mean_error_px)
 
     def on_calibration(self, msg: m.CalibrationMode) -> None:
         with self.lock:
             now = time.time()
             try:
-                self.calibration.on_request(msg, now, self.limits or PtzLimits())
+                self.calibration.on_request(msg, now, self.control.limits or PtzLimits())
             except PtzError as err:
                 self._unreachable(now, err)
             if not self.calibration.active(now):
-                self.follower.forget()
+                self.control.calibration_left()
 
     def on_robot(self, msg: m.RobotPosition) -> None:
         with self.lock:
-            self.robot = msg
-            pose = _pose(self.pose)
             now = time.time()
-            if (pose is None or self.limits is None or now < self.retry_at
-                    or self.calibration.active(now) or self.override.paused(now)):
-                return
-            command = self.follower.command(now, _xyz(msg), _velocity(msg), msg.measured_s,
-                                            pose)
+            command = self.control.command(msg, now, self.calibration.active(now))
             if command is None:
                 return
             try:
                 self.camera.move_to(command.pan_deg, command.tilt_deg, command.zoom,
                                     self.settings.speed, measured_s=command.measured_s)
-                self.override.commanded(now, command.pan_deg, command.tilt_deg)
+                self.control.commanded(now, command)
             except PtzError as err:
                 self._unreachable(now, err)
 
@@ -161,7 +144,7 @@ class _Loop:
         while not self.node.stop.wait(period):
             now = time.time()
             with self.lock:
-                if now < self.retry_at:
+                if not self.control.may_try(now):
                     continue
             try:
                 with self.lock:
@@ -170,7 +153,7 @@ class _Loop:
                     self.state_due = now + state_period
                     self._report(now)
                 with self.lock:
-                    self.retry_s = 0.5
+                    self.control.answered()
             except PtzError as err:
                 with self.lock:
                     self._unreachable(now, err)
@@ -184,55 +167,25 @@ class _Loop:
             return False
         if not self.calibration.active(now):
             self.calibration.leave()
-            self.follower.forget()
+            self.control.calibration_left()
             return False
         self.calibration.cycle()
         return True
 
     def _report(self, now: float) -> None:
         """Query the camera (without the lock) and publish its state."""
-        if self.limits is None:
+        if self.control.limits is None:
             limits = self.queries.limits()
             with self.lock:
-                self.limits = self.follower.limits = limits
+                self.control.camera_limits(limits)
             log.info("camera %s limits: %s", self.camera.name, limits)
         position = self.queries.position()
         with self.lock:
-            pose, robot = _pose(self.pose), self.robot
-            calibrating = self.calibration.active(now)
-            pointing_error, problem = self.pointing.error_deg, self.pointing.problem() or ""
-            manual = self._watch_hands(now, position.pan_deg, position.tilt_deg, calibrating)
-        status = "waiting_for_pose" if pose is None else ("tracking" if robot else "idle")
-        if calibrating:
-            status = "calibrating"
-        elif manual:
-            status = "manual"
-        if pose is None:
-            self.node.set_status("degraded", "waiting for a camera pose from calib")
-        else:
-            self.node.set_status("degraded" if problem else "ok", problem)
-        error = 0.0
-        if pose is not None and robot is not None:
-            error = aim_error_deg(_xyz(robot), pose, position.pan_deg, position.tilt_deg)
-        self._publish(status, position.pan_deg, position.tilt_deg, position.zoom, error, now,
-                      pointing_error if pointing_error != NOT_SEEN else None, problem)
-
-    def _watch_hands(self, now: float, pan: float, tilt: float, calibrating: bool) -> bool:
-        """Whether following is paused for someone else's move (``self.lock`` held)."""
-        if calibrating:  # calibration mode moves the camera itself; nothing to compare with
-            self.override.forget()
-            self.manual = False
-            return False
-        if self.override.observe(now, pan, tilt) and not self.manual:
-            log.warning("%s: moved by someone else (now pan %.1f°, tilt %.1f°): following "
-                        "paused for %g s", self.camera.name, pan, tilt,
-                        self.settings.manual_pause_s)
-        paused = self.override.paused(now)
-        if self.manual and not paused:
-            log.info("%s: following again after a manual move", self.camera.name)
-            self.follower.forget()  # the next sample sends a fresh command
-        self.manual = paused
-        return paused
+            state = self.control.status(now, position.pan_deg, position.tilt_deg,
+                                        self.calibration.active(now))
+        self.node.set_status(state.health, state.health_why)
+        self._publish(state.status, position.pan_deg, position.tilt_deg, position.zoom,
+                      state.aim_error_deg, now, state.pointing_error_deg, state.problem)
 
     def _publish(self, status: str, pan: float, tilt: float, zoom: int, error: float,
                  now: float, pointing_error: float | None = None, problem: str = "") -> None:
@@ -245,24 +198,5 @@ class _Loop:
 
     def _unreachable(self, now: float, err: PtzError) -> None:
         self.node.set_status("degraded", str(err))
-        self.retry_at, self.retry_s = now + self.retry_s, min(self.retry_s * 2, RETRY_MAX_S)
-        self.limits = None  # ask again: the camera may have been replaced or reconfigured
+        self.control.failed(now)
         self._publish("camera_unreachable", 0.0, 0.0, 1, 0.0, now)
-
-
-def _order(pose: m.CameraPose) -> tuple[int, float]:
-    return pose.version, pose.measured_s
-
-
-def _pose(msg: m.CameraPose | None) -> Pose | None:
-    if msg is None:
-        return None
-    return Pose.of(msg)
-
-
-def _xyz(robot: m.RobotPosition) -> np.ndarray:
-    return np.array([robot.x_mm, robot.y_mm, robot.z_mm])
-
-
-def _velocity(robot: m.RobotPosition) -> np.ndarray:
-    return np.array([robot.vx_mm_s, robot.vy_mm_s, robot.vz_mm_s])

@@ -1,0 +1,151 @@
+"""What a PTZ service decides, without I/O or a clock of its own (pure).
+
+Which camera pose holds (the highest version from the calibration service, or the same one
+measured later; never one measured in the future), whether a robot sample moves the camera
+(a pose and the camera's limits known, the camera not failing, not held for calibration, not
+in someone else's hands) and where to, how long to wait after the camera failed (doubling up
+to ``RETRY_MAX_S``), and what the camera's status is. ``services/ptz/service.py`` wires it to
+the bus and the camera; calibration mode (``calibration.py``) and previews (``preview.py``)
+are drivers beside it.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from common import messages as m
+from common.camera import Pose, PtzLimits
+from services.ptz.aim import aim_error_deg
+from services.ptz.follow import Command, Follower
+from services.ptz.override import ManualOverride
+from services.ptz.pointing import NOT_SEEN, PointingCheck
+
+log = logging.getLogger(__name__)
+RETRY_FIRST_S = 0.5
+RETRY_MAX_S = 5.0
+
+
+@dataclass(frozen=True)
+class Status:
+    """The camera's state as published: status, aim error and the pointing check."""
+
+    status: str  # waiting_for_pose, idle, tracking, calibrating, manual
+    aim_error_deg: float
+    pointing_error_deg: float | None
+    problem: str  # "" when the pointing check is content
+    health: str  # ok or degraded
+    health_why: str
+
+
+@dataclass
+class PtzControl:
+    follower: Follower
+    override: ManualOverride
+    pointing: PointingCheck
+    name: str = "ptz"
+    max_future_s: float = 1.0
+    pose_msg: m.CameraPose | None = None
+    pose: Pose | None = None  # converted once, when it arrives (robot samples come at 1 kHz)
+    robot: m.RobotPosition | None = None
+    limits: PtzLimits | None = None
+    retry_at: float = 0.0
+    retry_s: float = RETRY_FIRST_S
+    manual: bool = False  # following paused for someone else's move
+
+    # --- what comes in ----------------------------------------------------------------------
+
+    def take_pose(self, msg: m.CameraPose, now: float) -> str:
+        """"taken", "kept" (an older one: ours stays) or "future" (refused: one such pose
+        used to win for good)."""
+        if msg.measured_s - now > self.max_future_s:
+            return "future"
+        if self.pose_msg is not None and _order(msg) < _order(self.pose_msg):
+            return "kept"
+        if msg != self.pose_msg:
+            self.pointing.forget()
+        self.pose_msg, self.pose = msg, Pose.of(msg)
+        return "taken"
+
+    def command(self, msg: m.RobotPosition, now: float, calibrating: bool) -> Command | None:
+        """The move this robot sample asks for, or None."""
+        self.robot = msg
+        if (self.pose is None or self.limits is None or now < self.retry_at or calibrating
+                or self.override.paused(now)):
+            return None
+        return self.follower.command(now, _xyz(msg), _velocity(msg), msg.measured_s, self.pose)
+
+    def commanded(self, now: float, command: Command) -> None:
+        """The camera took the command."""
+        self.override.commanded(now, command.pan_deg, command.tilt_deg)
+
+    def camera_limits(self, limits: PtzLimits) -> None:
+        self.limits = self.follower.limits = limits
+
+    # --- the camera's health ------------------------------------------------------------------
+
+    def may_try(self, now: float) -> bool:
+        return now >= self.retry_at
+
+    def failed(self, now: float) -> None:
+        """The camera failed: wait, twice as long each time in a row; ask its limits again
+        (it may have been replaced or reconfigured)."""
+        self.retry_at, self.retry_s = now + self.retry_s, min(self.retry_s * 2, RETRY_MAX_S)
+        self.limits = None
+
+    def answered(self) -> None:
+        self.retry_s = RETRY_FIRST_S
+
+    def calibration_left(self) -> None:
+        """Calibration mode moved the camera: the next sample sends a fresh command."""
+        self.follower.forget()
+
+    # --- what goes out --------------------------------------------------------------------
+
+    def status(self, now: float, pan_deg: float, tilt_deg: float, calibrating: bool) -> Status:
+        """The status from where the camera is now (this also watches for someone else's
+        hand on it)."""
+        manual = self._watch_hands(now, pan_deg, tilt_deg, calibrating)
+        problem = self.pointing.problem() or ""
+        pointing = self.pointing.error_deg
+        status = ("calibrating" if calibrating else "manual" if manual
+                  else "waiting_for_pose" if self.pose is None
+                  else "tracking" if self.robot else "idle")
+        if self.pose is None:
+            health, why = "degraded", "waiting for a camera pose from calib"
+        else:
+            health, why = ("degraded", problem) if problem else ("ok", "")
+        error = 0.0
+        if self.pose is not None and self.robot is not None:
+            error = aim_error_deg(_xyz(self.robot), self.pose, pan_deg, tilt_deg)
+        return Status(status, error, pointing if pointing != NOT_SEEN else None, problem,
+                      health, why)
+
+    def _watch_hands(self, now: float, pan: float, tilt: float, calibrating: bool) -> bool:
+        if calibrating:  # calibration mode moves the camera itself; nothing to compare with
+            self.override.forget()
+            self.manual = False
+            return False
+        if self.override.observe(now, pan, tilt) and not self.manual:
+            log.warning("%s: moved by someone else (now pan %.1f°, tilt %.1f°): following "
+                        "paused for %g s", self.name, pan, tilt, self.override.pause_s)
+        paused = self.override.paused(now)
+        if self.manual and not paused:
+            log.info("%s: following again after a manual move", self.name)
+            self.follower.forget()  # the next sample sends a fresh command
+        self.manual = paused
+        return paused
+
+
+def _order(pose: m.CameraPose) -> tuple[int, float]:
+    return pose.version, pose.measured_s
+
+
+def _xyz(robot: m.RobotPosition) -> np.ndarray:
+    return np.array([robot.x_mm, robot.y_mm, robot.z_mm])
+
+
+def _velocity(robot: m.RobotPosition) -> np.ndarray:
+    return np.array([robot.vx_mm_s, robot.vy_mm_s, robot.vz_mm_s])

@@ -1,0 +1,124 @@
+"""The PTZ service's rules without a camera or a bus (services/ptz/control.py)."""
+
+from __future__ import annotations
+
+import pytest
+
+from common import messages as m
+from common.camera import Pose, PtzLimits
+from services.ptz.control import RETRY_FIRST_S, RETRY_MAX_S, PtzControl
+from services.ptz.follow import Follower
+from services.ptz.override import ManualOverride
+from services.ptz.pointing import PointingCheck
+
+MOUNT = Pose(3550.0, 1090.0, 2190.0, 180.0, 30.0, 165.0)
+
+
+def _control() -> PtzControl:
+    return PtzControl(Follower(min_interval_s=0.1), ManualOverride(5.0, 30.0),
+                      PointingCheck(3.0, 2), max_future_s=1.0)
+
+
+def _pose(measured_s: float = 100.0, version: int = 1, rz_deg: float = 165.0) -> m.CameraPose:
+    return m.CameraPose(measured_s=measured_s, camera="ptz1",
+                        **(MOUNT.fields() | {"rz_deg": rz_deg}), focal_mm=3.8,
+                        mean_error_px=0.5, passpoints=100, version=version)
+
+
+def _robot(t: float, x: float = 0.0) -> m.RobotPosition:
+    return m.RobotPosition(measured_s=t, label="robot", x_mm=x, y_mm=-900.0, z_mm=80.0,
+                           vx_mm_s=0.0, vy_mm_s=0.0, vz_mm_s=0.0)
+
+
+def _following(now: float = 200.0) -> PtzControl:
+    control = _control()
+    assert control.take_pose(_pose(), now) == "taken"
+    control.camera_limits(PtzLimits())
+    return control
+
+
+def test_a_pose_from_the_future_is_refused_an_older_one_kept_a_newer_one_taken() -> None:
+    control = _control()
+    assert control.take_pose(_pose(measured_s=300.0), now=200.0) == "future"
+    assert control.pose is None
+    assert control.take_pose(_pose(measured_s=100.0, version=2), now=200.0) == "taken"
+    assert control.take_pose(_pose(measured_s=150.0, version=1), now=200.0) == "kept"
+    assert control.take_pose(_pose(measured_s=120.0, version=2, rz_deg=160.0), 200.0) == "taken"
+    assert control.pose == Pose.of(control.pose_msg) and control.pose.rz_deg == 160.0
+    assert control.take_pose(_pose(measured_s=90.0, version=3), now=200.0) == "taken"
+
+
+def test_a_new_pose_clears_the_pointing_check_the_same_one_does_not() -> None:
+    control = _following()
+    control.pointing.error_deg = 40.0
+    control.take_pose(_pose(), 200.0)
+    assert control.pointing.error_deg == 40.0
+    control.take_pose(_pose(measured_s=101.0), 200.0)
+    assert control.pointing.error_deg is None
+
+
+def test_no_command_without_a_pose_or_limits_while_failing_or_calibrating() -> None:
+    control = _control()
+    assert control.command(_robot(200.0), 200.0, calibrating=False) is None  # no pose
+    control.take_pose(_pose(), 200.0)
+    assert control.command(_robot(200.0), 200.0, calibrating=False) is None  # no limits
+    control.camera_limits(PtzLimits())
+    assert control.command(_robot(200.0), 200.0, calibrating=True) is None
+    control.failed(200.0)
+    assert control.limits is None, "asked again after a failure"
+    control.camera_limits(PtzLimits())
+    assert control.command(_robot(200.2), 200.2, calibrating=False) is None  # waiting
+    command = control.command(_robot(200.6), 200.6, calibrating=False)
+    assert command is not None and command.measured_s == 200.6
+
+
+def test_commands_follow_the_robot_at_most_command_hz() -> None:
+    control = _following()
+    first = control.command(_robot(200.0, x=0.0), 200.0, calibrating=False)
+    assert first is not None
+    control.commanded(200.0, first)
+    assert control.command(_robot(200.05, x=300.0), 200.05, calibrating=False) is None
+    second = control.command(_robot(200.15, x=300.0), 200.15, calibrating=False)
+    assert second is not None and second.pan_deg != pytest.approx(first.pan_deg, abs=0.5)
+
+
+def test_the_wait_after_failures_doubles_up_to_the_limit_and_resets_on_an_answer() -> None:
+    control, now, waits = _following(), 0.0, []
+    for _ in range(6):
+        control.failed(now)
+        waits.append(round(control.retry_at - now, 3))
+        assert not control.may_try(now) and control.may_try(control.retry_at)
+        now = control.retry_at
+    assert waits == [0.5, 1.0, 2.0, 4.0, RETRY_MAX_S, RETRY_MAX_S]
+    control.answered()
+    assert control.retry_s == RETRY_FIRST_S
+
+
+def test_the_status_of_each_state() -> None:
+    control = _control()
+    state = control.status(200.0, 0.0, 0.0, calibrating=False)
+    assert (state.status, state.health) == ("waiting_for_pose", "degraded")
+    assert "pose" in state.health_why
+    control.take_pose(_pose(), 200.0)
+    control.camera_limits(PtzLimits())
+    assert control.status(200.5, 0.0, 0.0, calibrating=False).status == "idle"
+    control.command(_robot(201.0), 201.0, calibrating=False)
+    tracking = control.status(201.0, 0.0, 0.0, calibrating=False)
+    assert (tracking.status, tracking.health) == ("tracking", "ok")
+    assert tracking.aim_error_deg > 1.0  # the camera at (0, 0) does not look at the robot
+    assert control.status(201.5, 0.0, 0.0, calibrating=True).status == "calibrating"
+
+
+def test_someone_elses_move_pauses_following_and_says_manual() -> None:
+    control = _following()
+    control.status(199.9, 0.0, 0.0, calibrating=False)  # where it was seen before
+    command = control.command(_robot(200.0), 200.0, calibrating=False)
+    assert command is not None
+    control.commanded(200.0, command)
+    control.status(200.2, command.pan_deg, command.tilt_deg, calibrating=False)
+    moved = control.status(200.5, command.pan_deg + 40.0, command.tilt_deg, calibrating=False)
+    assert moved.status == "manual" and control.manual
+    assert control.command(_robot(201.0, x=500.0), 201.0, calibrating=False) is None
+    back = control.status(231.0, command.pan_deg + 40.0, command.tilt_deg, calibrating=False)
+    assert back.status == "tracking" and not control.manual
+    assert control.command(_robot(231.0, x=500.0), 231.0, calibrating=False) is not None

@@ -1,0 +1,72 @@
+"""The follower's rules and where a preview puts the robot (pure parts of the PTZ service)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from common import messages as m
+from common.camera import Intrinsics, Pose, PtzLimits, head_pose, project
+from common.volume import Volume
+from services.ptz.aim import aim_at, predict
+from services.ptz.follow import Follower
+from services.ptz.preview import robot_pixel
+
+MOUNT = Pose(3550.0, 1090.0, 2190.0, 180.0, 30.0, 165.0)
+ROBOT = np.array([0.0, -900.0, 80.0])
+STILL = np.zeros(3)
+
+
+def test_the_follower_aims_where_the_robot_will_be_after_the_cameras_latency() -> None:
+    follower = Follower(latency_s=0.25, min_interval_s=0.1)
+    velocity = np.array([290.0, 0.0, 0.0])
+    command = follower.command(100.05, ROBOT, velocity, 100.0, MOUNT)
+    assert command is not None and command.measured_s == 100.0
+    ahead = predict(ROBOT, velocity, 0.05 + 0.25, max_ahead_s=1.0)
+    assert (command.pan_deg, command.tilt_deg) == pytest.approx(aim_at(ahead, MOUNT))
+
+
+def test_the_follower_keeps_quiet_within_its_dead_band_its_rate_and_outside_its_volume() -> None:
+    follower = Follower(deadband_deg=0.3, min_interval_s=0.1, volume=Volume(x_max_mm=3000.0),
+                        max_age_s=1.0)
+    assert follower.command(100.0, ROBOT, STILL, 100.0, MOUNT) is not None
+    assert follower.command(100.05, ROBOT + [500, 0, 0], STILL, 100.05, MOUNT) is None  # rate
+    assert follower.command(100.2, ROBOT + [1, 0, 0], STILL, 100.2, MOUNT) is None  # dead band
+    assert follower.command(100.4, np.array([4000.0, 0, 80]), STILL, 100.4, MOUNT) is None
+    assert follower.command(102.0, ROBOT + [500, 0, 0], STILL, 100.6, MOUNT) is None  # stale
+    assert follower.command(102.1, ROBOT + [500, 0, 0], STILL, 102.1, MOUNT) is not None
+    follower.forget()
+    assert follower.command(102.15, ROBOT + [500, 0, 0], STILL, 102.15, MOUNT) is not None
+
+
+def test_the_follower_stays_within_the_cameras_limits() -> None:
+    follower = Follower(limits=PtzLimits(min_pan=-10.0, max_pan=10.0))
+    command = follower.command(100.0, np.array([-3000.0, 2500.0, 80.0]), STILL, 100.0, MOUNT)
+    assert command is not None and -10.0 <= command.pan_deg <= 10.0
+
+
+def _robot(at_s: float, velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+           ) -> m.RobotPosition:
+    return m.RobotPosition(measured_s=at_s, label="robot", x_mm=ROBOT[0], y_mm=ROBOT[1],
+                           z_mm=ROBOT[2], vx_mm_s=velocity[0], vy_mm_s=velocity[1],
+                           vz_mm_s=velocity[2])
+
+
+def test_a_preview_puts_the_robot_where_it_will_be_when_the_picture_is_taken() -> None:
+    pan, tilt = aim_at(ROBOT, MOUNT)
+    robot = _robot(100.0, (290.0, 0.0, 0.0))
+    found = robot_pixel(MOUNT, robot, pan, tilt, 3.8, 704, 576, at_s=100.5)
+    expected = project((ROBOT + [145.0, 0.0, 0.0])[None, :], head_pose(MOUNT, pan, tilt),
+                       Intrinsics(3.8, width_px=704, height_px=576))[0]
+    assert found == pytest.approx(expected.tolist(), abs=0.06)  # rounded to 0.1 px
+    capped = robot_pixel(MOUNT, robot, pan, tilt, 3.8, 704, 576, at_s=160.0)
+    assert capped == robot_pixel(MOUNT, robot, pan, tilt, 3.8, 704, 576, at_s=101.0)
+    centre = robot_pixel(MOUNT, _robot(100.0), pan, tilt, 3.8, 704, 576, at_s=100.0)
+    assert centre == pytest.approx([352.0, 288.0], abs=0.2)  # aimed at it: the image centre
+
+
+def test_no_robot_pixel_without_a_pose_a_robot_or_with_the_robot_behind_the_camera() -> None:
+    assert robot_pixel(None, _robot(1.0), 0.0, 0.0, 3.8, 704, 576, 1.0) is None
+    assert robot_pixel(MOUNT, None, 0.0, 0.0, 3.8, 704, 576, 1.0) is None
+    pan, tilt = aim_at(ROBOT, MOUNT)
+    assert robot_pixel(MOUNT, _robot(1.0), pan + 180.0, tilt, 3.8, 704, 576, 1.0) is None
