@@ -15,6 +15,7 @@ import threading
 import time
 from collections.abc import Callable
 from types import FrameType
+from typing import Generic, TypeVar
 
 from common import keys
 from common.bus import Bus, BusUnreachable, open_session
@@ -33,10 +34,14 @@ class StartupError(RuntimeError):
     """A service cannot start (a port in use, a device that does not answer, a bad file)."""
 
 
-class Node:
-    """A running service as its own code sees it: the bus, a stop event and a status."""
+S = TypeVar("S", bound=ServiceSettings)
 
-    def __init__(self, service: str, settings: ServiceSettings, bus: Bus) -> None:
+
+class Node(Generic[S]):
+    """A running service as its own code sees it: its settings, the bus, a stop event and a
+    status."""
+
+    def __init__(self, service: str, settings: S, bus: Bus) -> None:
         self.service = service
         self.settings = settings
         self.bus = bus

@@ -4,6 +4,11 @@ Precedence, lowest first: defaults < the lab file (``[bus]`` for everyone, then 
 ``[<section>]`` table) < environment (``STB_BUS__<FIELD>`` for everyone, then
 ``STB_<SECTION>__<FIELD>``; nested fields with ``__``; lists and tables as JSON) < command-line
 overrides. With no configuration at all a service runs against the simulator on loopback.
+
+Settings are plain pydantic models and ``load_settings`` is their loader: pydantic-settings'
+sources take one environment prefix per model and read a TOML file whole, while this
+precedence merges the shared ``[bus]`` table and ``STB_BUS__*`` into every service's settings
+beside its own section; sources of our own for that would be longer than the loader.
 """
 
 from __future__ import annotations
@@ -25,7 +30,6 @@ from pydantic import (
     field_validator,
     model_validator,
 )
-from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from common.errors import ConfigError
 from common.keys import DEFAULT_PREFIX, check_prefix
@@ -122,10 +126,10 @@ class BusSettings(_Strict):
         return check_prefix(prefix)
 
 
-class ServiceSettings(BaseSettings):
+class ServiceSettings(BaseModel):
     """Base of every service's settings; subclasses set ``section`` and add their fields."""
 
-    model_config = SettingsConfigDict(extra="forbid", frozen=True, validate_default=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
     section: ClassVar[str] = "service"
 
     instance: str = Field("main", pattern=r"^[A-Za-z0-9_.-]{1,64}$")
@@ -139,12 +143,6 @@ class ServiceSettings(BaseSettings):
     def zenoh_settings(self) -> ZenohSettings:
         """How this service joins the bus (the router overrides this)."""
         return self.bus.zenoh
-
-    @classmethod
-    def settings_customise_sources(cls, settings_cls, init_settings, **_ignored):  # type: ignore[no-untyped-def]
-        # Environment and files are merged by load_settings() in a documented order;
-        # constructing with keywords (tests) reads nothing else.
-        return (init_settings,)
 
 
 def load_settings(

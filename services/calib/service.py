@@ -195,7 +195,7 @@ def _rotation_gap_deg(a: m.CameraPose, b: m.CameraPose) -> float:
                for f in ("rx_deg", "ry_deg", "rz_deg"))
 
 
-def run(node: Node) -> None:
-    settings: CalibSettings = node.settings  # type: ignore[assignment]
+def run(node: Node[CalibSettings]) -> None:
+    settings = node.settings
     Calib(node, settings, PoseStore(settings.data_dir)).start()
     node.stop.wait()

@@ -23,8 +23,8 @@ from services.camera.settings import CameraSettings
 log = logging.getLogger(__name__)
 
 
-def run(node: Node) -> None:
-    s: CameraSettings = node.settings  # type: ignore[assignment]
+def run(node: Node[CameraSettings]) -> None:
+    s = node.settings
     publisher = FramePublisher(node, s)
     reader = threading.Thread(target=capture, args=(s.source, node.stop, publisher.publish),
                               name="camera", daemon=True)

@@ -40,8 +40,8 @@ from services.gantry.settings import GantrySettings
 log = logging.getLogger(__name__)
 
 
-def run(node: Node) -> None:
-    s: GantrySettings = node.settings  # type: ignore[assignment]
+def run(node: Node[GantrySettings]) -> None:
+    s = node.settings
     try:
         heights = HeightMap.load(s.height_map)
     except ValueError as err:

@@ -41,8 +41,8 @@ def make_camera(settings: PtzSettings) -> AxisPtzCamera:
     return AxisPtzCamera(client, settings.instance)
 
 
-def run(node: Node, camera: PtzCamera | None = None) -> None:
-    settings: PtzSettings = node.settings  # type: ignore[assignment]
+def run(node: Node[PtzSettings], camera: PtzCamera | None = None) -> None:
+    settings = node.settings
     log.info("detector ready (%.1f s)", warm_up())  # previews and calibration mode detect
     # Position queries have a client of their own, like previews: a query in flight never
     # holds up a move command (that client is the injected camera's in tests).

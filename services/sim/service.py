@@ -34,8 +34,8 @@ from services.sim.settings import SimSettings
 log = logging.getLogger(__name__)
 
 
-def run(node: Node) -> None:
-    settings: SimSettings = node.settings  # type: ignore[assignment]
+def run(node: Node[SimSettings]) -> None:
+    settings = node.settings
     lab = Lab.build(settings)
     clock = Clock()
     qtm = QtmProcess(settings, clock)

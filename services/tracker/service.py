@@ -33,8 +33,8 @@ def make_picker(settings: TrackerSettings) -> RobotPicker:
                        velocity_window_s=settings.velocity_window_s)
 
 
-def run(node: Node, mocap: MotionCapture | None = None) -> None:
-    settings: TrackerSettings = node.settings  # type: ignore[assignment]
+def run(node: Node[TrackerSettings], mocap: MotionCapture | None = None) -> None:
+    settings = node.settings
     mocap = mocap or make_mocap(settings)
     picker = make_picker(settings)
 

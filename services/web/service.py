@@ -20,8 +20,8 @@ TOPICS = (keys.TRACKER_ROBOT, keys.CALIB_PROGRESS, keys.GANTRY_STATE, keys.GANTR
           keys.GANTRY_OFFLOAD, keys.PTZ_STATE, keys.PTZ_PREVIEW, keys.TRUTH_ROBOT)
 
 
-def run(node: Node) -> None:
-    settings: WebSettings = node.settings  # type: ignore[assignment]
+def run(node: Node[WebSettings]) -> None:
+    settings = node.settings
     state = LiveState(track_s=settings.track_s)
     lock = threading.Lock()
 
