@@ -14,6 +14,8 @@ from typing import Protocol
 
 import numpy as np
 
+from common.volume import Box
+
 AXIS_215_FOCAL_MM = (3.8, 46.0)
 AXIS_215_ZOOM_STEPS = (1, 9999)
 
@@ -250,6 +252,7 @@ class PtzLimits:
     max_zoom: int = 9999
 
     def clamp(self, pan: float, tilt: float, zoom: float) -> tuple[float, float, float]:
-        return (min(max(pan, self.min_pan), self.max_pan),
-                min(max(tilt, self.min_tilt), self.max_tilt),
-                min(max(zoom, self.min_zoom), self.max_zoom))
+        pan, tilt, zoom = Box((self.min_pan, self.min_tilt, self.min_zoom),
+                              (self.max_pan, self.max_tilt, self.max_zoom)).clamp(
+            (pan, tilt, zoom))
+        return pan, tilt, zoom

@@ -13,11 +13,13 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from common.crane_registers import FAULT_CLAMPED
+from common.volume import Box
 
 if TYPE_CHECKING:  # the reading's type only: this module stays free of the Modbus driver
     from services.gantry.crane import CraneReading
@@ -31,13 +33,17 @@ class Workspace:
     y_max_mm: float = 3000.0
     margin_mm: float = 50.0
 
+    @cached_property
+    def box(self) -> Box:
+        """Where setpoints may go: the workspace less its margin."""
+        return Box((self.x_min_mm, self.y_min_mm), (self.x_max_mm, self.y_max_mm)).shrunk(
+            self.margin_mm)
+
     def clamp(self, xy: np.ndarray) -> np.ndarray:
-        low = np.array([self.x_min_mm, self.y_min_mm]) + self.margin_mm
-        high = np.array([self.x_max_mm, self.y_max_mm]) - self.margin_mm
-        return np.clip(xy, low, high)
+        return np.array(self.box.clamp(xy))
 
     def contains(self, xy: np.ndarray) -> bool:
-        return bool(np.all(self.clamp(xy) == xy))
+        return self.box.contains(xy)
 
 
 @dataclass(frozen=True)

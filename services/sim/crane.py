@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -39,6 +40,7 @@ from common.crane_registers import (  # noqa: F401 - its users import the bits f
     MOVING,
     SAFETY_OK,
 )
+from common.volume import Box
 
 STEP_S = 0.005
 HISTORY_S = 2.0
@@ -69,9 +71,12 @@ class CraneParams:
         cycle until it is sampled, the dead time, the position loop's lag on a ramp."""
         return 0.5 * self.cycle_s + self.dead_time_s + self.position_time_constant_s
 
+    @cached_property
+    def travel(self) -> Box:
+        return Box((self.x_min_mm, self.y_min_mm), (self.x_max_mm, self.y_max_mm))
+
     def clamp(self, x_mm: float, y_mm: float) -> tuple[float, float, bool]:
-        cx = min(max(x_mm, self.x_min_mm), self.x_max_mm)
-        cy = min(max(y_mm, self.y_min_mm), self.y_max_mm)
+        cx, cy = self.travel.clamp((x_mm, y_mm))
         return cx, cy, (cx, cy) != (x_mm, y_mm)
 
 

@@ -106,3 +106,4 @@ def test_velocity_at_qtms_full_rate_with_an_occlusion(rng: np.random.Generator) 
         if n == 1400:  # back: bridged over the occlusion with the last three samples
             np.testing.assert_allclose(out[1], [290.0, 0.0, 0.0], atol=40.0)
     np.testing.assert_allclose(out[1], [290.0, 0.0, 0.0], atol=25.0)
+
