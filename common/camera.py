@@ -77,8 +77,8 @@ def quaternion_wxyz(rotation: np.ndarray) -> tuple[float, float, float, float]:
     return tuple(float(c) for c in np.clip(quat, -1.0, 1.0))  # type: ignore[return-value]
 
 
-class PoseFields(Protocol):
-    """Anything that names a pose with the six fields (messages, settings)."""
+class PositionFields(Protocol):
+    """Anything that names a point in the world with ``x_mm``, ``y_mm``, ``z_mm``."""
 
     @property
     def x_mm(self) -> float: ...
@@ -86,6 +86,11 @@ class PoseFields(Protocol):
     def y_mm(self) -> float: ...
     @property
     def z_mm(self) -> float: ...
+
+
+class PoseFields(PositionFields, Protocol):
+    """Anything that names a pose with the six fields (messages, settings)."""
+
     @property
     def rx_deg(self) -> float: ...
     @property

@@ -15,10 +15,11 @@ from typing import NamedTuple, Protocol
 
 import numpy as np
 
+from common.camera import PositionFields
 from common.volume import Volume
 
 
-class Located(Protocol):
+class Located(PositionFields, Protocol):
     """A marker in one frame: its label ("" if unidentified), its id, and where it is — a
     mocap frame's ``Marker`` as it is (no copy per marker at QTM's rate), or a ``Seen``."""
 
@@ -26,12 +27,6 @@ class Located(Protocol):
     def label(self) -> str: ...
     @property
     def id(self) -> int: ...
-    @property
-    def x_mm(self) -> float: ...
-    @property
-    def y_mm(self) -> float: ...
-    @property
-    def z_mm(self) -> float: ...
 
 
 class Seen(NamedTuple):
