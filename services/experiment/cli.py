@@ -16,9 +16,10 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TextIO
 
 from common.errors import ConfigError
 from services.args import plain
@@ -113,10 +114,16 @@ def _gantry(args: argparse.Namespace, gantry: GantrySettings, sim: SimSettings) 
     names = ALGORITHMS if args.algorithm == "all" else ("default",) * len(args.ahead) \
         if oracle else (args.algorithm,)
     runs = []
+    progress = Progress(len(names), sys.stderr) if not args.json and sys.stderr.isatty() \
+        else None
     for i, name in enumerate(names):
+        label = f"oracle {args.ahead[i]:.2f} s" if oracle else name
         runs.append(run_scenario(args.scenario, name, seed=args.seed, crater_file=args.crater,
                                  gantry=gantry, sim=sim, path=path,
-                                 oracle_ahead_s=args.ahead[i] if oracle else None))
+                                 oracle_ahead_s=args.ahead[i] if oracle else None,
+                                 progress=progress.runner(label) if progress else None))
+        if progress:
+            progress.clear()
         if not args.json:
             print(_line(runs[-1].summary(), None if path else args.scenario), flush=True)
     if args.plot:
@@ -129,6 +136,36 @@ def _gantry(args: argparse.Namespace, gantry: GantrySettings, sim: SimSettings) 
                           "path": str(args.trajectory or args.recording or ""),
                           "results": [r.summary() for r in runs]}))
     return 0
+
+
+class Progress:
+    """One line on a terminal, rewritten as the runs go: which run, how far, the time left for
+    it and for all (from the runs' pace so far)."""
+
+    def __init__(self, runs: int, out: TextIO,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.runs, self.out, self.clock = runs, out, clock
+        self.started, self.done = clock(), 0
+
+    def runner(self, label: str) -> Callable[[float], None]:
+        run_started = self.clock()
+
+        def show(share: float) -> None:
+            now = self.clock()
+            left = "" if share < 0.02 else (
+                f", about {(now - run_started) * (1 - share) / share:.0f} s left")
+            if self.done and share >= 0.02:
+                per_run = (now - self.started) / (self.done + share)
+                left += f", about {per_run * (self.runs - self.done - share):.0f} s for all"
+            self.out.write(f"\r\033[K{label} ({self.done + 1} of {self.runs}): "
+                           f"{100 * share:.0f} %{left}")
+            self.out.flush()
+        return show
+
+    def clear(self) -> None:
+        self.done += 1
+        self.out.write("\r\033[K")
+        self.out.flush()
 
 
 def _line(s: dict, scenario: str | None) -> str:

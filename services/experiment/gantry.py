@@ -100,9 +100,11 @@ class Oracle:
 
 
 def run(lab: Lab, settings: GantrySettings, *, end_s: float | None = None,
-        oracle_ahead_s: float | None = None) -> Run:
+        oracle_ahead_s: float | None = None,
+        progress: Callable[[float], None] | None = None) -> Run:
     """One experiment; ``lab`` is used up (its crane moves). With ``oracle_ahead_s`` the
-    predictor is the ``Oracle`` (the bound), not ``settings.algorithm``."""
+    predictor is the ``Oracle`` (the bound), not ``settings.algorithm``. ``progress`` is told
+    the share of the run done, fifty times a run."""
     warm_up()  # load the compiled detector before the clock starts
     started = time.perf_counter()
     clock = SimClock(START_S)
@@ -119,7 +121,11 @@ def run(lab: Lab, settings: GantrySettings, *, end_s: float | None = None,
     samples_t: list[float] = []
     errors: list[np.ndarray] = []
     poll_s = 1 / settings.poll_hz
-    for poll in range(int((end - START_S) / poll_s) + 1):
+    polls = int((end - START_S) / poll_s) + 1
+    every = max(1, polls // 50)
+    for poll in range(polls):
+        if progress is not None and poll % every == 0:
+            progress(poll / polls)
         t = START_S + poll * poll_s
         while len(samples_t) * ERROR_SAMPLE_S < t:  # error samples between polls
             at = len(samples_t) * ERROR_SAMPLE_S
@@ -146,7 +152,8 @@ def run(lab: Lab, settings: GantrySettings, *, end_s: float | None = None,
 
 def run_scenario(scenario: str, algorithm: AlgorithmName, *, seed: int, crater_file: Path,
                  gantry: GantrySettings | None = None, sim: SimSettings | None = None,
-                 path: Trajectory | None = None, oracle_ahead_s: float | None = None) -> Run:
+                 path: Trajectory | None = None, oracle_ahead_s: float | None = None,
+                 progress: Callable[[float], None] | None = None) -> Run:
     """One algorithm (or the oracle) on one scenario, or on ``path`` (a recorded or CSV
     path: the walker's marker height if ``scenario`` is the walker, else the locomotive's)."""
     lab = make_lab("locomotive" if path is not None else scenario, seed, crater_file, sim)
@@ -156,7 +163,7 @@ def run_scenario(scenario: str, algorithm: AlgorithmName, *, seed: int, crater_f
         lab.crane.place(*lab.trajectory.position(0.0)[:2])
     settings = gantry_for(gantry or GantrySettings(), algorithm, seed=seed,
                           marker_height_mm=height)
-    return run(lab, settings, oracle_ahead_s=oracle_ahead_s)
+    return run(lab, settings, oracle_ahead_s=oracle_ahead_s, progress=progress)
 
 
 def on_crater(path: Trajectory, lab: Lab, marker_height_mm: float) -> Trajectory:

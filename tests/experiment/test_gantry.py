@@ -195,3 +195,39 @@ def test_the_oracle_bound_runs_beside_the_algorithms(tmp_path: Path, crater_file
     assert main([*args, "--algorithm", "basic"]) == 0
     basic = json.loads(capsys.readouterr().out)["results"][0]
     assert min(r["rms_mm"] for r in oracles) < basic["rms_mm"], "knowing the path helps"
+
+
+class _Terminal:
+    """What the command writes to a terminal's stderr (it shows progress only there)."""
+
+    def __init__(self) -> None:
+        self.text = ""
+
+    def write(self, text: str) -> int:
+        self.text += text
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+    def isatty(self) -> bool:
+        return True
+
+
+def test_progress_on_a_terminal_with_the_time_left_and_none_with_json(
+        tmp_path: Path, crater_file: Path, monkeypatch, capsys) -> None:  # noqa: ANN001
+    terminal = _Terminal()
+    monkeypatch.setattr("sys.stderr", terminal)
+    args = ["gantry", "--trajectory", str(_path_csv(tmp_path)), "--crater", str(crater_file),
+            "--algorithm", "all"]
+    assert main(args) == 0
+    shown = terminal.text.split("\r\033[K")
+    assert any(line.startswith("basic (1 of 5): 0 %") for line in shown)
+    later = [line for line in shown if line.startswith("pf-position-gauss (3 of 5): ")]
+    assert later and any("s left, about " in line and line.endswith("s for all")
+                         for line in later)
+    assert terminal.text.endswith("\r\033[K")  # the line is cleared before the results
+    assert len(capsys.readouterr().out.strip().splitlines()) == 5  # the five results
+    terminal.text = ""
+    assert main([*args, "--json"]) == 0
+    assert terminal.text == ""
