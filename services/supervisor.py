@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -63,7 +64,8 @@ class Child:
     restarts: int = 0
     last_exit: int | None = None
     alive: bool = False
-    health: str = ""
+    health: str = ""  # as shown: status, detail, drops
+    status: str = ""  # ok, degraded, stopping: a change of it is worth reporting
     log_file: object = field(default=None, repr=False)
 
     @property
@@ -72,9 +74,12 @@ class Child:
 
 
 class Supervisor:
-    def __init__(self, settings: UpSettings, lab: Path | None) -> None:
+    def __init__(self, settings: UpSettings, lab: Path | None, page_url: str | None = None
+                 ) -> None:
+        """``page_url``: where the web service's page is, when it is one of the services."""
         self.settings = settings
         self.lab = lab
+        self.page_url = page_url
         self.children = [Child(*_split(spec)) for spec in settings.services]
         # The router goes first and stops last.
         self.children.sort(key=lambda c: c.service != "router")
@@ -137,9 +142,18 @@ class Supervisor:
                     child.alive = alive
 
     def state(self) -> tuple:
-        """What changes when something worth reporting happens."""
-        return tuple((c.name, c.process is not None and c.process.pid, c.alive, c.restarts)
-                     for c in self.children)
+        """What changes when something worth reporting happens (a service's health too)."""
+        return tuple((c.name, c.process is not None and c.process.pid, c.alive, c.restarts,
+                      c.status) for c in self.children)
+
+    def page(self) -> str:
+        """Where the operator's page is, once the web service is up."""
+        web = [c for c in self.children if c.service == "web"]
+        if not web or self.page_url is None:
+            return ""
+        if any(c.alive for c in web):
+            return f"the page: {self.page_url}"
+        return "the page: waiting for the web service"
 
     def set_health(self, health: ServiceHealth) -> None:
         # "superseded" is latest-value delivery doing its job, not bad input.
@@ -150,7 +164,7 @@ class Supervisor:
         with self._lock:
             for child in self.children:
                 if (child.service, child.instance) == (health.service, health.instance):
-                    child.health = text
+                    child.health, child.status = text, health.status
 
     def render(self, now: float) -> str:
         lines = [f"{'service':<24} {'pid':>7}  {'state':<22} {'restarts':>8}  {'last exit':>9}"
@@ -201,22 +215,37 @@ def watch_alive(supervisor: Supervisor, settings: UpSettings, stop: threading.Ev
         session.close()
 
 
-def run(settings: UpSettings, lab: Path | None, stop: threading.Event, *, view: bool) -> int:
-    supervisor = Supervisor(settings, lab)
+def page_url(settings: UpSettings, host: str, port: int) -> str | None:
+    """The web page's address (``[web] host``, ``port``), if the web service is one of ours."""
+    if not any(_split(spec)[0] == "web" for spec in settings.services):
+        return None
+    host = socket.gethostname() if host in ("0.0.0.0", "::") else host
+    return f"http://{host}:{port}/"
+
+
+def run(settings: UpSettings, lab: Path | None, stop: threading.Event, *, view: bool,
+        page: str | None = None) -> int:
+    supervisor = Supervisor(settings, lab, page)
     watcher = threading.Thread(target=watch_alive, args=(supervisor, settings, stop), daemon=True)
     watcher.start()
-    last_view, last_state = 0.0, None
+    last_view, last_state, last_page = 0.0, None, ""
     try:
         while not stop.wait(0.05):
             now = time.monotonic()
             supervisor.poll(now)
-            if view and now - last_view >= 1.0:
-                print("\x1b[H\x1b[2J" + "stb up — Ctrl-C stops everything\n\n"
-                      + supervisor.render(now), flush=True)
+            page = supervisor.page()
+            changed = supervisor.state() != last_state
+            if view and (now - last_view >= 1.0 or (changed and now - last_view >= 0.2)):
+                last_state = supervisor.state()
+                header = "stb up — " + (f"{page} — " if page else "") + "Ctrl-C stops everything"
+                print("\x1b[H\x1b[2J" + header + "\n\n" + supervisor.render(now), flush=True)
                 last_view = now
-            elif not view and supervisor.state() != last_state:
+            elif not view and changed:
                 last_state = supervisor.state()
                 log.info("status\n%s", supervisor.render(now))
+            if not view and page != last_page and page.startswith("the page: http"):
+                log.info("%s", page)
+            last_page = page
     finally:
         log.info("stopping all services")
         supervisor.stop_all()

@@ -24,12 +24,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     from common.node import configure_logging, stop_on_signals
     from common.settings import load_settings
     from services import supervisor
+    from services.web.settings import WebSettings
 
     try:
         overrides = overrides_from(args)
         if args.only:
             overrides["services"] = args.only.split(",")
         settings = load_settings(supervisor.UpSettings, args.lab, overrides)
+        web = load_settings(WebSettings, args.lab)
     except ConfigError as err:
         print(f"stb up: {err}", file=sys.stderr)
         return EXIT_CONFIG
@@ -38,7 +40,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     restore = stop_on_signals(stop)
     try:
         view = not args.no_view and sys.stdout.isatty()
-        return supervisor.run(settings, args.lab, stop, view=view)
+        return supervisor.run(settings, args.lab, stop, view=view,
+                              page=supervisor.page_url(settings, web.host, web.port))
     finally:
         restore()
 

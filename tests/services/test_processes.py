@@ -194,3 +194,31 @@ def test_up_stops_every_child_on_ctrl_c(tmp_path: Path) -> None:
     assert _stop(up, signal.SIGINT, timeout=15) == 0
     log_text = (tmp_path / "logs" / "router-main.log").read_text()
     assert "router/main stopped" in log_text
+
+
+def test_up_says_where_the_page_is_once_the_web_service_is_up_and_reports_health_changes(
+        ) -> None:
+    from common.messages import ServiceHealth
+    from services.supervisor import Supervisor, UpSettings, page_url
+
+    settings = UpSettings(services=["router", "web"])
+    assert page_url(UpSettings(services=["router"]), "127.0.0.1", 8080) is None
+    supervisor = Supervisor(settings, None, page_url(settings, "127.0.0.1", 8080))
+    assert supervisor.page() == "the page: waiting for the web service"
+    supervisor.set_alive("web", "main", True)
+    assert supervisor.page() == "the page: http://127.0.0.1:8080/"
+    before = supervisor.state()
+
+    def health(status: str, detail: str = "") -> ServiceHealth:
+        return ServiceHealth(measured_s=1.0, service="web", instance="main", host="h", pid=1,
+                             started_s=0.0, status=status, detail=detail, keys={})
+
+    supervisor.set_health(health("ok", "serving"))
+    changed = supervisor.state()
+    assert changed != before
+    supervisor.set_health(health("ok", "serving more"))  # the detail alone: no new report
+    assert supervisor.state() == changed
+    supervisor.set_health(health("degraded", "no crater"))
+    assert supervisor.state() != changed
+    assert [c.health for c in supervisor.children if c.service == "web"] == [
+        "degraded (no crater)"]
