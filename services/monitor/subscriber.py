@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import sys
 import threading
 import time
@@ -75,8 +76,9 @@ def _table(bus: Bus, settings: MonitorSettings, stop: threading.Event,
     tty = sys.stdout.isatty()
     try:
         while not stop.wait(settings.refresh_s):
+            size = shutil.get_terminal_size() if tty else None
             with lock:
-                text = view.render(time.time())
+                text = view.render(time.time(), *(size if size else (120, None)))
             print(("\x1b[H\x1b[2J" if tty else "") + text + ("" if tty else "\n---"), flush=True)
             if deadline is not None and time.monotonic() > deadline:
                 break

@@ -78,15 +78,31 @@ class LabView:
     def on_alive(self, service: str, instance: str, alive: bool) -> None:
         (self.alive.add if alive else self.alive.discard)((service, instance))
 
-    def render(self, now_s: float) -> str:
-        lines = [f"alive services ({len(self.alive)}):"]
-        lines += [f"  {s}/{i}" for s, i in sorted(self.alive)] or ["  (none)"]
-        lines.append("")
-        lines.append(f"{'key':<36} {'rate Hz':>8} {'age s':>7}  latest")
+    def render(self, now_s: float, width: int = 120, height: int | None = None) -> str:
+        """The table for a terminal of ``width`` × ``height`` (None: as long as it takes):
+        nothing wraps — the digest of the latest sample narrows, then goes, before the rates
+        do, keys are cut with "…", and what does not fit is counted in the last line."""
+        alive = " ".join(f"{s}/{i}" for s, i in sorted(self.alive)) or "(none)"
+        lines = [_fit(f"alive ({len(self.alive)}): {alive}", width), ""]
+        longest = max((len(k) for k in self.keys), default=3)
+        key_w = min(longest, max(24, width - 19 - 30))  # 30 left for the digest, if it can
+        digest_w = width - key_w - 21
+        head = f"{'key':<{key_w}} {'rate Hz':>8} {'age s':>7}"
+        lines.append(head + ("  latest" if digest_w >= 16 else ""))
+        rows = []
         for key in sorted(self.keys):
             view = self.keys[key]
-            lines.append(f"{key:<36} {view.rate_hz(now_s):8.1f} {view.age_s(now_s):7.1f}  "
-                         f"{summary(view.latest)}")
+            row = f"{_fit(key, key_w):<{key_w}} {view.rate_hz(now_s):8.1f} {view.age_s(now_s):7.1f}"
+            if digest_w >= 16:
+                row += f"  {summary(view.latest, digest_w)}"
+            rows.append(_fit(row, width))
         if not self.keys:
-            lines.append("(no samples yet)")
-        return "\n".join(lines)
+            rows.append("(no samples yet)")
+        room = None if height is None else max(1, height - len(lines) - 1)
+        if room is not None and len(rows) > room:
+            rows = rows[:room - 1] + [f"… {len(rows) - room + 1} more keys"]
+        return "\n".join(lines + rows)
+
+
+def _fit(text: str, width: int) -> str:
+    return text if len(text) <= width else text[:max(width - 1, 0)] + "…"
