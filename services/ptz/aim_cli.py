@@ -9,12 +9,14 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from services.args import plain
+
 if TYPE_CHECKING:  # imported once the flags are parsed: --help answers at once
     from common.camera import Pose
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="stb ptz aim", description=__doc__)
+    parser = argparse.ArgumentParser(prog="stb ptz aim", description=plain(__doc__ or ""))
     parser.add_argument("--pose", type=Path, required=True,
                         help="the pose: as stb calib solve --json prints it (position_mm, "
                              "orientation_deg) or as the calib service stores it "

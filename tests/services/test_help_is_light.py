@@ -40,4 +40,8 @@ def test_help_is_answered_before_anything_heavy_is_imported(command: list[str]) 
     result = json.loads(done.stdout.strip().splitlines()[-1])
     assert result["code"] in (0, None), done.stderr
     assert "usage: stb" in done.stdout
+    described = done.stdout.split("\n\n", 1)[1] if "\n\n" in done.stdout else ""
+    assert described.strip() and not described.lstrip().startswith(("options:", "positional")), \
+        "a description after the usage"
+    assert "``" not in done.stdout, "plain text, not RST"
     assert result["heavy"] == [], f"imported before the flags were parsed: {result['heavy']}"
