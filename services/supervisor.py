@@ -215,10 +215,12 @@ def watch_alive(supervisor: Supervisor, settings: UpSettings, stop: threading.Ev
         session.close()
 
 
-def page_url(settings: UpSettings, host: str, port: int) -> str | None:
-    """The web page's address (``[web] host``, ``port``), if the web service is one of ours."""
-    if not any(_split(spec)[0] == "web" for spec in settings.services):
-        return None
+def runs_web(settings: UpSettings) -> bool:
+    return any(_split(spec)[0] == "web" for spec in settings.services)
+
+
+def page_url(host: str, port: int) -> str:
+    """The web page's address from ``[web] host`` and ``port``."""
     host = socket.gethostname() if host in ("0.0.0.0", "::") else host
     return f"http://{host}:{port}/"
 

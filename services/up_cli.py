@@ -31,7 +31,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.only:
             overrides["services"] = args.only.split(",")
         settings = load_settings(supervisor.UpSettings, args.lab, overrides)
-        web = load_settings(WebSettings, args.lab)
+        web = load_settings(WebSettings, args.lab) if supervisor.runs_web(settings) else None
     except ConfigError as err:
         print(f"stb up: {err}", file=sys.stderr)
         return EXIT_CONFIG
@@ -40,8 +40,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     restore = stop_on_signals(stop)
     try:
         view = not args.no_view and sys.stdout.isatty()
-        return supervisor.run(settings, args.lab, stop, view=view,
-                              page=supervisor.page_url(settings, web.host, web.port))
+        page = None if web is None else supervisor.page_url(web.host, web.port)
+        return supervisor.run(settings, args.lab, stop, view=view, page=page)
     finally:
         restore()
 

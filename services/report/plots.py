@@ -9,6 +9,7 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
+import matplotlib.patheffects as effects  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -42,29 +43,57 @@ def error_plot(rec: Recording, path: Path) -> Path | None:
     return _save(fig, path)
 
 
+def track_view(rec: Recording, margin_mm: float = 400.0
+               ) -> tuple[float, float, float, float] | None:
+    """The part of the crater the run used: every track's extent and ``margin_mm`` around it
+    (x0, x1, y0, y1), or None without a track."""
+    tracks = [series.arrays()[1][:, :2] for series in (rec.truth, rec.robot, rec.crane)
+              if len(series)]
+    xy = np.vstack(tracks) if tracks else np.zeros((0, 2))
+    xy = xy[np.all(np.isfinite(xy), axis=1)]
+    if len(xy) == 0:
+        return None
+    (x0, y0), (x1, y1) = xy.min(axis=0) - margin_mm, xy.max(axis=0) + margin_mm
+    return float(x0), float(x1), float(y0), float(y1)
+
+
 def track_plot(rec: Recording, height_map: HeightMap | None, path: Path) -> Path | None:
-    if len(rec.robot) == 0 and len(rec.crane) == 0:
+    """The tracks over the crater in grey (the lines' colours stand out), zoomed to where the
+    run went; the crane's line wide and outlined in white, the robot's thin on top of it."""
+    view = track_view(rec)
+    if view is None:
         return None
     fig, ax = plt.subplots(figsize=(7.5, 6.5), layout="constrained")
     if height_map is not None:
         x0, x1, y0, y1 = height_map.extent_mm
         shown = ax.imshow(height_map.heights_mm, origin="lower", extent=(x0, x1, y0, y1),
-                          cmap="terrain", alpha=0.8)
+                          cmap="gray", alpha=0.7)
         fig.colorbar(shown, ax=ax, shrink=0.7, label="height (mm)")
-    for series, label, style in ((rec.truth, "robot (sim truth)", dict(color="0.5", ls="--")),
-                                 (rec.robot, "robot (mocap)", dict(color="tab:red")),
-                                 (rec.crane, "crane", dict(color="tab:blue"))):
+    outline = [effects.Stroke(linewidth=3.6, foreground="white"), effects.Normal()]
+    for series, label, style in (  # the crane's wide line under the robot's thin one
+            (rec.truth, "robot (sim truth)", dict(color="0.3", ls="--", lw=1.0)),
+            (rec.crane, "crane", dict(color="tab:blue", lw=2.4, path_effects=outline)),
+            (rec.robot, "robot (mocap)", dict(color="tab:red", lw=0.9))):
         if len(series):
             _, values = series.arrays()
-            ax.plot(values[:, 0], values[:, 1], lw=1.0, label=label, **style)
-            ax.plot(*values[0, :2], "o", color=style["color"], ms=4)
+            ax.plot(values[:, 0], values[:, 1], label=label, **style)
+            ax.plot(*values[0, :2], "o", color=style["color"], ms=5)
+    x0, x1, y0, y1 = view
+    outside = []
     for camera, pose in sorted(rec.poses.items()):
-        ax.plot(pose.x_mm, pose.y_mm, "k^", ms=8)
-        ax.annotate(camera, (pose.x_mm, pose.y_mm), textcoords="offset points", xytext=(5, 5))
+        if x0 <= pose.x_mm <= x1 and y0 <= pose.y_mm <= y1:
+            ax.plot(pose.x_mm, pose.y_mm, "k^", ms=8)
+            ax.annotate(camera, (pose.x_mm, pose.y_mm), textcoords="offset points",
+                        xytext=(5, 5))
+        else:
+            outside.append(f"{camera} ({pose.x_mm:.0f}, {pose.y_mm:.0f})")
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
     ax.set_aspect("equal")
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
-    ax.set_title("tracks over the crater (dots: start)", fontsize=9)
+    ax.set_title("tracks over the crater (dots: start)" + (
+        f"\ncameras outside the view: {', '.join(outside)} mm" if outside else ""), fontsize=9)
     ax.legend(loc="upper right", fontsize=8)
     return _save(fig, path)
 

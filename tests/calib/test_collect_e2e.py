@@ -30,9 +30,11 @@ def _pose_of(msg: m.CameraPose) -> Pose:
 
 def test_collect_solve_publish_recovers_the_sim_camera(tmp_path: Path) -> None:
     lab, endpoint = _lab_for_up(tmp_path)
-    with open(lab, "a") as f:  # collect away from pan = tilt = 0: the mount must still come out
-        f.write('services = ["router", "sim", "tracker", "calib", "ptz:ptz1"]\n'
-                "[calib.hold.ptz1]\npan_deg = 6.0\ntilt_deg = -4.0\n")
+    # only what a collection needs (the line belongs to [up]: appended, it fell into [web]
+    # and the whole lab ran); collect away from pan = tilt = 0: the mount must still come out
+    lab.write_text(lab.read_text().replace(
+        "[up]\n", '[up]\nservices = ["router", "sim", "tracker", "calib", "ptz:ptz1"]\n', 1)
+        + "[calib.hold.ptz1]\npan_deg = 6.0\ntilt_deg = -4.0\n")
     env = {"STB_SIM__SCENARIO": "calibration"}
     up = stb_process("up", "--lab", str(lab), "--no-view", env=env)
     session = None

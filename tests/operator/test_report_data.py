@@ -84,3 +84,20 @@ def test_bad_files_and_key_expressions_are_clear_errors(tmp_path: Path) -> None:
     assert proc.wait(timeout=60) == 2
     assert "bad key expression 'stb//tracker'" in proc.stderr.read()
     assert not (tmp_path / "x.mcap").exists(), "nothing written before the arguments are good"
+
+
+def test_the_tracks_are_shown_zoomed_to_where_the_run_went(tmp_path: Path) -> None:
+    from services.report.plots import track_plot, track_view
+
+    rec = Recording(path=None)  # type: ignore[arg-type]
+    assert track_view(rec) is None and track_plot(rec, None, tmp_path / "t.png") is None
+    for i in range(50):  # a 2 m × 1 m oval's worth of the crater, far from its 8 m extent
+        t = float(i)
+        rec.robot.add(t, 1000.0 + 20.0 * i, -500.0 + 10.0 * i, 80.0, 0.0, 0.0)
+        rec.crane.add(t, 990.0 + 20.0 * i, -490.0 + 10.0 * i, 1.0)
+    rec.crane.add(50.0, float("nan"), 0.0, 1.0)  # a bad sample does not widen the view
+    x0, x1, y0, y1 = track_view(rec, margin_mm=400.0)  # type: ignore[misc]
+    assert (x0, x1, y0, y1) == pytest.approx((590.0, 2380.0, -900.0, 400.0))
+    rec.poses["ptz1"] = _pose_msg(PAPER_POSE)
+    written = track_plot(rec, None, tmp_path / "tracks.png")
+    assert written is not None and written.stat().st_size > 10_000

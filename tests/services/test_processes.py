@@ -199,11 +199,11 @@ def test_up_stops_every_child_on_ctrl_c(tmp_path: Path) -> None:
 def test_up_says_where_the_page_is_once_the_web_service_is_up_and_reports_health_changes(
         ) -> None:
     from common.messages import ServiceHealth
-    from services.supervisor import Supervisor, UpSettings, page_url
+    from services.supervisor import Supervisor, UpSettings, page_url, runs_web
 
     settings = UpSettings(services=["router", "web"])
-    assert page_url(UpSettings(services=["router"]), "127.0.0.1", 8080) is None
-    supervisor = Supervisor(settings, None, page_url(settings, "127.0.0.1", 8080))
+    assert runs_web(settings) and not runs_web(UpSettings(services=["router", "sim"]))
+    supervisor = Supervisor(settings, None, page_url("127.0.0.1", 8080))
     assert supervisor.page() == "the page: waiting for the web service"
     supervisor.set_alive("web", "main", True)
     assert supervisor.page() == "the page: http://127.0.0.1:8080/"
