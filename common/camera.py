@@ -256,8 +256,11 @@ class PtzLimits:
     min_zoom: int = 1
     max_zoom: int = 9999
 
+    @cached_property
+    def box(self) -> Box:
+        return Box((self.min_pan, self.min_tilt, self.min_zoom),
+                   (self.max_pan, self.max_tilt, self.max_zoom))
+
     def clamp(self, pan: float, tilt: float, zoom: float) -> tuple[float, float, float]:
-        pan, tilt, zoom = Box((self.min_pan, self.min_tilt, self.min_zoom),
-                              (self.max_pan, self.max_tilt, self.max_zoom)).clamp(
-            (pan, tilt, zoom))
+        pan, tilt, zoom = self.box.clamp((pan, tilt, zoom))
         return pan, tilt, zoom

@@ -12,7 +12,7 @@ import math
 from typing import Any, TypeVar
 
 import msgpack
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
 from common.messages import Message
 
@@ -94,9 +94,9 @@ def _has_non_finite(value: object) -> bool:
     return isinstance(value, float) and not math.isfinite(value)
 
 
-def to_plain(msg: Message | dict) -> dict[str, Any]:
+def to_plain(msg: BaseModel | dict) -> dict[str, Any]:
     """A JSON-ready dict of a message; bytes become base64 strings (monitor, recordings)."""
-    data = msg.model_dump() if isinstance(msg, Message) else dict(msg)
+    data = msg.model_dump() if isinstance(msg, BaseModel) else dict(msg)
     return _plain(data)
 
 

@@ -37,8 +37,7 @@ def summary(msg: BaseModel | dict, width: int = 60) -> str:
         elif isinstance(value, str) and len(value) > 16:
             value = f"<{len(value)} chars>"
         parts.append(f"{name}={value}")
-    text = " ".join(parts)
-    return text if len(text) <= width else text[: width - 1] + "…"
+    return _fit(" ".join(parts), width)
 
 
 @dataclass

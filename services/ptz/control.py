@@ -58,8 +58,8 @@ class PtzControl:
     # --- what comes in ----------------------------------------------------------------------
 
     def take_pose(self, msg: m.CameraPose, now: float) -> str:
-        """"taken", "kept" (an older one: ours stays) or "future" (refused: one such pose
-        used to win for good)."""
+        """``taken``, ``kept`` (an older one: ours stays) or ``future`` (refused: one such
+        pose used to win for good)."""
         if msg.measured_s - now > self.max_future_s:
             return "future"
         if self.pose_msg is not None and _order(msg) < _order(self.pose_msg):

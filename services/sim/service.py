@@ -123,10 +123,9 @@ class DeviceLoop:
     def __init__(self, lab: Lab, settings: SimSettings, clock: Clock, *,
                  serve_mocap: bool = True) -> None:
         m_ = settings.mocap
-        source = MocapSource(lab.labels, m_.rate_hz, lab.mocap_frame, clock,
-                             lab.body_points)
-        self.mocap = MocapServer(source, settings.host_of(m_.host), m_.port) if serve_mocap \
-            else None
+        self.mocap = MocapServer(
+            MocapSource(lab.labels, m_.rate_hz, lab.mocap_frame, clock, lab.body_points),
+            settings.host_of(m_.host), m_.port) if serve_mocap else None
         self.crane = CraneServer(lab.crane, clock, lab.crane_lock,
                                  settings.host_of(settings.crane.host), settings.crane.port,
                                  registers=settings.crane.registers,
