@@ -315,6 +315,8 @@ class GravityOffload(Message):
     vertical_loss_pct: float = Field(ge=0, le=100, description="vertical pull lost, 1 − cos θ")
     horizontal_share_pct: float = Field(ge=0, le=100, description="sideways pull, sin θ")
     warning: bool = Field(description="horizontal share above the configured limit")
+    warn_above_pct: float = Field(5.0, gt=0, le=100, description="that limit, % (the gantry's "
+                                  "offload_warn_pct)")
 
 
 # --- simulation ground truth (tests and evaluation only) ----------------------------------------

@@ -175,7 +175,8 @@ class Control:
         self.node.bus.publish(keys.GANTRY_OFFLOAD, m.GravityOffload(
             measured_s=now, horizontal_error_mm=o.horizontal_error_mm,
             cable_length_mm=self.s.cable_length_mm, vertical_loss_pct=o.vertical_loss_pct,
-            horizontal_share_pct=o.horizontal_share_pct, warning=o.warning))
+            horizontal_share_pct=o.horizontal_share_pct, warning=o.warning,
+            warn_above_pct=self.s.offload_warn_pct))
 
     def _unreachable(self, now: float, error: str) -> None:
         self.node.set_status("degraded", error)

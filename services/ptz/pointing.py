@@ -9,7 +9,12 @@ marker is then far from where the pose puts it, or not in the picture at all.
 
 The robot's retro-reflective marker is bright only when the camera sees infrared (IR-cut
 filter off): so a preview without any marker counts only if it was taken in infrared (the
-preview loop takes one every ``pointing_infrared_s``). A single preview proves little (a
+preview loop takes one every ``pointing_infrared_s``), and while infrared previews are taken,
+only they are judged: in daylight the bright spots found are reflections and other lights
+(with previews at 2 Hz and an infrared one every 2 s, three daylight previews in a row that
+showed a reflection far from the robot made a problem of a camera that pointed right).
+Without infrared previews, daylight previews that show markers are judged. A single preview
+proves little (a
 reflection, the robot behind the crater's rim): only ``persist`` disagreeing previews in a
 row make a problem, and one agreeing preview ends it.
 """
@@ -53,12 +58,16 @@ class PointingCheck:
     """The latest measured pointing error, and whether the last ``persist`` judged previews
     all disagreed by more than ``tolerance_deg``."""
 
-    def __init__(self, tolerance_deg: float, persist: int) -> None:
-        self.tolerance_deg, self.persist = tolerance_deg, persist
+    def __init__(self, tolerance_deg: float, persist: int, daylight: bool = True) -> None:
+        """``daylight``: judge previews taken with the IR-cut filter on too (False while the
+        preview loop takes infrared ones)."""
+        self.tolerance_deg, self.persist, self.daylight = tolerance_deg, persist, daylight
         self.error_deg: float | None = None  # of the latest judged preview
         self._misses = 0
 
     def observe(self, preview: m.PtzPreview, focal_mm: float, infrared: bool) -> None:
+        if not infrared and not self.daylight:
+            return
         error = pointing_error_deg(preview, focal_mm)
         if error is None or (error == NOT_SEEN and not infrared):
             return

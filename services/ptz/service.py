@@ -86,7 +86,8 @@ class _Loop:
                      target_size_mm=settings.target_size_mm,
                      image_fraction=settings.image_fraction),
             ManualOverride(settings.manual_deg, settings.manual_pause_s),
-            PointingCheck(settings.pointing_tolerance_deg, settings.pointing_persist),
+            PointingCheck(settings.pointing_tolerance_deg, settings.pointing_persist,
+                          daylight=settings.pointing_infrared_s == 0),
             name=camera.name, max_future_s=settings.bus.max_future_s)
         self.lock = threading.Lock()
         name = settings.instance

@@ -55,7 +55,7 @@ class PtzSettings(ServiceSettings):
         2.0, ge=0, description="a preview in infrared (IR-cut filter off for one snapshot: the "
         "markers bright) this often, for the pointing check; 0 = never (then it judges only "
         "previews that show markers anyway)")
-    preview_hz: float = Field(1.0, ge=0, le=5, description="preview snapshots a second while "
+    preview_hz: float = Field(2.0, ge=0, le=5, description="preview snapshots a second while "
                               "following (stb/ptz/{camera}/preview); 0 = none")
     calibration_snapshot_hz: float = Field(10.0, gt=0, le=30,
                                            description="snapshots a second in calibration mode")

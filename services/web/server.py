@@ -37,16 +37,31 @@ PREVIEW_PATH = re.compile(r"^/preview/([A-Za-z0-9_.-]{1,64})\.jpg$")
 COMMAND_PATH = re.compile(r"^/gantry/(arm|disarm|stop|reset)$")
 
 
+COLOURS = "terrain"
+SCALE_STEPS = 11  # colours the page's scale is drawn from, lowest to highest
+
+
 def map_png(height_map: HeightMap) -> bytes:
     """The height map as a colour PNG, row 0 at the top = the largest y (north up)."""
     h = height_map.heights_mm.astype(float)
     span = float(h.max() - h.min()) or 1.0
-    rgba = colormaps["terrain"]((h - h.min()) / span)
+    rgba = colormaps[COLOURS]((h - h.min()) / span)
     bgr = (rgba[::-1, :, 2::-1] * 255).astype(np.uint8)
     ok, png = cv2.imencode(".png", np.ascontiguousarray(bgr))
     if not ok:
         raise ValueError("height map does not encode as PNG")
     return png.tobytes()
+
+
+def map_info(height_map: HeightMap) -> dict[str, Any]:
+    """The map's extent and its colour scale: the lowest and highest height and the colours
+    between them, as the PNG shows them."""
+    h = height_map.heights_mm
+    steps = colormaps[COLOURS](np.linspace(0.0, 1.0, SCALE_STEPS))
+    return {"extent_mm": list(height_map.extent_mm), "image": True,
+            "height_mm": [round(float(h.min()), 1), round(float(h.max()), 1)],
+            "colours": ["#{:02x}{:02x}{:02x}".format(*(int(round(c * 255)) for c in rgba[:3]))
+                        for rgba in steps]}
 
 
 class CraterImage:
@@ -78,7 +93,7 @@ class CraterImage:
             log.error("height map not shown: %s", err)
             self.path = None  # a broken file stays broken: do not read it every request
             return
-        self.info = json.dumps({"extent_mm": height_map.extent_mm, "image": True})
+        self.info = json.dumps(map_info(height_map))
         log.info("height map %s shown", path)
 
 

@@ -16,13 +16,14 @@ from services.web.settings import WebSettings
 from services.web.state import LiveState
 
 log = logging.getLogger(__name__)
+JUDGE_PERIOD_S = 0.5  # alarms begin and end on time even while no page looks
 TOPICS = (keys.TRACKER_ROBOT, keys.CALIB_PROGRESS, keys.GANTRY_STATE, keys.GANTRY_ESTIMATE,
           keys.GANTRY_OFFLOAD, keys.PTZ_STATE, keys.PTZ_PREVIEW, keys.TRUTH_ROBOT)
 
 
 def run(node: Node[WebSettings]) -> None:
     settings = node.settings
-    state = LiveState(track_s=settings.track_s)
+    state = LiveState(track_s=settings.track_s, history_s=settings.history_s)
     lock = threading.Lock()
 
     def on_message(msg: object) -> None:
@@ -61,7 +62,9 @@ def run(node: Node[WebSettings]) -> None:
     server.start()
     log.info("operator page on http://%s:%d/", settings.host, server.port)
     try:
-        node.stop.wait()
+        while not node.stop.wait(JUDGE_PERIOD_S):
+            with lock:
+                state.judge(time.time())
     finally:
         server.close()
         tokens.undeclare()

@@ -18,4 +18,6 @@ class WebSettings(ServiceSettings):
                                     description="crater height map (.npz) drawn under the "
                                     "tracks; missing file: a plain grid")
     track_s: float = Field(60.0, gt=0, le=3600, description="robot track shown, seconds")
+    history_s: float = Field(300.0, gt=0, le=3600, description="crane error and sideways "
+                             "pull plotted, seconds")
     push_hz: float = Field(5.0, gt=0, le=30, description="page updates a second")

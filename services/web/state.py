@@ -12,8 +12,10 @@ import numpy as np
 
 from common import messages as m
 from common.camera import Pose, head_pose
+from services.web.alarms import AlarmBoard, calibration_alarms, crane_alarms, service_alarms
 
 TRACK_MIN_STEP_S = 0.1
+HISTORY_STEP_S = 1.0  # the plot's resolution: the largest error and pull of each second
 # A lab has a handful of cameras, robots and services; names beyond these many (a key churn)
 # push out the longest unheard, so that memory stays flat whatever arrives.
 MAX_CAMERAS, MAX_ROBOTS, MAX_SERVICES = 16, 8, 64
@@ -47,9 +49,11 @@ def _keep(latest: dict, key: Any, value: Any, limit: int) -> None:
 
 @dataclass
 class LiveState:
-    """The latest of everything the page shows; ``track_s`` of robot track is kept."""
+    """The latest of everything the page shows; ``track_s`` of robot track and ``history_s``
+    of crane error and sideways pull are kept."""
 
     track_s: float = 60.0
+    history_s: float = 300.0
     alive: set[tuple[str, str]] = field(default_factory=set)
     seen: dict[tuple[str, str], None] = field(default_factory=dict)  # listed when it goes
     health: dict[tuple[str, str], m.ServiceHealth] = field(default_factory=dict)
@@ -63,6 +67,9 @@ class LiveState:
     poses: dict[str, m.CameraPose] = field(default_factory=dict)
     previews: dict[str, m.PtzPreview] = field(default_factory=dict)
     collections: dict[str, m.CollectProgress] = field(default_factory=dict)
+    collecting_since: dict[str, float] = field(default_factory=dict)
+    history: deque[list[float]] = field(default_factory=deque)  # [t, error mm, pull %]
+    alarms: AlarmBoard = field(default_factory=AlarmBoard)
 
     def on_alive(self, service: str, instance: str, alive: bool) -> None:
         (self.alive.add if alive else self.alive.discard)((service, instance))
@@ -82,6 +89,7 @@ class LiveState:
             self.estimate = msg
         elif isinstance(msg, m.GravityOffload):
             self.offload = msg
+            self._remember(msg)
         elif isinstance(msg, m.PtzState):
             _keep(self.ptz, msg.camera, msg, MAX_CAMERAS)
         elif isinstance(msg, m.CameraPose):
@@ -91,16 +99,46 @@ class LiveState:
         elif isinstance(msg, m.PtzPreview):
             _keep(self.previews, msg.camera, msg, MAX_CAMERAS)
         elif isinstance(msg, m.CollectProgress):
+            old = self.collections.get(msg.camera)
+            if old is None or old.state not in ("collecting", "solving"):
+                _keep(self.collecting_since, msg.camera, msg.measured_s, MAX_CAMERAS)
             _keep(self.collections, msg.camera, msg, MAX_CAMERAS)
         elif isinstance(msg, m.ServiceHealth):
             _keep(self.health, (msg.service, msg.instance), msg, MAX_SERVICES)
         elif isinstance(msg, m.RobotTruth):
             _keep(self.truth, msg.robot, msg, MAX_ROBOTS)
 
+    def _remember(self, offload: m.GravityOffload) -> None:
+        """The plot's history: per ``HISTORY_STEP_S``, the largest error and pull."""
+        t = math.floor(offload.measured_s / HISTORY_STEP_S) * HISTORY_STEP_S
+        point = [t, offload.horizontal_error_mm, offload.horizontal_share_pct]
+        if self.history and self.history[-1][0] == t:
+            last = self.history[-1]
+            last[1], last[2] = max(last[1], point[1]), max(last[2], point[2])
+        elif not self.history or t > self.history[-1][0]:
+            self.history.append(point)
+        while self.history and self.history[0][0] < t - self.history_s:
+            self.history.popleft()
+
+    def judge(self, now_s: float) -> None:
+        """Alarms begin and end by what is known at ``now_s`` (the service calls this on a
+        timer, so that an alarm's start does not wait for a page to look)."""
+        self.alarms.update(
+            crane_alarms(self.crane, self.estimate, self.offload, now_s)
+            + service_alarms(self._services(now_s)) + calibration_alarms(self.collections),
+            now_s)
+
     def view(self, now_s: float) -> dict[str, Any]:
         """Everything the page draws, JSON-ready (images only by sequence number)."""
+        self.judge(now_s)
         return {
             "now_s": now_s,
+            "alarms": self.alarms.view(),
+            "history": {"step_s": HISTORY_STEP_S, "span_s": self.history_s,
+                        "limit_pct": None if self.offload is None
+                        else self.offload.warn_above_pct,
+                        "points": [[round(t - now_s, 1), round(e), round(p, 2)]
+                                   for t, e, p in self.history]},
             "services": self._services(now_s),
             "robot": None if self.robot is None else {
                 "x_mm": self.robot.x_mm, "y_mm": self.robot.y_mm, "z_mm": self.robot.z_mm,
@@ -122,6 +160,7 @@ class LiveState:
                 "cable_length_mm": self.offload.cable_length_mm,
                 "vertical_loss_pct": self.offload.vertical_loss_pct,
                 "horizontal_share_pct": self.offload.horizontal_share_pct,
+                "warn_above_pct": self.offload.warn_above_pct,
                 "warning": self.offload.warning},
             "cameras": self._cameras(),
         }
@@ -152,7 +191,9 @@ class LiveState:
                                          state.pointing_error_deg if state else None,
                                      "pointing_problem": state.pointing_problem if state else "",
                                      "position": None, "looking_at": None, "preview": None,
-                                     "calibration": _collection(self.collections.get(camera))}
+                                     "calibration": _collection(
+                                         self.collections.get(camera),
+                                         self.collecting_since.get(camera))}
             if pose is not None:
                 entry["position"] = [pose.x_mm, pose.y_mm, pose.z_mm]
                 entry["pose_error_px"] = pose.mean_error_px
@@ -172,10 +213,17 @@ class LiveState:
         return None if preview is None else preview.jpeg
 
 
-def _collection(progress: m.CollectProgress | None) -> dict[str, Any] | None:
-    """The camera's latest passpoint collection, as the page shows it."""
+def _collection(progress: m.CollectProgress | None, since_s: float | None
+                ) -> dict[str, Any] | None:
+    """The camera's latest passpoint collection, as the page shows it: how far, what was
+    passed over, and the time left at the pace so far."""
     if progress is None:
         return None
+    left = None
+    if progress.state == "collecting" and progress.passpoints > 0 and since_s is not None:
+        pace = (progress.measured_s - since_s) / progress.passpoints
+        left = round(max(0, progress.target - progress.passpoints) * pace, 1)
     return {"state": progress.state, "passpoints": progress.passpoints,
             "target": progress.target, "message": progress.message,
-            "mean_error_px": progress.mean_error_px}
+            "snapshots": progress.snapshots, "skipped": dict(progress.skipped),
+            "time_left_s": left, "mean_error_px": progress.mean_error_px}

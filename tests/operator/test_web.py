@@ -24,7 +24,7 @@ reach Google's hosts through the closed network. Playwright adds --headless and 
 profile directory of its own."""
 
 
-def _chromium_or_skip() -> str:
+def chromium_or_skip() -> str:
     if Path(CHROMIUM).exists():
         return CHROMIUM
     if os.environ.get("STB_REQUIRE_BROWSER"):
@@ -35,13 +35,13 @@ def _chromium_or_skip() -> str:
 
 @pytest.fixture(scope="module")
 def page(live_lab: LiveLab) -> Iterator[object]:
-    executable = _chromium_or_skip()
+    executable = chromium_or_skip()
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=executable, args=FLAGS)
         try:
-            tab = browser.new_page(viewport={"width": 1300, "height": 950})
+            tab = browser.new_page(viewport={"width": 1400, "height": 900})
             tab.goto(live_lab.web_url, wait_until="load")
             yield tab
         finally:
@@ -84,14 +84,24 @@ def test_the_robot_moves_on_the_page_while_the_sim_runs(page: object, live_lab: 
     assert (tmp_path / "page.png").stat().st_size > 20_000
 
 
-def test_camera_previews_and_offload_figures_are_shown(page: object) -> None:
+def test_camera_previews_the_plot_and_offload_figures_are_shown(page: object,
+                                                                 tmp_path: Path) -> None:
     for camera in ("ptz1", "ptz2"):
         preview = page.locator(f"#camera-{camera} canvas")  # type: ignore[attr-defined]
         wait_for(lambda p=preview: p.get_attribute("data-seq"), timeout=10)
         caption = page.locator(f"#camera-{camera} .caption").inner_text()  # type: ignore[attr-defined]
         assert "tracking" in caption, caption
+    # The robot's IR marker is found in the previews (the sim renders the crater, the robot
+    # and its marker; the page draws each detection on the picture).
+    wait_for(lambda: any(int(page.locator(f"#camera-{c} canvas").get_attribute(  # type: ignore[attr-defined]
+        "data-markers") or 0) for c in ("ptz1", "ptz2")), timeout=10)
     offload = page.locator("#offload").inner_text()  # type: ignore[attr-defined]
     assert "sideways pull" in offload and "%" in offload
+    plot = page.locator("#plot")  # type: ignore[attr-defined]
+    wait_for(lambda: int(plot.get_attribute("data-points")) >= 3, timeout=10)
+    assert page.locator("#alarms").get_attribute("class") in ("on", "none")  # type: ignore[attr-defined]
+    shots = Path(os.environ.get("STB_PAGE_SCREENSHOTS") or tmp_path)
+    page.screenshot(path=str(shots / "page-following.png"))  # type: ignore[attr-defined]
 
 
 def test_the_gantry_buttons_stop_reset_and_arm_it(page: object) -> None:
@@ -104,6 +114,10 @@ def test_the_gantry_buttons_stop_reset_and_arm_it(page: object) -> None:
         wait_for(lambda b=button: answer.inner_text().startswith(f"{b}: done"), timeout=10)
         wait_for(lambda e=expected: mode.inner_text().startswith(e), timeout=5)
     assert "(web:127.0.0.1)" in mode.inner_text(), "who armed it"
+    page.click("button[data-command='reset']")  # type: ignore[attr-defined]
+    wait_for(lambda: answer.inner_text().startswith("reset: refused"), timeout=10)
+    assert "disarm or stop before a reset" in answer.inner_text(), "the gantry's reason"
+    assert mode.inner_text().startswith("mode: armed")
 
 
 def test_a_command_from_another_site_is_refused(live_lab: LiveLab) -> None:

@@ -100,11 +100,15 @@ def _get(web: WebServer, path: str) -> tuple[int, bytes, str]:
 
 def test_a_cameras_collection_shows_its_progress_and_why_it_failed() -> None:
     state = LiveState()
+    state.on_message(m.CollectProgress(measured_s=0.0, camera="ptz1", state="collecting",
+                                       passpoints=0, target=100, snapshots=0, skipped={}))
     state.on_message(m.CollectProgress(measured_s=10.0, camera="ptz1", state="collecting",
-                                       passpoints=34, target=100, snapshots=80, skipped={}))
+                                       passpoints=34, target=100, snapshots=80,
+                                       skipped={"no marker": 40, "moving": 6}))
     assert state.view(11.0)["cameras"]["ptz1"]["calibration"] == {
         "state": "collecting", "passpoints": 34, "target": 100, "message": "",
-        "mean_error_px": None}
+        "snapshots": 80, "skipped": {"no marker": 40, "moving": 6},
+        "time_left_s": pytest.approx(66 * 10 / 34, abs=0.1), "mean_error_px": None}
     why = "no passpoint for 60 s (34 of 100; since the last: 600 no marker)"
     state.on_message(m.CollectProgress(measured_s=70.0, camera="ptz1", state="failed",
                                        passpoints=34, target=100, snapshots=680,
@@ -112,6 +116,10 @@ def test_a_cameras_collection_shows_its_progress_and_why_it_failed() -> None:
     shown = state.view(71.0)["cameras"]["ptz1"]
     assert shown["calibration"]["state"] == "failed" and shown["calibration"]["message"] == why
     assert shown["position"] is None, "uncalibrated: no pose"
+    assert shown["calibration"]["time_left_s"] is None
+    alarms = state.view(72.0)["alarms"]["active"]
+    assert alarms == [{"cause": "calibration failed", "detail": f"ptz1: {why}",
+                       "since_s": 71.0}]
 
 
 def test_the_server_serves_the_page_the_state_and_events(server: tuple) -> None:
@@ -141,7 +149,9 @@ def test_the_height_map_appears_once_the_sim_has_written_it(server: tuple) -> No
     heights[10:20, 10:30] = -500.0
     HeightMap(heights, -2000.0, -1500.0, 100.0).save(crater_file)
     info = json.loads(_get(web, "/map.json")[1])
-    assert info == {"extent_mm": [-2000.0, 1900.0, -1500.0, 1400.0], "image": True}
+    assert info["extent_mm"] == [-2000.0, 1900.0, -1500.0, 1400.0] and info["image"] is True
+    assert info["height_mm"] == [-500.0, 0.0], "the colour scale's ends"
+    assert len(info["colours"]) == 11 and all(c.startswith("#") for c in info["colours"])
     status, png, kind = _get(web, "/map.png")
     assert status == 200 and png.startswith(b"\x89PNG") and kind == "image/png"
 

@@ -57,3 +57,18 @@ def test_a_problem_only_after_disagreeing_previews_in_a_row() -> None:
     assert "not seen" in check.problem()
     check.forget()
     assert check.problem() is None and check.error_deg is None
+
+
+def test_while_infrared_previews_are_taken_daylight_ones_are_not_judged() -> None:
+    """In daylight the spots found are reflections: three in a row far from the robot
+    (previews at 2 Hz, an infrared one every 2 s) made a problem of a camera pointing right."""
+    check = PointingCheck(tolerance_deg=3.0, persist=2, daylight=False)
+    reflection = _preview([352.0, 288.0], (600, 100))
+    for _ in range(3):
+        check.observe(reflection, FOCAL_MM, infrared=False)
+    assert check.problem() is None and check.error_deg is None
+    check.observe(_preview([352.0, 288.0], (353, 289)), FOCAL_MM, infrared=True)
+    assert check.error_deg == pytest.approx(0.1, abs=0.1) and check.problem() is None
+    for _ in range(2):
+        check.observe(reflection, FOCAL_MM, infrared=True)  # infrared: the robot's marker
+    assert check.problem() is not None

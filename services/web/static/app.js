@@ -1,31 +1,35 @@
 // The operator's page: draws /events (Server-Sent Events of the live state) on a top view of
-// the crater and in tables. No framework, no build step.
+// the crater, a time plot, the cameras' previews and tables. No framework, no build step.
+// Every canvas says what it waits for until its first data: the page is never blank.
 "use strict";
 
 const map = document.getElementById("map");
 const ctx = map.getContext("2d");
+const plot = document.getElementById("plot");
 const mapImage = new Image();
-let mapExtent = [-3000, 3000, -3000, 3000];  // the height map's x_min, x_max, y_min, y_max (mm)
-let view = mapExtent;  // what the canvas shows: the map and every camera, square
+let mapInfo = {extent_mm: [-3000, 3000, -3000, 3000], image: false};
+let view = mapInfo.extent_mm;  // what the map shows: the crater and every camera, square
 let mapReady = false;
+let latest = null;  // the last state drawn
+// The map's drawing area inside its canvas: axes left and below, the colour scale right.
+const AREA = {left: 62, top: 10, size: 640};
 
 function loadMap() {
   // The sim may write the height map after the page started: ask again until there is one.
   fetch("map.json").then((r) => r.json()).then((info) => {
-    mapExtent = info.extent_mm;
+    mapInfo = info;
     if (info.image) {
-      mapImage.onload = () => { mapReady = true; };
+      mapImage.onload = () => { mapReady = true; draw(latest); };
       mapImage.src = "map.png";
     } else {
       setTimeout(loadMap, 3000);
     }
   }).catch(() => setTimeout(loadMap, 3000));
 }
-loadMap();
 
 function fitView(state) {
-  let [x0, x1, y0, y1] = mapExtent;
-  for (const cam of Object.values(state.cameras)) {
+  let [x0, x1, y0, y1] = mapInfo.extent_mm;
+  for (const cam of Object.values(state ? state.cameras : {})) {
     if (!cam.position) continue;
     x0 = Math.min(x0, cam.position[0] - 300); x1 = Math.max(x1, cam.position[0] + 300);
     y0 = Math.min(y0, cam.position[1] - 300); y1 = Math.max(y1, cam.position[1] + 300);
@@ -36,33 +40,108 @@ function fitView(state) {
 
 function toCanvas(x, y) {
   const [x0, x1, y0, y1] = view;
-  return [(x - x0) / (x1 - x0) * map.width, (1 - (y - y0) / (y1 - y0)) * map.height];
+  return [AREA.left + (x - x0) / (x1 - x0) * AREA.size,
+          AREA.top + (1 - (y - y0) / (y1 - y0)) * AREA.size];
 }
 
 function mmToPx(mm) {
-  return mm / (view[1] - view[0]) * map.width;
+  return mm / (view[1] - view[0]) * AREA.size;
 }
 
 function fmt(value, digits = 0, unit = "") {
   return value === null || value === undefined ? "—" : `${value.toFixed(digits)}${unit}`;
 }
 
+function clock(seconds) {
+  return new Date(seconds * 1000).toLocaleTimeString([], {hour12: false});
+}
+
+function niceStep(span, most) {
+  // The smallest of 1, 2, 5 × 10^k that gives at most `most` intervals over `span`.
+  const raw = span / most, power = Math.pow(10, Math.floor(Math.log10(raw)));
+  for (const m of [1, 2, 5, 10]) if (m * power >= raw) return m * power;
+  return 10 * power;
+}
+
+function waitingText(c, canvas, text) {
+  canvas.dataset.waiting = text;  // what the canvas says, for people reading the DOM and tests
+  c.fillStyle = "#aab4be"; c.font = "24px sans-serif"; c.textAlign = "center";
+  c.fillText(text, canvas.width / 2, canvas.height / 2);
+  c.textAlign = "left";
+}
+
+function drawAxes() {
+  // mm along the bottom and the left, with a faint grid over the crater.
+  const step = niceStep(view[1] - view[0], 8);
+  ctx.font = "19px sans-serif"; ctx.fillStyle = "#c8d0d8"; ctx.lineWidth = 1;
+  const bottom = AREA.top + AREA.size, right = AREA.left + AREA.size;
+  for (let v = Math.ceil(view[0] / step) * step; v <= view[1]; v += step) {
+    const [px] = toCanvas(v, 0);
+    ctx.strokeStyle = "rgba(255,255,255,0.12)";
+    ctx.beginPath(); ctx.moveTo(px, AREA.top); ctx.lineTo(px, bottom); ctx.stroke();
+    ctx.strokeStyle = "#c8d0d8";
+    ctx.beginPath(); ctx.moveTo(px, bottom); ctx.lineTo(px, bottom + 6); ctx.stroke();
+    ctx.textAlign = "center"; ctx.fillText(String(Math.round(v)), px, bottom + 24);
+  }
+  for (let v = Math.ceil(view[2] / step) * step; v <= view[3]; v += step) {
+    const [, py] = toCanvas(0, v);
+    ctx.strokeStyle = "rgba(255,255,255,0.12)";
+    ctx.beginPath(); ctx.moveTo(AREA.left, py); ctx.lineTo(right, py); ctx.stroke();
+    ctx.strokeStyle = "#c8d0d8";
+    ctx.beginPath(); ctx.moveTo(AREA.left - 6, py); ctx.lineTo(AREA.left, py); ctx.stroke();
+    ctx.textAlign = "right"; ctx.fillText(String(Math.round(v)), AREA.left - 8, py + 5);
+  }
+  ctx.textAlign = "left";
+  ctx.strokeStyle = "#5a636d"; ctx.strokeRect(AREA.left, AREA.top, AREA.size, AREA.size);
+}
+
+function drawColourScale() {
+  const x = AREA.left + AREA.size + 16, w = 18, top = AREA.top + 20, h = AREA.size - 40;
+  ctx.font = "19px sans-serif"; ctx.fillStyle = "#c8d0d8"; ctx.textAlign = "left";
+  if (!mapReady || !mapInfo.colours) {
+    ctx.save(); ctx.translate(x + 12, AREA.top + AREA.size / 2); ctx.rotate(-Math.PI / 2);
+    ctx.textAlign = "center"; ctx.fillText("no height map yet", 0, 0); ctx.restore();
+    return;
+  }
+  const gradient = ctx.createLinearGradient(0, top + h, 0, top);
+  mapInfo.colours.forEach((c, i) => gradient.addColorStop(i / (mapInfo.colours.length - 1), c));
+  ctx.globalAlpha = 0.85; ctx.fillStyle = gradient; ctx.fillRect(x, top, w, h);
+  ctx.globalAlpha = 1; ctx.strokeStyle = "#5a636d"; ctx.strokeRect(x, top, w, h);
+  const [low, high] = mapInfo.height_mm;
+  ctx.fillStyle = "#c8d0d8";
+  ctx.fillText(`${Math.round(high)}`, x - 4, top - 6);
+  ctx.fillText(`${Math.round(low)}`, x - 4, top + h + 18);
+  ctx.save(); ctx.translate(x + w + 16, top + h / 2); ctx.rotate(-Math.PI / 2);
+  ctx.textAlign = "center"; ctx.fillText("height mm", 0, 0); ctx.restore();
+}
+
 function drawMap(state) {
   fitView(state);
   ctx.clearRect(0, 0, map.width, map.height);
+  ctx.fillStyle = "#2f353c"; ctx.fillRect(AREA.left, AREA.top, AREA.size, AREA.size);
   if (mapReady) {
-    const [left, top] = toCanvas(mapExtent[0], mapExtent[3]);
-    const [right, bottom] = toCanvas(mapExtent[1], mapExtent[2]);
+    const e = mapInfo.extent_mm;
+    const [left, top] = toCanvas(e[0], e[3]);
+    const [right, bottom] = toCanvas(e[1], e[2]);
     ctx.globalAlpha = 0.85;
     ctx.drawImage(mapImage, left, top, right - left, bottom - top);
     ctx.globalAlpha = 1;
-  } else {
-    ctx.strokeStyle = "#444";
-    for (let i = 1; i < 10; i++) {
-      ctx.beginPath(); ctx.moveTo(i * map.width / 10, 0); ctx.lineTo(i * map.width / 10, map.height);
-      ctx.moveTo(0, i * map.height / 10); ctx.lineTo(map.width, i * map.height / 10); ctx.stroke();
-    }
   }
+  drawAxes();
+  drawColourScale();
+  map.dataset.waiting = "";
+  if (!state || (!state.robot && !state.crane)) {
+    map.dataset.waiting = state ? "waiting for the robot (tracker) and the crane (gantry)…"
+                                : "connecting to the web service…";
+    ctx.save(); ctx.beginPath(); ctx.rect(AREA.left, AREA.top, AREA.size, AREA.size); ctx.clip();
+    ctx.fillStyle = "rgba(29,33,38,0.75)";
+    ctx.fillRect(AREA.left + 40, AREA.top + AREA.size / 2 - 40, AREA.size - 80, 64);
+    ctx.fillStyle = "#e6e6e6"; ctx.font = "19px sans-serif"; ctx.textAlign = "center";
+    ctx.fillText(map.dataset.waiting, AREA.left + AREA.size / 2, AREA.top + AREA.size / 2);
+    ctx.textAlign = "left"; ctx.restore();
+    if (!state) return;
+  }
+  ctx.save(); ctx.beginPath(); ctx.rect(AREA.left, AREA.top, AREA.size, AREA.size); ctx.clip();
   for (const [name, cam] of Object.entries(state.cameras)) {
     if (!cam.position) continue;
     const [cx, cy] = toCanvas(cam.position[0], cam.position[1]);
@@ -74,10 +153,14 @@ function drawMap(state) {
     ctx.fillStyle = "#ffd84d";
     ctx.beginPath(); ctx.moveTo(cx, cy - 9); ctx.lineTo(cx - 8, cy + 6); ctx.lineTo(cx + 8, cy + 6);
     ctx.closePath(); ctx.fill();
-    ctx.font = "14px sans-serif"; ctx.fillText(name, cx + 10, cy - 6);
+    ctx.font = "20px sans-serif";
+    const labelLeft = cx + 10 + ctx.measureText(name).width > AREA.left + AREA.size;
+    ctx.textAlign = labelLeft ? "right" : "left";
+    ctx.fillText(name, labelLeft ? cx - 10 : cx + 10, cy - 6);
+    ctx.textAlign = "left";
   }
   if (state.track.length > 1) {
-    ctx.strokeStyle = "rgba(255, 80, 80, 0.8)"; ctx.lineWidth = 2;
+    ctx.strokeStyle = "rgba(255, 80, 80, 0.85)"; ctx.lineWidth = 2.5;
     ctx.beginPath();
     state.track.forEach(([x, y], i) => {
       const [px, py] = toCanvas(x, y);
@@ -87,7 +170,7 @@ function drawMap(state) {
   }
   if (state.estimate && state.estimate.valid) {
     const [ex, ey] = toCanvas(state.estimate.x_mm, state.estimate.y_mm);
-    ctx.strokeStyle = "#bbb"; ctx.lineWidth = 1.5;
+    ctx.strokeStyle = "#ddd"; ctx.lineWidth = 1.5;
     ctx.beginPath(); ctx.arc(ex, ey, 7, 0, 2 * Math.PI); ctx.stroke();
   }
   if (state.robot) {
@@ -98,7 +181,7 @@ function drawMap(state) {
   }
   if (state.crane) {
     const [kx, ky] = toCanvas(state.crane.x_mm, state.crane.y_mm);
-    ctx.strokeStyle = "#4da3ff"; ctx.lineWidth = 2;
+    ctx.strokeStyle = "#4da3ff"; ctx.lineWidth = 2.5;
     ctx.beginPath(); ctx.moveTo(kx - 10, ky); ctx.lineTo(kx + 10, ky);
     ctx.moveTo(kx, ky - 10); ctx.lineTo(kx, ky + 10); ctx.stroke();
     if (state.offload) {
@@ -108,6 +191,68 @@ function drawMap(state) {
       ctx.stroke();
     }
   }
+  ctx.restore();
+}
+
+function drawPlot(state) {
+  // The crane's error (mm, left axis) and the sideways pull (%, right axis, with its limit)
+  // over the last history.span_s: the largest of each second.
+  const c = plot.getContext("2d"), W = plot.width, H = plot.height;
+  const L = 62, R = 70, T = 28, B = 28, w = W - L - R, h = H - T - B;
+  c.clearRect(0, 0, W, H);
+  const hist = state ? state.history : null;
+  const points = hist ? hist.points : [];
+  plot.dataset.points = String(points.length);
+  plot.dataset.waiting = "";
+  if (!points.length) {
+    waitingText(c, plot, state ? "waiting for the gantry's offload figures (stb/gantry/offload)…"
+                               : "connecting to the web service…");
+    return;
+  }
+  const span = hist.span_s, limit = hist.limit_pct;
+  const maxError = Math.max(100, ...points.map((p) => p[1])) * 1.1;
+  const maxPull = Math.max(limit ? limit * 1.5 : 1, ...points.map((p) => p[2])) * 1.1;
+  const X = (t) => L + (1 + t / span) * w;
+  const Ye = (e) => T + h - e / maxError * h, Yp = (p) => T + h - p / maxPull * h;
+  c.font = "18px sans-serif"; c.lineWidth = 1;
+  c.strokeStyle = "#5a636d"; c.strokeRect(L, T, w, h);
+  const tStep = span >= 180 ? 60 * niceStep(span / 60, 6) : niceStep(span, 6);
+  c.fillStyle = "#c8d0d8"; c.textAlign = "center";
+  for (let t = 0; t >= -span; t -= tStep) {
+    c.strokeStyle = "rgba(255,255,255,0.1)";
+    c.beginPath(); c.moveTo(X(t), T); c.lineTo(X(t), T + h); c.stroke();
+    c.fillText(t === 0 ? "now" : (tStep >= 60 ? `${t / 60} min` : `${t} s`), X(t), H - 6);
+  }
+  const eStep = niceStep(maxError, 4), pStep = niceStep(maxPull, 4);
+  c.textAlign = "right"; c.fillStyle = "#4da3ff";
+  for (let e = 0; e <= maxError; e += eStep) c.fillText(String(Math.round(e)), L - 6, Ye(e) + 5);
+  c.textAlign = "left"; c.fillStyle = "#ffa64d";
+  for (let p = 0; p <= maxPull; p += pStep) c.fillText(`${+p.toFixed(1)} %`, L + w + 6, Yp(p) + 5);
+  if (limit) {
+    c.strokeStyle = "#ff5050"; c.setLineDash([6, 4]);
+    c.beginPath(); c.moveTo(L, Yp(limit)); c.lineTo(L + w, Yp(limit)); c.stroke();
+    c.setLineDash([]);
+  }
+  const line = (colour, y) => {
+    c.strokeStyle = colour; c.lineWidth = 2; c.beginPath();
+    let gap = true, last = null;
+    for (const p of points) {
+      // A missing second (no offload figure: the gantry idle or gone) breaks the line.
+      if (last !== null && p[0] - last > 2.5 * hist.step_s) gap = true;
+      if (gap) c.moveTo(X(p[0]), y(p)); else c.lineTo(X(p[0]), y(p));
+      gap = false; last = p[0];
+    }
+    c.stroke();
+  };
+  line("#4da3ff", (p) => Ye(p[1]));
+  line("#ffa64d", (p) => Yp(p[2]));
+  c.font = "18px sans-serif"; c.textAlign = "left";
+  let x = L + 4;
+  for (const [colour, text] of [["#4da3ff", "crane error, mm (largest each second)"],
+                                ["#ffa64d", "sideways pull, %"],
+                                ["#ff5050", limit ? `- - limit ${limit} %` : ""]]) {
+    c.fillStyle = colour; c.fillText(text, x, 20); x += c.measureText(text).width + 24;
+  }
 }
 
 function row(cells, cls = "") {
@@ -116,14 +261,46 @@ function row(cells, cls = "") {
   for (const cell of cells) {
     const td = document.createElement("td");
     td.textContent = cell;
+    td.title = cell;
     tr.appendChild(td);
   }
   return tr;
 }
 
+function drawAlarms(state) {
+  const banner = document.getElementById("alarms");
+  if (!state) return;
+  const active = state.alarms.active, ended = state.alarms.ended;
+  banner.replaceChildren();
+  if (active.length) {
+    banner.className = "on";
+    for (const a of active) {
+      const line = document.createElement("span");
+      line.className = "alarm"; line.dataset.cause = a.cause;
+      line.textContent = `⚠ ${clock(a.since_s)} ${a.cause} — ${a.detail}` +
+        ` (for ${fmt(state.now_s - a.since_s)} s)`;
+      banner.appendChild(line);
+    }
+  } else {
+    banner.className = "none";
+    banner.textContent = "no alarm" + (ended.length
+      ? ` · last: ${ended[0].cause}, ${clock(ended[0].since_s)}–${clock(ended[0].until_s)}` : "");
+  }
+  const list = document.getElementById("ended");
+  list.replaceChildren();
+  for (const a of ended) {
+    const div = document.createElement("div");
+    div.textContent = `${clock(a.since_s)}–${clock(a.until_s)} ${a.cause}: ${a.detail}`;
+    div.title = div.textContent;
+    list.appendChild(div);
+  }
+  if (!ended.length) list.innerHTML = "<div>none yet</div>";
+}
+
 function drawServices(state) {
   const table = document.getElementById("services");
   table.replaceChildren();
+  if (!state.services.length) table.appendChild(row(["waiting for the services' health…"]));
   for (const s of state.services) {
     const status = s.alive ? (s.status || "alive") : "gone";
     const tr = row([`${s.alive ? "●" : "○"} ${s.service}/${s.instance}`, status, s.detail],
@@ -140,37 +317,64 @@ function drawOffload(state) {
   const o = state.offload, c = state.crane;
   table.appendChild(row(["crane", c ? `${c.status}${c.enabled ? "" : " (disabled)"}` : "—"]));
   if (state.estimate) table.appendChild(row(["filter", state.estimate.algorithm]));
-  if (!o) { table.appendChild(row(["offload", "no data yet"])); return; }
+  if (!o) { table.appendChild(row(["offload", "waiting for the gantry…"])); return; }
   table.appendChild(row(["horizontal error", fmt(o.horizontal_error_mm, 0, " mm")]));
   table.appendChild(row(["cable length", fmt(o.cable_length_mm, 0, " mm")]));
   table.appendChild(row(["vertical pull lost", fmt(o.vertical_loss_pct, 3, " %")]));
-  table.appendChild(row(["sideways pull", fmt(o.horizontal_share_pct, 2, " %")],
-                        o.warning ? "warn" : ""));
+  table.appendChild(row(["sideways pull", `${fmt(o.horizontal_share_pct, 2, " %")} ` +
+                         `(limit ${o.warn_above_pct} %)`], o.warning ? "warn" : ""));
 }
 
 const previewSeq = {};
 
+function calibrationText(cal) {
+  // "12 of 20 passpoints · 35 snapshots passed over (no marker 30) · about 40 s left"
+  const skipped = Object.entries(cal.skipped || {}).map(([why, n]) => `${why} ${n}`).join(", ");
+  return `calibrating: ${cal.passpoints} of ${cal.target} passpoints` +
+    (cal.state === "solving" ? ", solving…" : "") +
+    (skipped ? ` · passed over: ${skipped}` : "") +
+    (cal.time_left_s !== null && cal.time_left_s !== undefined
+      ? ` · about ${fmt(cal.time_left_s)} s left` : "");
+}
+
+function cameraBox(box, name) {
+  let div = document.getElementById(`camera-${name}`);
+  if (!div) {
+    div = document.createElement("section");
+    div.id = `camera-${name}`;
+    div.className = "preview";
+    div.innerHTML = `<div class="caption"></div><div class="progress-text"></div>` +
+      `<div class="bar"><div></div></div><canvas width="704" height="576"></canvas>`;
+    box.appendChild(div);
+    const canvas = div.querySelector("canvas"), c = canvas.getContext("2d");
+    c.fillStyle = "#000"; c.fillRect(0, 0, canvas.width, canvas.height);
+    waitingText(c, canvas, `waiting for ${name}'s first preview…`);
+  }
+  return div;
+}
+
 function drawCameras(state) {
   const box = document.getElementById("cameras");
+  const waiting = document.getElementById("cameras-waiting");
+  if (waiting && Object.keys(state.cameras).length) waiting.remove();
   for (const [name, cam] of Object.entries(state.cameras)) {
-    let div = document.getElementById(`camera-${name}`);
-    if (!div) {
-      div = document.createElement("div");
-      div.id = `camera-${name}`;
-      div.className = "preview";
-      div.innerHTML = `<div class="caption"></div><canvas width="352" height="288"></canvas>`;
-      box.appendChild(div);
-    }
+    const div = cameraBox(box, name);
     const cal = cam.calibration;
     const collecting = cal && (cal.state === "collecting" || cal.state === "solving");
     const calFailed = cal && cal.state === "failed" && !cam.position;
     div.querySelector(".caption").textContent =
-      `${name}: ${cam.status || "—"}, pan ${fmt(cam.pan_deg, 1, "°")}, tilt ${fmt(cam.tilt_deg, 1, "°")}, ` +
-      (collecting ? `calibrating: ${cal.passpoints} of ${cal.target} passpoints` +
-        (cal.state === "solving" ? ", solving" : "")
-       : `aim error ${fmt(cam.aim_error_deg, 2, "°")}, seen ${fmt(cam.pointing_error_deg, 1, "°")} off`) +
-      (calFailed ? ` — uncalibrated: ${cal.message}` : "") +
-      (cam.pointing_problem ? ` — ${cam.pointing_problem}` : "");
+      `${name}: ${cam.status || "—"}, pan ${fmt(cam.pan_deg, 1, "°")}, tilt ${fmt(cam.tilt_deg, 1, "°")}` +
+      (collecting ? "" : `, aim error ${fmt(cam.aim_error_deg, 2, "°")}, ` +
+                         `seen ${fmt(cam.pointing_error_deg, 1, "°")} off`);
+    const progress = div.querySelector(".progress-text"), bar = div.querySelector(".bar");
+    progress.textContent = collecting ? calibrationText(cal)
+      : calFailed ? `uncalibrated: ${cal.message}`
+      : cam.pointing_problem ? cam.pointing_problem : "";
+    progress.title = progress.textContent;
+    bar.style.display = collecting ? "block" : "none";
+    if (collecting) {
+      bar.firstChild.style.width = `${Math.min(100, 100 * cal.passpoints / Math.max(1, cal.target))}%`;
+    }
     div.classList.toggle("alarm", Boolean(cam.pointing_problem) || Boolean(calFailed));
     const p = cam.preview;
     if (p && previewSeq[name] !== p.seq) {
@@ -200,14 +404,23 @@ function drawPreview(canvas, img, p) {
     c.moveTo(u + 12, v - 12); c.lineTo(u - 12, v + 12); c.stroke();
   }
   canvas.dataset.seq = String(p.seq);
+  canvas.dataset.waiting = "";
+  canvas.dataset.markers = String(p.markers.length);
 }
 
 function drawGantry(state) {
-  const line = document.getElementById("gantry-mode"), c = state.crane;
-  if (!c) { line.textContent = "mode: —"; line.className = ""; return; }
+  const line = document.getElementById("gantry-mode"), pill = document.getElementById("gantry-pill");
+  const c = state.crane;
+  if (!c) {
+    line.textContent = "mode: — (waiting for the gantry)"; line.className = "";
+    pill.textContent = "gantry: —"; pill.className = "";
+    return;
+  }
   line.textContent = `mode: ${c.mode} — ${c.mode_reason} (${c.mode_by})` +
     (c.safety_ok ? "" : " — safety circuit OPEN");
   line.className = c.mode;
+  pill.textContent = `gantry: ${c.mode}, ${c.status}`;
+  pill.className = c.mode;
 }
 
 async function command(name) {
@@ -217,8 +430,10 @@ async function command(name) {
     const reply = await fetch(`gantry/${name}`, {method: "POST", headers: {"X-STB-Command": "1"}});
     const body = await reply.json();
     answer.textContent = `${name}: ${body.accepted ? "done" : "refused"} — ${body.detail}`;
+    answer.className = body.accepted ? "" : "warn";
   } catch (err) {
     answer.textContent = `${name}: no answer (${err})`;
+    answer.className = "warn";
   }
 }
 
@@ -227,7 +442,11 @@ for (const button of document.querySelectorAll("button[data-command]")) {
 }
 
 function draw(state) {
+  latest = state;
   drawMap(state);
+  drawPlot(state);
+  if (!state) return;
+  drawAlarms(state);
   drawGantry(state);
   drawServices(state);
   drawOffload(state);
@@ -244,7 +463,16 @@ function connect() {
   const events = new EventSource("events");
   events.onopen = () => { status.textContent = "live"; status.className = "up"; };
   events.onmessage = (event) => draw(JSON.parse(event.data));
-  events.onerror = () => { status.textContent = "reconnecting…"; status.className = "down"; };
+  events.onerror = () => {
+    status.textContent = "reconnecting…"; status.className = "down";
+    const banner = document.getElementById("alarms");
+    banner.className = "on";
+    banner.textContent = "⚠ no connection to the web service: what you see may be old";
+  };
 }
 
+draw(null);  // the waiting texts, before anything arrives
+loadMap();
+fetch("state.json").then((r) => r.json()).then((state) => { if (!latest) draw(state); })
+  .catch(() => {});
 connect();
