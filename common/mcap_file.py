@@ -3,8 +3,10 @@
 * One channel per concrete key (topic = the key, e.g. ``stb/tracker/robot``), message encoding
   ``msgpack``, no schema: the payload exactly as it crossed the bus, so that a replay puts back
   the same bytes. Channel metadata: the Zenoh encoding and the model name.
-* Beside it a JSON copy for Foxglove (topic ``json/<key>``, encoding ``json``): the message as
-  JSON, camera images as ``foxglove.CompressedImage`` (see ``services.recording.foxglove``).
+* Beside it a JSON copy for Foxglove (topic ``json/<key>``, encoding ``json``, a JSON Schema
+  per model; see ``services.recording.foxglove``), and Foxglove's typed channels (``/scene``,
+  ``/tf``, ``/CAMERA/image``, …, protobuf; see ``services.recording.typed``). Only the
+  msgpack channels are the recording proper: replay and the report read those.
 * ``log_time`` = when the recorder received the sample, ``publish_time`` = the message's own
   measurement time (``measured_s``; the receive time if the payload has none), ``sequence`` =
   the sample's number on its key, from 1.
@@ -99,6 +101,22 @@ class RecordWriter:
         self._writer.add_message(channel, log_time=_ns(received_s), data=data,
                                  publish_time=_ns(received_s if measured_s is None
                                                   else measured_s), sequence=sequence)
+
+    def write_typed(self, topic: str, *, schema: tuple[str, str, bytes], message_encoding: str,
+                    data: bytes, time_s: float) -> None:
+        """A typed message for Foxglove: ``schema`` = (name, encoding, data)."""
+        channel = self._channels.get(topic)
+        if channel is None:
+            name, encoding, body = schema
+            schema_id = self._schemas.get(name) or self._writer.register_schema(
+                name, encoding, body)
+            self._schemas[name] = schema_id
+            channel = self._writer.register_channel(topic, message_encoding, schema_id)
+            self._channels[topic] = channel
+        sequence = self._sequence.get(topic, 0) + 1
+        self._sequence[topic] = sequence
+        self._writer.add_message(channel, log_time=_ns(time_s), data=data,
+                                 publish_time=_ns(time_s), sequence=sequence)
 
     def finish(self) -> None:
         self._writer.finish()

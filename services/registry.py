@@ -47,10 +47,14 @@ TOOLS: dict[str, ServiceInfo] = {
     "monitor": ServiceInfo("live table of alive services and every key's latest value; --raw",
                            "services.monitor.settings:MonitorSettings",
                            "services.monitor.__main__"),
-    "record": ServiceInfo("record the bus to MCAP (+ a JSON copy for Foxglove): "
+    "record": ServiceInfo("record the bus to MCAP (+ Foxglove's typed channels): "
                           "stb record OUT.mcap [KEYEXPR...]",
                           "services.recording.record:RecordSettings",
                           "services.recording.record_cli"),
+    "foxglove": ServiceInfo("the bus live in Foxglove (3D scene, previews, plots): "
+                            "stb foxglove, then ws://127.0.0.1:8765",
+                            "services.recording.live:FoxgloveSettings",
+                            "services.recording.foxglove_cli"),
     "replay": ServiceInfo("put a recording back on the bus with its timing: "
                           "stb replay IN.mcap [--speed X]",
                           "services.recording.replay:ReplaySettings",

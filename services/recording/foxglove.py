@@ -1,57 +1,46 @@
-"""The JSON copy of a recorded sample, so that Foxglove (which cannot decode msgpack) shows it.
-
-Messages become their fields as JSON (bytes as base64); camera images become
-``foxglove.CompressedImage`` (JPEG as sent; raw mono8 tracking-camera frames are JPEG-encoded
-for the copy only — the msgpack channel keeps the exact frame).
-"""
+"""The JSON copy of a recorded sample, so that Foxglove (which cannot decode msgpack) shows it
+and its plot panel finds each numeric field: the message as JSON with its JSON Schema
+(``stb.<Model>``, from the message's definition). Images have no JSON copy: they are in the
+typed channels (``services.recording.typed``, ``/CAMERA/image``, ``/gantry/image``)."""
 
 from __future__ import annotations
 
-import base64
 import json
-
-import cv2
-import numpy as np
+from functools import cache
+from typing import Any
 
 from common import codec
 from common import messages as m
 
-COMPRESSED_IMAGE = ("foxglove.CompressedImage", {
-    "title": "foxglove.CompressedImage", "type": "object",
-    "properties": {
-        "timestamp": {"type": "object", "properties": {"sec": {"type": "integer", "minimum": 0},
-                                                       "nsec": {"type": "integer", "minimum": 0}}},
-        "frame_id": {"type": "string"},
-        "data": {"type": "string", "contentEncoding": "base64"},
-        "format": {"type": "string"}}})
-JPEG_QUALITY = 80
+IMAGES = (m.PtzPreview, m.CameraFrame)
 
 
-def json_copy(msg: m.Message | dict) -> tuple[bytes, tuple[str, dict] | None]:
-    """(JSON bytes, schema or None for schemaless JSON) of a decoded sample."""
-    image = _image(msg)
-    if image is not None:
-        return image, COMPRESSED_IMAGE
-    return json.dumps(codec.to_plain(msg), allow_nan=False).encode(), None
-
-
-def _image(msg: m.Message | dict) -> bytes | None:
-    if isinstance(msg, m.PtzPreview):
-        jpeg, frame_id = msg.jpeg, msg.camera
-    elif isinstance(msg, m.CameraFrame) and msg.encoding == "jpeg":
-        jpeg, frame_id = msg.data, msg.camera
-    elif isinstance(msg, m.CameraFrame):
-        pixels = np.frombuffer(msg.data, np.uint8)
-        if pixels.size != msg.width_px * msg.height_px:
-            return None
-        ok, encoded = cv2.imencode(".jpg", pixels.reshape(msg.height_px, msg.width_px),
-                                   [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
-        if not ok:
-            return None
-        jpeg, frame_id = encoded.tobytes(), msg.camera
-    else:
+def json_copy(msg: m.Message | dict) -> tuple[bytes, tuple[str, dict] | None] | None:
+    """(JSON bytes, (schema name, JSON Schema) or None for a message of no known model), or
+    None for an image."""
+    if isinstance(msg, IMAGES):
         return None
-    sec, nsec = divmod(round(msg.measured_s * 1e9), 1_000_000_000)
-    return json.dumps({"timestamp": {"sec": sec, "nsec": nsec}, "frame_id": frame_id,
-                       "data": base64.b64encode(jpeg).decode("ascii"),
-                       "format": "jpeg"}).encode()
+    data = json.dumps(codec.to_plain(msg), allow_nan=False).encode()
+    if isinstance(msg, dict):
+        return data, None
+    return data, (f"stb.{type(msg).__name__}", json_schema(type(msg)))
+
+
+@cache
+def json_schema(model: type[m.Message]) -> dict[str, Any]:
+    """The model's JSON Schema with its ``$defs`` written in place (Foxglove reads the fields
+    of a plain schema for its message paths)."""
+    schema = model.model_json_schema()
+    defs = schema.pop("$defs", {})
+
+    def inline(node: Any) -> Any:
+        if isinstance(node, dict):
+            ref = node.get("$ref")
+            if isinstance(ref, str) and ref.startswith("#/$defs/"):
+                return inline(defs[ref.removeprefix("#/$defs/")])
+            return {k: inline(v) for k, v in node.items()}
+        if isinstance(node, list):
+            return [inline(v) for v in node]
+        return node
+
+    return inline(schema)

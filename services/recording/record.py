@@ -20,6 +20,7 @@ from pydantic import Field
 
 from common import codec, keys
 from common import messages as m
+from common.heightmap import HeightMap
 from common.mcap_file import RecordWriter
 from common.node import stop_on_signals
 from common.settings import LogLevel, ServiceSettings
@@ -30,6 +31,7 @@ from services.entry import (
     tool_settings,
 )
 from services.recording.foxglove import json_copy
+from services.recording.typed import LabScene
 
 log = logging.getLogger(__name__)
 
@@ -40,6 +42,10 @@ class RecordSettings(ServiceSettings):
     log_level: LogLevel = "WARNING"
     progress_s: float = Field(5.0, gt=0, description="a progress line this often (stderr)")
     json_copy: bool = Field(True, description="also write the JSON copy Foxglove can show")
+    typed: bool = Field(True, description="also write Foxglove's typed channels: the 3D "
+                        "scene, camera transforms, images and their annotations")
+    height_map: Path | None = Field(Path("run/sim/crater.npz"), description="the crater in "
+                                    "the 3D scene (.npz); missing: a scene without it")
 
 
 @dataclass
@@ -55,8 +61,10 @@ class Recorder:
 
     def __init__(self, session: zenoh.Session, prefix: str, key_exprs: Sequence[str],
                  out: IO[bytes], *, exclude: Sequence[str] = (), with_json: bool = True,
+                 scene: LabScene | None = None,
                  metadata: dict[str, str] | None = None) -> None:
         self.prefix, self.with_json, self._session = prefix, with_json, session
+        self.scene = scene
         self.stats = Stats()
         self._writer = RecordWriter(out, metadata)
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
@@ -104,21 +112,23 @@ class Recorder:
                                       received_s=received, measured_s=measured)
         self.stats.samples[key] += 1
         self.stats.payload_bytes += len(payload)
-        if self.with_json and msg is not None:
-            data, schema = json_copy(msg)
+        if self.with_json and msg is not None and (copy := json_copy(msg)) is not None:
+            data, schema = copy
             self._writer.write_json(key, data, schema=schema, received_s=received,
                                     measured_s=measured, sequence=sequence)
+        if self.scene is not None and isinstance(msg, m.Message):
+            for typed in self.scene.on(msg):
+                self._writer.write_typed(
+                    typed.topic, schema=(typed.schema_name, typed.schema_encoding,
+                                         typed.schema_data),
+                    message_encoding=typed.message_encoding, data=typed.data,
+                    time_s=typed.time_s)
 
     def _decode(self, key: str, payload: bytes) -> tuple[m.Message | dict | None, str]:
-        topic = keys.topic_for(self.prefix, key)
-        try:
-            if topic is not None:
-                return (codec.decode(topic.model, payload, max_bytes=topic.max_payload_bytes),
-                        topic.model.__name__)
-            return codec.unpack(payload, max_bytes=codec.DEFAULT_MAX_BYTES), ""
-        except codec.DecodeError as err:
-            self.stats.invalid[f"{key}: {err.reason}"] += 1
-            return None, topic.model.__name__ if topic is not None else ""
+        msg, model, error = decode(self.prefix, key, payload)
+        if error:
+            self.stats.invalid[f"{key}: {error}"] += 1
+        return msg, model
 
     def close(self) -> None:
         """Stop listening, write what is queued, and finish the file (its summary)."""
@@ -127,6 +137,30 @@ class Recorder:
         self._queue.put(None)
         self._thread.join()
         self._writer.finish()
+
+
+def decode(prefix: str, key: str, payload: bytes) -> tuple[m.Message | dict | None, str, str]:
+    """(the message — a plain dict on a key of no known model — or None, its model's name,
+    why it is invalid or "") of a sample."""
+    topic = keys.topic_for(prefix, key)
+    model = topic.model.__name__ if topic is not None else ""
+    try:
+        if topic is not None:
+            return codec.decode(topic.model, payload, max_bytes=topic.max_payload_bytes), model, ""
+        return codec.unpack(payload, max_bytes=codec.DEFAULT_MAX_BYTES), model, ""
+    except codec.DecodeError as err:
+        return None, model, err.reason
+
+
+def crater(path: Path | None) -> HeightMap | None:
+    """The height map for the 3D scene, or None (said why) when there is none to read."""
+    if path is None:
+        return None
+    try:
+        return HeightMap.load(path)
+    except (OSError, ValueError) as err:
+        log.warning("no crater in the 3D scene: %s", err)
+        return None
 
 
 def _float_or_none(value: object) -> float | None:
@@ -152,7 +186,8 @@ def record(args: argparse.Namespace) -> int:
     metadata = {"prefix": settings.bus.prefix, "key_exprs": " ".join(exprs),
                 "exclude": " ".join(exclude), "started_s": f"{time.time():.6f}"}
     recorder = Recorder(session, settings.bus.prefix, exprs, out, exclude=exclude,
-                        with_json=settings.json_copy, metadata=metadata)
+                        with_json=settings.json_copy, metadata=metadata,
+                        scene=LabScene(crater(settings.height_map)) if settings.typed else None)
     print(f"stb record: recording {' '.join(exprs)} to {args.out} (Ctrl-C ends)",
           file=sys.stderr)
     recorder.ask_latest()

@@ -3,9 +3,11 @@
 Default key expression: everything under the bus prefix (``stb/**``); what queryables hold
 for those keys at the start (the camera poses) is asked for once and recorded too. Each sample
 is written as it crossed the bus (msgpack) with its receive and measurement times, plus a JSON
-copy that Foxglove shows (camera images as ``foxglove.CompressedImage``); see
-``common.mcap_file`` for the layout. Invalid payloads are recorded too (as bytes,
-without a JSON copy) and counted. Ctrl-C, SIGTERM or ``--duration`` end the recording cleanly.
+copy with its schema (Foxglove's plots) and Foxglove's typed channels (a 3D scene of the
+crater, robot, crane and camera cones; the previews with their detections); see
+``common.mcap_file`` for the layout and docs/operator.md for the channels. Invalid payloads
+are recorded too (as bytes, without a JSON copy) and counted. Ctrl-C, SIGTERM or
+``--duration`` end the recording cleanly.
 
 The tracking camera's raw frames (``stb/gantry/camera/frame``) are about 8 MB/s before
 compression; leave them out with ``--exclude stb/gantry/camera/frame`` when they are not needed.

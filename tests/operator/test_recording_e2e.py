@@ -10,14 +10,17 @@ from collections import defaultdict
 from pathlib import Path
 
 import pytest
+from mcap.reader import make_reader
 
 from common import codec, keys
 from common import messages as m
 from common.bus import Bus
 from common.mcap_file import read_samples, recorded_keys
+from tests.calib.test_demo_calibration import MOUNTS
 from tests.conftest import client_settings, open_when_up, stb_process, wait_for
 from tests.operator.conftest import LiveLab
 from tests.ports import free_port
+from tests.recording.typed import decoded_typed
 from tests.services.test_processes import _stop
 
 EXPECTED = ["stb/tracker/markers", "stb/tracker/robot", "stb/gantry/state",
@@ -33,7 +36,8 @@ RECORD_S = 8.0
 def recording(live_lab: LiveLab, tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("rec") / "run.mcap"
     proc = stb_process("record", str(out), "--lab", str(live_lab.lab), "--duration",
-                       str(RECORD_S), "--set", "progress_s=2")
+                       str(RECORD_S), "--set", "progress_s=2",
+                       "--set", f"height_map={live_lab.crater_file}")
     assert proc.wait(timeout=RECORD_S + 30) == 0, proc.stderr.read()
     log = proc.stderr.read()
     assert "wrote" in log and "samples" in log
@@ -60,6 +64,54 @@ def test_the_recording_has_every_key_in_order_and_decodable(recording: Path) -> 
         last[sample.key] = (sample.received_s, sample.sequence)
     assert received == sorted(received), "in the order they were received"
     assert received[-1] - received[0] > RECORD_S - 1.5
+
+
+def test_the_recording_opens_in_foxglove_with_typed_channels(recording: Path) -> None:
+    """What Foxglove's 3D, image and plot panels read: typed (protobuf) channels with their
+    schemas, whose content is the run's — read with the mcap library, decoded by the file's own
+    schemas."""
+    with open(recording, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    typed = {c.topic: summary.schemas[c.schema_id] for c in summary.channels.values()
+             if c.message_encoding == "protobuf"}
+    assert {t: s.name for t, s in typed.items()} == {
+        "/scene": "foxglove.SceneUpdate", "/crater": "foxglove.SceneUpdate",
+        "/tf": "foxglove.FrameTransforms", "/gantry/image": "foxglove.CompressedImage",
+        "/ptz1/image": "foxglove.CompressedImage", "/ptz2/image": "foxglove.CompressedImage",
+        "/ptz1/annotations": "foxglove.ImageAnnotations",
+        "/ptz2/annotations": "foxglove.ImageAnnotations"}
+    schemaless = [c.topic for c in summary.channels.values()
+                  if c.topic.startswith("json/") and c.schema_id == 0]
+    assert not schemaless, f"JSON copies without a schema: {schemaless}"
+    robot = {round(s.measured_s, 3): codec.decode(m.RobotPosition, s.payload)
+             for s in read_samples(recording, ["stb/tracker/robot"])}
+    scenes = decoded_typed(recording, "/scene")
+    assert len(scenes) >= 5 * RECORD_S, "about 10 a second"
+    for scene in scenes[10:: 10]:  # from a second in: the crane has reported by then
+        [entity] = [e for e in scene.entities if e.id == "robot"]
+        t = round(entity.timestamp.seconds + entity.timestamp.nanos / 1e9, 3)
+        position = entity.spheres[0].pose.position
+        assert t in robot and (position.x, position.y) == pytest.approx(
+            (robot[t].x_mm / 1000, robot[t].y_mm / 1000)), "the robot where the tracker put it"
+        assert {"crane", "camera/ptz1", "camera/ptz2"} <= {e.id for e in scene.entities}
+    heads = {f.child_frame_id: f for tf in decoded_typed(recording, "/tf")
+             for f in tf.transforms}
+    for camera, mount in MOUNTS.items():
+        moved = heads[camera].translation
+        assert (moved.x, moved.y, moved.z) == pytest.approx(
+            (mount.x_mm / 1000, mount.y_mm / 1000, mount.z_mm / 1000), abs=1e-3)
+    [crater] = decoded_typed(recording, "/crater")[:1]
+    assert len(crater.entities[0].triangles[0].points) > 1000
+    previews = {round(s.measured_s, 6): codec.decode(m.PtzPreview, s.payload)
+                for s in read_samples(recording, ["stb/ptz/ptz1/preview"])}
+    images = decoded_typed(recording, "/ptz1/image")
+    assert len(images) == len(previews) and all(i.data[:2] == b"\xff\xd8" for i in images)
+    for notes in decoded_typed(recording, "/ptz1/annotations"):
+        t = round(notes.circles[0].timestamp.seconds + notes.circles[0].timestamp.nanos / 1e9,
+                  6) if notes.circles else None
+        if t is not None and t in previews:
+            assert len(notes.circles) == len(previews[t].markers)
 
 
 def test_replaying_the_recording_gives_the_same_messages(recording: Path) -> None:

@@ -19,7 +19,9 @@ from common.bus import Bus
 from common.mcap_file import RecordingError, read_samples, recorded_keys
 from services.recording.record import Recorder
 from services.recording.replay import pace, replay, retimed
+from services.recording.typed import LabScene
 from tests.conftest import wait_for
+from tests.recording.typed import decoded_typed
 
 
 def _robot(i: int, t: float) -> m.RobotPosition:
@@ -56,7 +58,7 @@ def test_every_sample_is_recorded_in_order_with_its_times_and_a_json_copy(
         publisher.publish(keys.GANTRY_FRAME, _frame(t0))
         publisher.session.put("stb/tracker/robot", b"\xc1 not msgpack")
 
-    recorder = _record(recorder_bus, path, publish, expect=52)
+    recorder = _record(recorder_bus, path, publish, expect=52, scene=LabScene())
     assert recorder.stats.invalid == {"stb/tracker/robot: not_msgpack": 1}
     assert recorded_keys(path) == {"stb/tracker/robot": 51, "stb/gantry/camera/frame": 1}
     robot = list(read_samples(path, ["stb/tracker/robot"]))
@@ -71,12 +73,15 @@ def test_every_sample_is_recorded_in_order_with_its_times_and_a_json_copy(
 
     with open(path, "rb") as f:
         copies = {c.topic: (c, s) for s, c, _ in make_reader(f).iter_messages()}
-    channel, schema = copies["json/stb/gantry/camera/frame"]
-    assert channel.message_encoding == "json" and schema.name == "foxglove.CompressedImage"
-    with open(path, "rb") as f:
-        image = next(json.loads(msg.data) for _, c, msg in make_reader(f).iter_messages(
-            topics=["json/stb/gantry/camera/frame"]))
-    assert image["format"] == "jpeg" and image["frame_id"] == "tracking"
+    assert "json/stb/gantry/camera/frame" not in copies, "images go to the typed channels"
+    channel, schema = copies["/gantry/image"]
+    assert channel.message_encoding == "protobuf" and schema.name == "foxglove.CompressedImage"
+    image = decoded_typed(path, "/gantry/image")[0]
+    assert image.format == "jpeg" and image.frame_id == "tracking"
+    assert image.data.startswith(b"\xff\xd8"), "the frame as a JPEG"
+    channel, schema = copies["json/stb/tracker/robot"]
+    assert schema.name == "stb.RobotPosition" and schema.encoding == "jsonschema"
+    assert json.loads(schema.data)["properties"]["x_mm"]["type"] == "number"
     with open(path, "rb") as f:
         first = next(json.loads(msg.data) for _, c, msg in make_reader(f).iter_messages(
             topics=["json/stb/tracker/robot"]))
