@@ -121,6 +121,10 @@ GANTRY_COMMAND = Topic("gantry/command", m.GantryCommand,
                        "arm, disarm, stop, reset: only operators may send them", stream=False)
 GANTRY_COMMAND_REPLY = Topic("gantry/command/reply", m.GantryCommandReply,
                              "the gantry's answer to each command", stream=False)
+VIDEO = Topic("video/{camera}", m.CameraFrame,
+              "a camera's video (JPEG) as `stb record --video` takes it from the camera (VAPIX "
+              "MJPEG): in recordings, and on the bus when one is replayed",
+              max_payload_bytes=2 * MIB)
 TRUTH_ROBOT = Topic("sim/truth/robot/{robot}", m.RobotTruth, "sim only: true robot marker")
 TRUTH_CRANE = Topic("sim/truth/crane", m.CraneTruth, "sim only: true crane position")
 TRUTH_PTZ = Topic("sim/truth/ptz/{camera}", m.PtzTruth, "sim only: true camera pan/tilt/zoom")
@@ -132,7 +136,7 @@ ALL_TOPICS: tuple[Topic, ...] = (
     PTZ_PREVIEW,
     CALIB_COLLECT, CALIB_PROGRESS, CALIB_POSE, GANTRY_FRAME, GANTRY_DETECTIONS, GANTRY_ESTIMATE,
     GANTRY_SETPOINT, GANTRY_STATE, GANTRY_OFFLOAD, GANTRY_COMMAND, GANTRY_COMMAND_REPLY,
-    TRUTH_ROBOT, TRUTH_CRANE, TRUTH_PTZ, HEALTH,
+    VIDEO, TRUTH_ROBOT, TRUTH_CRANE, TRUTH_PTZ, HEALTH,
 )
 
 ALIVE = "alive/{service}/{instance}"

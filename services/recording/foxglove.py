@@ -1,7 +1,8 @@
 """The JSON copy of a recorded sample, so that Foxglove (which cannot decode msgpack) shows it
 and its plot panel finds each numeric field: the message as JSON with its JSON Schema
 (``stb.<Model>``, from the message's definition). Images have no JSON copy: they are in the
-typed channels (``services.recording.typed``, ``/CAMERA/image``, ``/gantry/image``)."""
+typed channels (``services.recording.typed``: ``/CAMERA/image``, ``/CAMERA/video``,
+``/gantry/image``)."""
 
 from __future__ import annotations
 

@@ -66,7 +66,7 @@ class Bridge:
                 log.exception("cannot forward a sample of %s", item[0])
 
     def _forward(self, key: str, payload: bytes) -> None:
-        msg, _, error = decode(self.prefix, key, payload)
+        msg, topic, error = decode(self.prefix, key, payload)
         if msg is None:
             log.debug("%s: invalid sample (%s)", key, error)
             return
@@ -78,7 +78,7 @@ class Bridge:
                           schema_name=None if schema is None else schema[0]).log(
                 data, log_time=round(when * 1e9))
         if isinstance(msg, m.Message):
-            for typed in self.scene.on(msg):
+            for typed in self.scene.on(msg, topic):
                 self._typed(typed)
         self.forwarded += 1
 

@@ -21,17 +21,20 @@ from pydantic import Field
 from common import codec, keys
 from common import messages as m
 from common.heightmap import HeightMap
+from common.jpeg import jpeg_size
 from common.mcap_file import RecordWriter
 from common.node import stop_on_signals
-from common.settings import LogLevel, ServiceSettings
+from common.settings import ConfigError, LogLevel, ServiceSettings, load_settings
 from services.entry import (
     ToolError,
     checked_key_exprs,
     tool_session,
     tool_settings,
 )
+from services.ptz.settings import CameraConnection, PtzSettings
 from services.recording.foxglove import json_copy
 from services.recording.typed import LabScene
+from services.recording.video import CameraVideo
 
 log = logging.getLogger(__name__)
 
@@ -46,6 +49,11 @@ class RecordSettings(ServiceSettings):
                         "scene, camera transforms, images and their annotations")
     height_map: Path | None = Field(Path("run/sim/crater.npz"), description="the crater in "
                                     "the 3D scene (.npz); missing: a scene without it")
+    video: list[str] = Field(default_factory=list, description="cameras of [ptz.cameras] whose "
+                             "video (VAPIX MJPEG) goes into the recording on video/<camera>")
+    video_fps: float = Field(5.0, gt=0, le=30, description="video frames a second per camera")
+    video_resolution: str = Field("704x576", pattern=r"^[1-9][0-9]{1,4}x[1-9][0-9]{1,4}$",
+                                  description="the video's size, as VAPIX names it")
 
 
 @dataclass
@@ -65,6 +73,7 @@ class Recorder:
                  metadata: dict[str, str] | None = None) -> None:
         self.prefix, self.with_json, self._session = prefix, with_json, session
         self.scene = scene
+        self._video_seq: dict[str, int] = {}
         self.stats = Stats()
         self._writer = RecordWriter(out, metadata)
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
@@ -105,7 +114,8 @@ class Recorder:
                 log.exception("cannot record a sample of %s", item[0])
 
     def _write(self, key: str, payload: bytes, encoding: str, received: float) -> None:
-        msg, model = self._decode(key, payload)
+        msg, topic = self._decode(key, payload)
+        model = topic.model.__name__ if topic is not None else ""
         measured = (msg.measured_s if isinstance(msg, m.Message)
                     else _float_or_none(msg.get("measured_s")) if isinstance(msg, dict) else None)
         sequence = self._writer.write(key, payload, encoding=encoding, model=model,
@@ -117,18 +127,33 @@ class Recorder:
             self._writer.write_json(key, data, schema=schema, received_s=received,
                                     measured_s=measured, sequence=sequence)
         if self.scene is not None and isinstance(msg, m.Message):
-            for typed in self.scene.on(msg):
+            for typed in self.scene.on(msg, topic):
                 self._writer.write_typed(
                     typed.topic, schema=(typed.schema_name, typed.schema_encoding,
                                          typed.schema_data),
                     message_encoding=typed.message_encoding, data=typed.data,
                     time_s=typed.time_s)
 
-    def _decode(self, key: str, payload: bytes) -> tuple[m.Message | dict | None, str]:
-        msg, model, error = decode(self.prefix, key, payload)
+    def _decode(self, key: str, payload: bytes
+                ) -> tuple[m.Message | dict | None, keys.Topic | None]:
+        msg, topic, error = decode(self.prefix, key, payload)
         if error:
             self.stats.invalid[f"{key}: {error}"] += 1
-        return msg, model
+        return msg, topic
+
+    def add_video(self, camera: str, jpeg: bytes, received_s: float) -> None:
+        """A camera's video frame, recorded as if it had crossed the bus on ``video/CAMERA``
+        (so that replay puts it there), stamped when it arrived."""
+        size = jpeg_size(jpeg)
+        if size is None or 0 in size:
+            self.stats.invalid[f"video {camera}: not a JPEG"] += 1
+            return
+        seq = self._video_seq[camera] = self._video_seq.get(camera, 0) + 1
+        frame = m.CameraFrame(measured_s=received_s, camera=camera, seq=seq, width_px=size[0],
+                              height_px=size[1], encoding="jpeg", data=jpeg)
+        self._queue.put((keys.VIDEO.key(self.prefix, camera=camera),
+                         codec.encode(frame, sent_s=received_s),
+                         f"{codec.CONTENT_TYPE};CameraFrame", received_s))
 
     def close(self) -> None:
         """Stop listening, write what is queued, and finish the file (its summary)."""
@@ -139,17 +164,34 @@ class Recorder:
         self._writer.finish()
 
 
-def decode(prefix: str, key: str, payload: bytes) -> tuple[m.Message | dict | None, str, str]:
-    """(the message — a plain dict on a key of no known model — or None, its model's name,
-    why it is invalid or "") of a sample."""
+def video_cameras(names: list[str], args: argparse.Namespace
+                  ) -> list[tuple[str, CameraConnection]]:
+    """The cameras to take video from, with how to reach them (the lab file's [ptz.cameras]);
+    a ToolError names one it does not know."""
+    if not names:
+        return []
+    try:
+        known = load_settings(PtzSettings, args.lab).cameras
+    except ConfigError as err:
+        raise ToolError(str(err)) from err
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise ToolError(f"no camera {', '.join(unknown)} in [ptz.cameras] (there: "
+                        f"{', '.join(sorted(known)) or 'none'})")
+    return [(n, known[n]) for n in dict.fromkeys(names)]
+
+
+def decode(prefix: str, key: str, payload: bytes
+           ) -> tuple[m.Message | dict | None, keys.Topic | None, str]:
+    """(the message — a plain dict on a key of no known topic — or None, its topic, why it is
+    invalid or "") of a sample."""
     topic = keys.topic_for(prefix, key)
-    model = topic.model.__name__ if topic is not None else ""
     try:
         if topic is not None:
-            return codec.decode(topic.model, payload, max_bytes=topic.max_payload_bytes), model, ""
-        return codec.unpack(payload, max_bytes=codec.DEFAULT_MAX_BYTES), model, ""
+            return codec.decode(topic.model, payload, max_bytes=topic.max_payload_bytes), topic, ""
+        return codec.unpack(payload, max_bytes=codec.DEFAULT_MAX_BYTES), topic, ""
     except codec.DecodeError as err:
-        return None, model, err.reason
+        return None, topic, err.reason
 
 
 def crater(path: Path | None) -> HeightMap | None:
@@ -171,6 +213,7 @@ def record(args: argparse.Namespace) -> int:
     settings = tool_settings(RecordSettings, args)
     exprs = checked_key_exprs(args.key_exprs or [f"{settings.bus.prefix}/**"])
     exclude = checked_key_exprs(args.exclude)
+    cameras = video_cameras(settings.video, args)
     try:
         out = open(args.out, "wb")  # noqa: SIM115 - closed below, after the writer finished
     except OSError as err:
@@ -191,9 +234,13 @@ def record(args: argparse.Namespace) -> int:
     print(f"stb record: recording {' '.join(exprs)} to {args.out} (Ctrl-C ends)",
           file=sys.stderr)
     recorder.ask_latest()
+    videos = [CameraVideo(name, connection, settings.video_fps, settings.video_resolution,
+                          recorder.add_video).start() for name, connection in cameras]
     try:
         _wait(recorder, stop, args.duration, settings.progress_s)
     finally:
+        for video in videos:
+            video.stop()
         recorder.close()
         out.close()
         session.close()

@@ -9,12 +9,18 @@ crater, robot, crane and camera cones; the previews with their detections); see
 are recorded too (as bytes, without a JSON copy) and counted. Ctrl-C, SIGTERM or
 ``--duration`` end the recording cleanly.
 
+``--video ptz1 --video ptz2`` takes each camera's video straight from the camera (VAPIX
+``mjpg/video.cgi`` at ``--video-fps``, 5 by default, 704x576), stamped when each frame arrived,
+into ``video/<camera>`` — beside the mocap and gantry channels on the same clock; replay puts
+it on the bus, Foxglove shows it on ``/<camera>/video``.
+
 The tracking camera's raw frames (``stb/gantry/camera/frame``) are about 8 MB/s before
 compression; leave them out with ``--exclude stb/gantry/camera/frame`` when they are not needed.
 """
 
 from __future__ import annotations
 
+import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -30,7 +36,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--exclude", action="append", default=[], metavar="KEYEXPR",
                         help="leave these keys out (repeatable)")
     parser.add_argument("--duration", type=float, help="stop after this many seconds")
+    parser.add_argument("--video", action="append", default=None, metavar="CAMERA",
+                        help="also record this camera's video (VAPIX MJPEG; a camera of "
+                        "[ptz.cameras]; repeatable)")
+    parser.add_argument("--video-fps", type=float, metavar="FPS",
+                        help="video frames a second per camera (default 5)")
     args = parser.parse_args(argv)
+    if args.video:  # the flags are settings of [record]: --set has the last word
+        args.set[:0] = [f"video={json.dumps(args.video)}"]
+    if args.video_fps is not None:
+        args.set[:0] = [f"video_fps={args.video_fps}"]
     from services.entry import tool_main
     from services.recording.record import record
 

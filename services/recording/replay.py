@@ -85,8 +85,9 @@ def replay(session: zenoh.Session, path: Path, *, speed: float = 1.0, keys: Sequ
         for sample, origin, start in pace(read_samples(path, chosen), speed, stop):
             publisher = publishers.get(sample.key)
             if publisher is None:
-                publisher = session.declare_publisher(
-                    sample.key, encoding=zenoh.Encoding(sample.encoding or codec.CONTENT_TYPE))
+                publisher = session.declare_publisher(  # a replay waits rather than drops
+                    sample.key, encoding=zenoh.Encoding(sample.encoding or codec.CONTENT_TYPE),
+                    congestion_control=zenoh.CongestionControl.BLOCK)
                 publishers[sample.key] = publisher
             payload = sample.payload if as_recorded else retimed(
                 sample.payload, origin_s=origin, start_s=start, speed=speed,

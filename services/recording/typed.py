@@ -13,6 +13,8 @@ and plot panels show a run without any extension.
     /CAMERA/annotations ImageAnnotations the markers the detector found (circles) and where the
                                          robot should be (a cross)
     /gantry/image       CompressedImage  the tracking camera's frames (mono8 JPEG-encoded)
+    /CAMERA/video       CompressedImage  a camera's video as ``stb record --video`` took it
+    /CAMERA/snapshot    CompressedImage  its snapshots in calibration mode
 
 Positions in metres (Foxglove's unit), frame ``world`` = the mocap's frame. Each output is a
 ``Typed`` record of plain bytes (schema and payload), so that the MCAP writer and the live
@@ -33,6 +35,7 @@ from foxglove import messages as fm
 from matplotlib import colormaps
 from scipy.spatial.transform import Rotation
 
+from common import keys
 from common import messages as m
 from common.camera import Intrinsics, Pose, head_pose
 from common.heightmap import HeightMap
@@ -46,6 +49,9 @@ TRACK_S, TRACK_STEP_S = 30.0, 0.2
 RED, BLUE, YELLOW, WHITE = ((1.0, 0.31, 0.31, 1.0), (0.3, 0.64, 1.0, 1.0),
                             (1.0, 0.85, 0.3, 1.0), (1.0, 1.0, 1.0, 1.0))
 JPEG_QUALITY = 80
+FRAME_TOPICS = {keys.GANTRY_FRAME: GANTRY_IMAGE, keys.VIDEO: "/{camera}/video",
+                keys.PTZ_SNAPSHOT: "/{camera}/snapshot"}
+"""Where each kind of camera frame goes (all are ``CameraFrame`` on the bus)."""
 
 
 @dataclass(frozen=True)
@@ -149,8 +155,9 @@ class LabScene:
         self._tf_at: dict[str, float] = {}
         self._crater_at = -math.inf
 
-    def on(self, msg: m.Message) -> list[Typed]:
-        """The typed messages ``msg`` gives (often none: it only updates the scene)."""
+    def on(self, msg: m.Message, topic: keys.Topic | None = None) -> list[Typed]:
+        """The typed messages ``msg`` (which came on ``topic``) gives; often none: it only
+        updates the scene."""
         t = msg.measured_s
         out: list[Typed] = []
         if isinstance(msg, m.RobotPosition):
@@ -174,8 +181,8 @@ class LabScene:
                 out += self._camera_transform(msg.camera, t)
         elif isinstance(msg, m.PtzPreview):
             out += _preview(msg)
-        elif isinstance(msg, m.CameraFrame):
-            out += _frame(msg)
+        elif isinstance(msg, m.CameraFrame) and topic in FRAME_TOPICS:
+            out += _frame(msg, FRAME_TOPICS[topic].format(camera=msg.camera))
         if self.height_map is not None and t - self._crater_at >= self.crater_every_s:
             self._crater_at = t
             out.append(crater_mesh(self.height_map, t))
@@ -303,7 +310,7 @@ def _preview(msg: m.PtzPreview) -> list[Typed]:
                    fm.ImageAnnotations(circles=circles, points=points), t)]
 
 
-def _frame(msg: m.CameraFrame) -> list[Typed]:
+def _frame(msg: m.CameraFrame, to: str) -> list[Typed]:
     if msg.encoding == "jpeg":
         jpeg = msg.data
     else:
@@ -317,4 +324,4 @@ def _frame(msg: m.CameraFrame) -> list[Typed]:
         jpeg = encoded.tobytes()
     image = fm.CompressedImage(timestamp=_time(msg.measured_s), frame_id=msg.camera,
                                data=jpeg, format="jpeg")
-    return [_typed(GANTRY_IMAGE, image, msg.measured_s)]
+    return [_typed(to, image, msg.measured_s)]

@@ -1,0 +1,74 @@
+"""A camera's video for the recording: the MJPEG stream cut into its JPEGs however TCP splits
+it, a camera that is not there, a camera the lab does not have. (From the sim's cameras over
+VAPIX into a recording of the whole lab: tests/operator/test_recording_e2e.py.)"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from services.ptz.settings import CameraConnection
+from services.recording.video import CameraVideo, MjpegParts, VideoError, boundary_of
+from tests.conftest import stb_process, wait_for
+from tests.ports import free_port
+
+JPEGS = [b"\xff\xd8" + bytes([i]) * (100 + 37 * i) + b"\xff\xd9" for i in range(5)]
+
+
+def _stream(parts: list[bytes], lengths: bool = True) -> bytes:
+    out = b"preamble the parser must skip\r\n"
+    for part in parts:
+        length = f"Content-Length: {len(part)}\r\n" if lengths else ""
+        out += (f"--myboundary\r\nContent-Type: image/jpeg\r\n{length}\r\n".encode() + part
+                + b"\r\n")
+    return out + b"--myboundary\r\n"
+
+
+@settings(max_examples=200, deadline=None)
+@given(cuts=st.lists(st.integers(min_value=1, max_value=40), max_size=60),
+       lengths=st.booleans())
+def test_parts_come_out_whole_however_the_stream_is_cut(cuts: list[int], lengths: bool) -> None:
+    stream, got, parser, at = _stream(JPEGS, lengths), [], MjpegParts("myboundary"), 0
+    for cut in cuts:
+        got += parser.feed(stream[at:at + cut])
+        at += cut
+    got += parser.feed(stream[at:])
+    assert got == JPEGS
+
+
+def test_an_oversized_part_is_dropped_and_the_next_one_kept() -> None:
+    parser = MjpegParts("--myboundary", max_part_bytes=200)
+    assert parser.feed(_stream([bytes(500), JPEGS[0]])) == [JPEGS[0]]
+    assert parser.dropped == 1
+
+
+def test_what_is_not_a_video_stream_is_named() -> None:
+    assert boundary_of('multipart/x-mixed-replace; boundary="myboundary"') == "myboundary"
+    with pytest.raises(VideoError, match="not a video stream"):
+        boundary_of("text/plain")
+    with pytest.raises(VideoError, match="no boundary"):
+        boundary_of("multipart/x-mixed-replace")
+
+
+def test_a_camera_that_is_not_there_is_tried_again_and_ends_nothing() -> None:
+    port = free_port()  # nothing listens
+    video = CameraVideo("ptz9", CameraConnection(url=f"http://127.0.0.1:{port}"), 5.0,
+                        "704x576", lambda *_: None, timeout_s=1.0).start()
+    try:
+        wait_for(lambda: video.problem, timeout=5)
+        assert "ConnectError" in video.problem and video.frames == 0
+    finally:
+        started = time.monotonic()
+        video.stop()
+        assert time.monotonic() - started < 3
+
+
+def test_stb_record_names_a_camera_it_does_not_know(tmp_path: Path) -> None:
+    proc = stb_process("record", str(tmp_path / "x.mcap"), "--video", "ptz7", "--duration", "1",
+                       "--connect", f"tcp/127.0.0.1:{free_port()}")
+    assert proc.wait(timeout=30) == 2
+    assert "no camera ptz7 in [ptz.cameras] (there: ptz1, ptz2)" in proc.stderr.read()
