@@ -9,6 +9,7 @@ import time
 import urllib.error
 import urllib.request
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -33,19 +34,26 @@ def chromium_or_skip() -> str:
     pytest.skip(f"no chromium at {CHROMIUM}: apt-get install chromium (.ci/run does)")
 
 
-@pytest.fixture(scope="module")
-def page(live_lab: LiveLab) -> Iterator[object]:
+@contextmanager
+def chromium() -> Iterator[object]:
+    """Debian's chromium, headless, driven by Playwright."""
     executable = chromium_or_skip()
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=executable, args=FLAGS)
         try:
-            tab = browser.new_page(viewport={"width": 1400, "height": 900})
-            tab.goto(live_lab.web_url, wait_until="load")
-            yield tab
+            yield browser
         finally:
             browser.close()
+
+
+@pytest.fixture(scope="module")
+def page(live_lab: LiveLab) -> Iterator[object]:
+    with chromium() as browser:
+        tab = browser.new_page(viewport={"width": 1400, "height": 900})  # type: ignore[attr-defined]
+        tab.goto(live_lab.web_url, wait_until="load")
+        yield tab
 
 
 def _expected_services() -> set[str]:

@@ -22,7 +22,7 @@ from common import messages as m
 from common.bus import Bus
 from services.sim.world import CraterShape, generate_crater
 from tests.conftest import client_settings, stb_process, wait_for
-from tests.operator.test_web import FLAGS, chromium_or_skip
+from tests.operator.test_web import chromium
 from tests.services.test_processes import _open_when_up, _stop
 from tests.uplab import write_up_lab
 
@@ -66,15 +66,8 @@ def quiet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Quiet]:
 
 @pytest.fixture(scope="module")
 def browser(quiet: Quiet) -> Iterator[object]:
-    executable = chromium_or_skip()
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as pw:
-        launched = pw.chromium.launch(executable_path=executable, args=FLAGS)
-        try:
-            yield launched
-        finally:
-            launched.close()
+    with chromium() as launched:
+        yield launched
 
 
 @pytest.fixture(scope="module")
