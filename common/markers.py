@@ -16,23 +16,24 @@ Pixel ``[row, col]`` has its centre at ``(u, v) = (col, row)``. Angles are in de
 (−90, 90], measured from the +u axis towards +v (clockwise on screen).
 
 Speed: one vectorised pass finds the brightest pixel of each band of 16 rows — a frame in
-which nothing reaches the lowest threshold ends there; in the bands that do, each row's
-brightest pixel is found once, and at each threshold only the rows that reach it are scanned,
-by the compiled loop in ``markers_kernel.py`` (run lengths, union-find and moments in one
-go). The first
+which nothing reaches the lowest threshold ends there; in the bands that do, each column's
+brightest over the band gives the band's bright segments of columns and each row's brightest
+pixel within them, and at each threshold only the rows that reach it are scanned, within
+those segments, by the compiled loop in ``markers_kernel.py`` (run lengths,
+union-find and moments in one go). The first
 call compiles it (a few seconds, then cached on disk): services call ``warm_up()`` at
 start-up.
 """
 
 from __future__ import annotations
 
+import functools
 import time
-from dataclasses import dataclass
 from typing import Literal, NamedTuple
 
 import numpy as np
 
-from common.markers_kernel import row_maxima, threshold_kernel
+from common.markers_kernel import bright_segments, threshold_kernel
 from common.messages import DetectedMarker, MarkerDetections
 
 Status = Literal["ok", "none", "too_many"]
@@ -53,10 +54,10 @@ class Spot(NamedTuple):
     area: int
 
 
-@dataclass(frozen=True)
-class Detection:
+class Detection(NamedTuple):
     """What ``detect`` found. ``regions`` are all regions at the final threshold (markers and
-    rejected ones alike, for annotated images); ``markers`` are the valid ones."""
+    rejected ones alike, for annotated images); ``markers`` are the valid ones. (A NamedTuple:
+    it is made for every frame, and a frozen dataclass costs microseconds to make.)"""
 
     status: Status
     threshold: int
@@ -87,17 +88,21 @@ def detect(frame: np.ndarray, *, threshold: int = 230, t_lim: int = 203, step: i
     if image.size == 0:
         return Detection("none", t_lim, ())
     bands = _band_maxima(image)
-    brightest = int(bands.max())
-    regions: tuple[Spot, ...] = ()
-    if brightest < t_lim:  # the common frame: nothing reaches even the lowest threshold
-        return Detection("none", t_lim, (), regions)
-    row_max = row_maxima(image, bands, BAND_ROWS, t_lim)
-    thresholds = np.array(_thresholds(threshold, t_lim, step), np.int64)
-    t, table, is_marker = threshold_kernel(image, row_max, thresholds, l_min, _SMALL_AREA,
-                                           float(r_lim), min_area, max_area)
-    regions = tuple(Spot(u, v, long_r, short_r, angle, roundness, int(area))
-                    for u, v, long_r, short_r, angle, roundness, area in table.tolist())
-    markers = tuple(r for r, marker in zip(regions, is_marker.tolist(), strict=True) if marker)
+    if max(bands.tobytes()) < t_lim:  # the common frame: nothing reaches even the lowest
+        return Detection("none", t_lim, ())  # threshold (bytes: faster than a numpy max)
+    row_max, row_span, band_start, segments = bright_segments(image, bands, BAND_ROWS, t_lim)
+    t, table, is_marker = threshold_kernel(
+        image, row_max, row_span, BAND_ROWS, band_start, segments,
+        _thresholds(threshold, t_lim, step), l_min, _SMALL_AREA, float(r_lim), min_area,
+        max_area)
+    found, kept = [], []
+    for (u, v, long_r, short_r, angle, roundness, area), marker in zip(
+            table.tolist(), is_marker.tolist(), strict=True):
+        spot = Spot(u, v, long_r, short_r, angle, roundness, int(area))
+        found.append(spot)
+        if marker:
+            kept.append(spot)
+    regions, markers = tuple(found), tuple(kept)
     if not markers:
         return Detection("none", t_lim, (), regions)
     return Detection("too_many" if len(markers) > max_markers else "ok", int(t), markers,
@@ -148,7 +153,7 @@ def _checked(frame: np.ndarray, threshold: int, t_lim: int, step: int, r_lim: fl
 def _band_maxima(image: np.ndarray) -> np.ndarray:
     """The brightest pixel of every band of ``BAND_ROWS`` rows: the one full pass over the
     frame, as numpy's vectorised reduction over contiguous bands (several times faster than
-    a compiled per-row loop)."""
+    a compiled per-row loop, and than a maximum per column of each band)."""
     rows = image.shape[0]
     full = rows - rows % BAND_ROWS
     if full == 0:
@@ -157,9 +162,12 @@ def _band_maxima(image: np.ndarray) -> np.ndarray:
     return bands if full == rows else np.append(bands, image[full:].max())
 
 
-def _thresholds(threshold: int, t_lim: int, step: int) -> list[int]:
-    out = list(range(threshold, t_lim, -step))
-    return [*out, t_lim]
+@functools.lru_cache(maxsize=64)
+def _thresholds(threshold: int, t_lim: int, step: int) -> np.ndarray:
+    """The paper's thresholds, highest first, down to ``t_lim`` (made once per parameters)."""
+    out = np.array([*range(threshold, t_lim, -step), t_lim], np.int64)
+    out.flags.writeable = False
+    return out
 
 
 # --- annotated images ----------------------------------------------------------------------------

@@ -23,60 +23,110 @@ def _find(parent: np.ndarray, i: int) -> int:
 
 
 @njit(cache=True, nogil=True)
-def _brightest(values: np.ndarray) -> int:
-    top = 0
-    for value in values:  # no early exit: vectorised
-        top = max(top, value)
-    return top
-
-
-@njit(cache=True, nogil=True)
-def row_maxima(image: np.ndarray, band_max: np.ndarray, band_rows: int, floor: int
-               ) -> np.ndarray:
-    """The brightest pixel of every row of a band whose brightest (``band_max``, every
-    ``band_rows`` rows) reaches ``floor``; elsewhere the band's brightest, below ``floor``, so
-    that no threshold tried looks at the row."""
-    out = np.empty(image.shape[0], np.uint8)
-    for y in range(image.shape[0]):
-        top = band_max[y // band_rows]
-        out[y] = _brightest(image[y]) if top >= floor else top
-    return out
-
-
-@njit(cache=True, nogil=True)
-def _scan_runs(image: np.ndarray, row_max: np.ndarray, threshold: int, l_min: int) -> tuple:
-    """Runs (row, start, end exclusive, Σw, Σw·x) with w = gray − threshold + 1, in the rows
-    whose maximum reaches the threshold; sorted by row, then start."""
+def bright_segments(image: np.ndarray, band_max: np.ndarray, band_rows: int, floor: int
+                    ) -> tuple:
+    """Where a threshold of at least ``floor`` can find anything: in each band whose brightest
+    (``band_max``) reaches it, the segments of columns whose brightest over the band's rows
+    (a vectorised pass) does — ``segments[band_start[b]:band_start[b + 1]]``, (first, end)
+    each, left to right — and each row's brightest pixel within them (0 elsewhere, so that no
+    threshold looks at the row) and its span: from its first to past its last pixel at or
+    above ``floor``. A run of pixels at or above ``floor`` never leaves its segment or its
+    row's span."""
     rows, cols = image.shape
-    bright_rows = 0
-    for y in range(rows):
+    bands = band_max.shape[0]
+    row_max = np.zeros(rows, np.uint8)
+    row_span = np.zeros((rows, 2), np.int64)
+    band_start = np.zeros(bands + 1, np.int64)
+    segments = np.empty((cols // 2 + 1, 2), np.int64)  # a band has at most this many
+    found = np.empty((0, 2), np.int64)
+    column_max = np.empty(cols, np.uint8)
+    n = 0
+    for b in range(bands):
+        band_start[b] = n
+        if band_max[b] < floor:
+            continue
+        top_row = b * band_rows
+        end_row = min(top_row + band_rows, rows)
+        column_max[:] = image[top_row]
+        for y in range(top_row + 1, end_row):
+            np.maximum(column_max, image[y], column_max)  # vectorised
+        first = n
+        x = 0
+        while x < cols:
+            if column_max[x] < floor:
+                x += 1
+                continue
+            begin = x
+            while x < cols and column_max[x] >= floor:
+                x += 1
+            segments[n - first, 0], segments[n - first, 1] = begin, x
+            n += 1
+        found = np.concatenate((found, segments[:n - first]))
+        for y in range(top_row, end_row):
+            top, f, g = 0, -1, -1
+            for k in range(n - first):
+                for x in range(segments[k, 0], segments[k, 1]):
+                    value = image[y, x]
+                    top = max(top, value)
+                    if value >= floor:
+                        if f < 0:
+                            f = x
+                        g = x
+            row_max[y] = top
+            if f >= 0:
+                row_span[y, 0], row_span[y, 1] = f, g + 1
+    band_start[bands] = n
+    return row_max, row_span, band_start, found
+
+
+@njit(cache=True, nogil=True)
+def run_capacity(row_max: np.ndarray, band_rows: int, band_start: np.ndarray,
+                 segments: np.ndarray, threshold: int, l_min: int) -> int:
+    """The most runs a threshold can give: one per l_min + 1 columns of each segment in each
+    row that reaches it, and one more (the lowest threshold gives the most)."""
+    capacity = 1
+    for y in range(row_max.shape[0]):
         if row_max[y] >= threshold:
-            bright_rows += 1
-    capacity = bright_rows * (cols // (l_min + 1) + 1) + 1
-    run_row = np.empty(capacity, np.int64)
-    run_start = np.empty(capacity, np.int64)
-    run_end = np.empty(capacity, np.int64)
-    run_w = np.empty(capacity, np.float64)
-    run_wx = np.empty(capacity, np.float64)
+            b = y // band_rows
+            for k in range(band_start[b], band_start[b + 1]):
+                capacity += (segments[k, 1] - segments[k, 0]) // (l_min + 1) + 1
+    return capacity
+
+
+@njit(cache=True, nogil=True)
+def _scan_runs(image: np.ndarray, row_max: np.ndarray, row_span: np.ndarray, band_rows: int,
+               band_start: np.ndarray, segments: np.ndarray, threshold: int, l_min: int,
+               runs: np.ndarray, weights: np.ndarray) -> tuple:
+    """Runs (row, start, end exclusive; Σw, Σw·x) with w = gray − threshold + 1, in the rows
+    whose maximum reaches the threshold, within their band's segments and their span; sorted
+    by row, then
+    start; written into ``runs`` (n × 3) and ``weights`` (n × 2), which hold
+    ``run_capacity`` of them."""
+    rows = image.shape[0]
+    run_row, run_start, run_end = runs[:, 0], runs[:, 1], runs[:, 2]
+    run_w, run_wx = weights[:, 0], weights[:, 1]
     n = 0
     for y in range(rows):
         if row_max[y] < threshold:
             continue
-        x = 0
-        while x < cols:
-            if image[y, x] < threshold:
-                x += 1
-                continue
-            start, w, wx = x, 0.0, 0.0
-            while x < cols and image[y, x] >= threshold:
-                weight = image[y, x] - threshold + 1.0
-                w += weight
-                wx += weight * x
-                x += 1
-            if x - start >= l_min:
-                run_row[n], run_start[n], run_end[n] = y, start, x
-                run_w[n], run_wx[n] = w, wx
-                n += 1
+        b = y // band_rows
+        for k in range(band_start[b], band_start[b + 1]):
+            x = max(segments[k, 0], row_span[y, 0])
+            end = min(segments[k, 1], row_span[y, 1])
+            while x < end:
+                if image[y, x] < threshold:
+                    x += 1
+                    continue
+                start, w, wx = x, 0.0, 0.0
+                while x < end and image[y, x] >= threshold:
+                    weight = image[y, x] - threshold + 1.0
+                    w += weight
+                    wx += weight * x
+                    x += 1
+                if x - start >= l_min:
+                    run_row[n], run_start[n], run_end[n] = y, start, x
+                    run_w[n], run_wx[n] = w, wx
+                    n += 1
     return run_row[:n], run_start[:n], run_end[:n], run_w[:n], run_wx[:n]
 
 
@@ -116,8 +166,9 @@ def _label_runs(run_row: np.ndarray, run_start: np.ndarray, run_end: np.ndarray)
 
 
 @njit(cache=True, nogil=True)
-def regions_kernel(image: np.ndarray, row_max: np.ndarray, threshold: int, l_min: int,
-                   small_area: int) -> np.ndarray:
+def regions_kernel(image: np.ndarray, row_max: np.ndarray, row_span: np.ndarray, band_rows: int,
+                   band_start: np.ndarray, segments: np.ndarray, threshold: int, l_min: int,
+                   small_area: int, runs: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """One row per region, columns u, v, radius_long, radius_short, angle_deg, roundness, area:
     the brightness-weighted centroid, and the binary region's inertia ellipse (radius =
     2·√eigenvalue, + 1/12 px² for a pixel's own extent, so a disc of radius R gives R), its
@@ -126,7 +177,9 @@ def regions_kernel(image: np.ndarray, row_max: np.ndarray, threshold: int, l_min
     A region smaller than ``small_area`` leaves too few pixels for its binary shape to say
     whether it is round (three pixels make an "L"); its centroid and ellipse come from the
     brightness-weighted moments of the blurred spot around it (``weighted_ellipse``)."""
-    run_row, run_start, run_end, run_w, run_wx = _scan_runs(image, row_max, threshold, l_min)
+    run_row, run_start, run_end, run_w, run_wx = _scan_runs(
+        image, row_max, row_span, band_rows, band_start, segments, threshold, l_min, runs,
+        weights)
     label, count = _label_runs(run_row, run_start, run_end)
     sums = np.zeros((count, 9))
     seed = np.full((count, 2), -1, np.int64)  # a pixel of each region: its first run's start
@@ -174,6 +227,31 @@ def regions_kernel(image: np.ndarray, row_max: np.ndarray, threshold: int, l_min
 
 
 @njit(cache=True, nogil=True)
+def _border_median(image: np.ndarray, r0: int, r1: int, c0: int, c1: int) -> float:
+    """The median gray of the window's border (its two rows and two columns, corners counted
+    twice, as ``np.median`` of them would give), by counting: no copy, no sort."""
+    counts = np.zeros(256, np.int64)
+    for x in range(c0, c1):
+        counts[image[r0, x]] += 1
+        counts[image[r1 - 1, x]] += 1
+    for y in range(r0, r1):
+        counts[image[y, c0]] += 1
+        counts[image[y, c1 - 1]] += 1
+    total = 2 * (c1 - c0) + 2 * (r1 - r0)
+    low_rank, high_rank = (total - 1) // 2, total // 2
+    low = high = -1
+    seen = 0
+    for value in range(256):
+        seen += counts[value]
+        if low < 0 and seen > low_rank:
+            low = value
+        if seen > high_rank:
+            high = value
+            break
+    return (low + high) / 2.0
+
+
+@njit(cache=True, nogil=True)
 def weighted_ellipse(image: np.ndarray, u: float, v: float, reach: int, threshold: int,
                      seed_y: int, seed_x: int) -> np.ndarray:
     """(u, v, radius_long, radius_short, angle_deg) from brightness-weighted moments of the
@@ -185,9 +263,7 @@ def weighted_ellipse(image: np.ndarray, u: float, v: float, reach: int, threshol
     rows, cols = image.shape
     r0, r1 = max(int(v) - reach, 0), min(int(v) + reach + 1, rows)
     c0, c1 = max(int(u) - reach, 0), min(int(u) + reach + 1, cols)
-    border = np.concatenate((image[r0, c0:c1], image[r1 - 1, c0:c1], image[r0:r1, c0],
-                             image[r0:r1, c1 - 1]))
-    floor = (np.median(border.astype(np.float64)) + threshold) / 2
+    floor = (_border_median(image, r0, r1, c0, c1) + threshold) / 2
     out = np.full(5, np.nan)
     if not (r0 <= seed_y < r1 and c0 <= seed_x < c1) or image[seed_y, seed_x] <= floor:
         return out
@@ -230,9 +306,10 @@ def weighted_ellipse(image: np.ndarray, u: float, v: float, reach: int, threshol
 
 
 @njit(cache=True, nogil=True)
-def threshold_kernel(image: np.ndarray, row_max: np.ndarray, thresholds: np.ndarray,
-                     l_min: int, small_area: int, r_lim: float, min_area: int,
-                     max_area: int) -> tuple:
+def threshold_kernel(image: np.ndarray, row_max: np.ndarray, row_span: np.ndarray,
+                     band_rows: int, band_start: np.ndarray, segments: np.ndarray,
+                     thresholds: np.ndarray, l_min: int, small_area: int, r_lim: float,
+                     min_area: int, max_area: int) -> tuple:
     """The paper's threshold loop in one call: from the first threshold down, the regions at
     each threshold the frame reaches, until one has a marker (roundness below ``r_lim``, area
     within bounds). Returns (threshold, regions table, which regions are markers); the last
@@ -243,10 +320,14 @@ def threshold_kernel(image: np.ndarray, row_max: np.ndarray, thresholds: np.ndar
         brightest = max(brightest, value)
     table = np.empty((0, 7))
     is_marker = np.zeros(0, np.bool_)
+    capacity = run_capacity(row_max, band_rows, band_start, segments, thresholds[-1], l_min)
+    runs = np.empty((capacity, 3), np.int64)  # one buffer for every threshold's runs
+    weights = np.empty((capacity, 2), np.float64)
     for t in thresholds:
         if t > brightest:
             continue
-        table = regions_kernel(image, row_max, t, l_min, small_area)
+        table = regions_kernel(image, row_max, row_span, band_rows, band_start, segments, t,
+                               l_min, small_area, runs, weights)
         is_marker = np.empty(table.shape[0], np.bool_)
         for k in range(table.shape[0]):
             is_marker[k] = table[k, 5] < r_lim and min_area <= table[k, 6] <= max_area
