@@ -18,7 +18,8 @@ from services.web.state import LiveState
 log = logging.getLogger(__name__)
 JUDGE_PERIOD_S = 0.5  # alarms begin and end on time even while no page looks
 TOPICS = (keys.TRACKER_ROBOT, keys.CALIB_PROGRESS, keys.GANTRY_STATE, keys.GANTRY_ESTIMATE,
-          keys.GANTRY_OFFLOAD, keys.PTZ_STATE, keys.PTZ_PREVIEW, keys.TRUTH_ROBOT)
+          keys.GANTRY_OFFLOAD, keys.PTZ_STATE, keys.PTZ_PREVIEW, keys.PTZ_SNAPSHOT,
+          keys.PTZ_DETECTIONS, keys.TRUTH_ROBOT)
 
 
 def run(node: Node[WebSettings]) -> None:

@@ -66,6 +66,10 @@ class LiveState:
     ptz: dict[str, m.PtzState] = field(default_factory=dict)
     poses: dict[str, m.CameraPose] = field(default_factory=dict)
     previews: dict[str, m.PtzPreview] = field(default_factory=dict)
+    # calibration mode: the latest snapshot and the markers found in it (same capture time)
+    snapshots: dict[str, tuple[m.CameraFrame, list[m.DetectedMarker]]] = field(
+        default_factory=dict)
+    detections: dict[str, m.MarkerDetections] = field(default_factory=dict)
     collections: dict[str, m.CollectProgress] = field(default_factory=dict)
     collecting_since: dict[str, float] = field(default_factory=dict)
     history: deque[list[float]] = field(default_factory=deque)  # [t, error mm, pull %]
@@ -98,6 +102,15 @@ class LiveState:
                 _keep(self.poses, msg.camera, msg, MAX_CAMERAS)
         elif isinstance(msg, m.PtzPreview):
             _keep(self.previews, msg.camera, msg, MAX_CAMERAS)
+        elif isinstance(msg, m.CameraFrame) and msg.encoding == "jpeg":
+            found = self.detections.get(msg.camera)  # each key has its thread: either first
+            markers = found.markers if found and found.measured_s == msg.measured_s else []
+            _keep(self.snapshots, msg.camera, (msg, markers), MAX_CAMERAS)
+        elif isinstance(msg, m.MarkerDetections):
+            _keep(self.detections, msg.camera, msg, MAX_CAMERAS)
+            shot = self.snapshots.get(msg.camera)
+            if shot is not None and shot[0].measured_s == msg.measured_s:
+                self.snapshots[msg.camera] = (shot[0], msg.markers)
         elif isinstance(msg, m.CollectProgress):
             old = self.collections.get(msg.camera)
             if old is None or old.state not in ("collecting", "solving"):
@@ -180,6 +193,7 @@ class LiveState:
     def _cameras(self) -> dict[str, dict[str, Any]]:
         out: dict[str, dict[str, Any]] = {}
         for camera in sorted(set(self.ptz) | set(self.poses) | set(self.previews)
+                             | set(self.snapshots)
                              | set(self.collections)):
             state, pose, preview = (self.ptz.get(camera), self.poses.get(camera),
                                     self.previews.get(camera))
@@ -199,18 +213,34 @@ class LiveState:
                 entry["pose_error_px"] = pose.mean_error_px
                 if state is not None and state.status != "camera_unreachable":
                     entry["looking_at"] = looking_at(pose, state.pan_deg, state.tilt_deg)
-            if preview is not None:
+            shot = self.snapshots.get(camera)
+            if shot is not None and (preview is None
+                                     or shot[0].measured_s > preview.measured_s):
+                frame, markers = shot
                 entry["preview"] = {
-                    "seq": preview.seq, "width_px": preview.width_px,
-                    "height_px": preview.height_px, "robot_px": preview.robot_px,
-                    "markers": [[d.u_px, d.v_px, d.radius_long_px] for d in preview.markers],
+                    "seq": f"snapshot-{frame.seq}", "kind": "calibration snapshot",
+                    "width_px": frame.width_px, "height_px": frame.height_px,
+                    "robot_px": None, "markers": _drawn(markers),
+                    "measured_s": frame.measured_s}
+            elif preview is not None:
+                entry["preview"] = {
+                    "seq": f"preview-{preview.seq}", "kind": "preview",
+                    "width_px": preview.width_px, "height_px": preview.height_px,
+                    "robot_px": preview.robot_px, "markers": _drawn(preview.markers),
                     "measured_s": preview.measured_s}
             out[camera] = entry
         return out
 
     def preview_jpeg(self, camera: str) -> bytes | None:
-        preview = self.previews.get(camera)
+        """The camera's latest picture: its preview, or in calibration mode its snapshot."""
+        preview, shot = self.previews.get(camera), self.snapshots.get(camera)
+        if shot is not None and (preview is None or shot[0].measured_s > preview.measured_s):
+            return shot[0].data
         return None if preview is None else preview.jpeg
+
+
+def _drawn(markers: list[m.DetectedMarker]) -> list[list[float]]:
+    return [[d.u_px, d.v_px, d.radius_long_px] for d in markers]
 
 
 def _collection(progress: m.CollectProgress | None, since_s: float | None

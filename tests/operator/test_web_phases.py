@@ -14,6 +14,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -159,8 +160,23 @@ def test_2_calibration_progress_per_camera(tab: object, quiet: Quiet) -> None:
     quiet.bus.publish(keys.PTZ_STATE, m.PtzState(
         measured_s=time.time(), camera="ptz1", status="calibrating", pan_deg=10.0,
         tilt_deg=-20.0, zoom=1, focal_mm=3.8, aim_error_deg=0.0), camera="ptz1")
+    picture = np.full((576, 704), 40, np.uint8)
+    cv2.circle(picture, (300, 200), 6, 255, -1)  # the wand's marker
+    jpeg = cv2.imencode(".jpg", picture)[1].tobytes()
+    taken = time.time()
+    quiet.bus.publish(keys.PTZ_SNAPSHOT, m.CameraFrame(
+        measured_s=taken, camera="ptz1", seq=9, width_px=704, height_px=576, encoding="jpeg",
+        data=jpeg), camera="ptz1")
+    quiet.bus.publish(keys.PTZ_DETECTIONS, m.MarkerDetections(
+        measured_s=taken, camera="ptz1", status="ok", threshold=230, width_px=704,
+        height_px=576, markers=[m.DetectedMarker(
+            u_px=300.0, v_px=200.0, radius_long_px=6.0, radius_short_px=6.0, angle_deg=0.0,
+            roundness=1.0, area_px=113)]), camera="ptz1")
     text = wait_for(lambda: "12 of 40" in _text(tab, "#camera-ptz1") and _text(
         tab, "#camera-ptz1"), timeout=5)
+    canvas = tab.locator("#camera-ptz1 canvas")  # type: ignore[attr-defined]
+    wait_for(lambda: canvas.get_attribute("data-markers") == "1", timeout=5)
+    assert canvas.get_attribute("data-kind") == "calibration snapshot"
     assert "calibrating: 12 of 40 passpoints" in text and "passed over: no marker 24" in text
     left = float(text.split("about ")[1].split(" s left")[0])
     assert 60 <= left <= 80, text
@@ -168,8 +184,6 @@ def test_2_calibration_progress_per_camera(tab: object, quiet: Quiet) -> None:
         "document.querySelector('#camera-ptz1 .bar div').style.width")
     assert width == "30%"
     assert "aim error" not in text, "no aim error while calibrating"
-    assert "waiting for ptz1's first preview" in tab.locator(  # type: ignore[attr-defined]
-        "#camera-ptz1 canvas").get_attribute("data-waiting")
     _shot(tab, quiet, "2-calibrating")
 
 
@@ -193,6 +207,8 @@ def test_3_following_with_alarms_in_the_banner_and_the_plot(tab: object, quiet: 
     assert int(tab.locator("#plot").get_attribute("data-points")) >= 3  # type: ignore[attr-defined]
     assert tab.locator("#plot").get_attribute("data-waiting") == ""  # type: ignore[attr-defined]
     assert "uncalibrated: no passpoint for 60 s" in _text(tab, "#camera-ptz2")
+    assert "waiting for ptz2's first preview" in tab.locator(  # type: ignore[attr-defined]
+        "#camera-ptz2 canvas").get_attribute("data-waiting"), "never a blank picture"
     assert _text(tab, "#gantry-pill") == "gantry: armed, tracking"
     assert "sideways pull" in _text(tab, "#offload") and "(limit 5 %)" in _text(tab, "#offload")
     _shot(tab, quiet, "3-alarms")

@@ -72,9 +72,42 @@ def test_cameras_show_pose_direction_and_preview_but_not_the_jpeg_in_the_json() 
                                   markers=[], robot_px=[350.0, 290.0]))
     camera = state.view(3.0)["cameras"]["ptz1"]
     assert camera["position"][0] == MOUNTS["ptz1"].x_mm, "an older pose does not replace"
-    assert camera["looking_at"] is not None and camera["preview"]["seq"] == 7
+    assert camera["looking_at"] is not None and camera["preview"]["seq"] == "preview-7"
     assert "jpeg" not in json.dumps(state.view(3.0))
     assert state.preview_jpeg("ptz1") == b"\xff\xd8jpeg" and state.preview_jpeg("ptz9") is None
+
+
+def test_in_calibration_mode_the_snapshot_with_its_markers_is_the_picture() -> None:
+    state = LiveState()
+    state.on_message(m.PtzPreview(measured_s=1.0, camera="ptz1", seq=3, width_px=704,
+                                  height_px=576, jpeg=b"preview", pan_deg=0, tilt_deg=0,
+                                  markers=[]))
+    shot = m.CameraFrame(measured_s=2.0, camera="ptz1", seq=41, width_px=704, height_px=576,
+                         encoding="jpeg", data=b"snapshot")
+    state.on_message(shot)
+    marker = m.DetectedMarker(u_px=100.0, v_px=200.0, radius_long_px=4.0, radius_short_px=3.9,
+                              angle_deg=0.0, roundness=1.03, area_px=50)
+    state.on_message(m.MarkerDetections(measured_s=1.9, camera="ptz1", status="ok",
+                                        threshold=230, width_px=704, height_px=576,
+                                        markers=[marker]))  # another snapshot's: not drawn
+    shown = state.view(3.0)["cameras"]["ptz1"]["preview"]
+    assert shown["kind"] == "calibration snapshot" and shown["seq"] == "snapshot-41"
+    assert shown["markers"] == [] and state.preview_jpeg("ptz1") == b"snapshot"
+    state.on_message(m.MarkerDetections(measured_s=2.0, camera="ptz1", status="ok",
+                                        threshold=230, width_px=704, height_px=576,
+                                        markers=[marker]))
+    assert state.view(3.0)["cameras"]["ptz1"]["preview"]["markers"] == [[100.0, 200.0, 4.0]]
+    state.on_message(m.PtzPreview(measured_s=5.0, camera="ptz1", seq=4, width_px=704,
+                                  height_px=576, jpeg=b"later", pan_deg=0, tilt_deg=0,
+                                  markers=[]))  # following again: the preview
+    assert state.view(6.0)["cameras"]["ptz1"]["preview"]["kind"] == "preview"
+    assert state.preview_jpeg("ptz1") == b"later"
+    # the detections may be handled before their snapshot (each key has its own thread)
+    state.on_message(m.MarkerDetections(measured_s=7.0, camera="ptz1", status="ok",
+                                        threshold=230, width_px=704, height_px=576,
+                                        markers=[marker]))
+    state.on_message(shot.model_copy(update={"measured_s": 7.0, "seq": 42}))
+    assert state.view(8.0)["cameras"]["ptz1"]["preview"]["markers"] == [[100.0, 200.0, 4.0]]
 
 
 @pytest.fixture

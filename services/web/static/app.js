@@ -403,7 +403,12 @@ function drawPreview(canvas, img, p) {
     c.beginPath(); c.moveTo(u - 12, v - 12); c.lineTo(u + 12, v + 12);
     c.moveTo(u + 12, v - 12); c.lineTo(u - 12, v + 12); c.stroke();
   }
+  if (p.kind !== "preview") {  // calibration mode: say what the picture is
+    c.fillStyle = "rgba(0,0,0,0.6)"; c.fillRect(0, 0, 330, 30);
+    c.fillStyle = "#ffd84d"; c.font = "20px sans-serif"; c.fillText(p.kind, 8, 22);
+  }
   canvas.dataset.seq = String(p.seq);
+  canvas.dataset.kind = p.kind;
   canvas.dataset.waiting = "";
   canvas.dataset.markers = String(p.markers.length);
 }
