@@ -54,10 +54,12 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(1234)
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="session", autouse=True)
 def compiled_detector() -> None:
-    """Services compile the marker detector at start (seconds in a fresh checkout, before
-    they act); tests that time a service's behaviour start with it compiled."""
+    """Services compile the marker detector at start (about 10 s in a fresh checkout, in
+    every process at once, before they act): every test session compiles it first, into the
+    cache the services load (0.2 s), so that no test that times a service waits for the
+    compiler (a demo-calibration test once missed its 30 s that way in a fresh clone)."""
     warm_up()
 
 

@@ -21,8 +21,6 @@ from services.gantry.frames import OpenCvFrames
 from services.gantry.settings import GantrySettings
 from tests.video import marker_video
 
-pytestmark = pytest.mark.usefixtures("compiled_detector")
-
 
 def _path_csv(tmp_path: Path) -> Path:
     t = np.arange(0, 12.01, 0.5)

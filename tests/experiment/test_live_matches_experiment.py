@@ -20,7 +20,6 @@ from services.sim.robots import MARKER_HEIGHT_MM
 from tests.conftest import free_port, stb_process, wait_for
 from tests.gantry.rig import Operator
 
-pytestmark = pytest.mark.usefixtures("compiled_detector")
 END_S = 30.0  # scenario seconds run
 WINDOW_S = (10.0, 28.0)  # compared: once both have settled, before the live run's end
 

@@ -15,7 +15,6 @@ from services.gantry.settings import GantrySettings
 from services.sim.robots import MARKER_HEIGHT_MM
 from services.sim.settings import SimSettings
 
-pytestmark = pytest.mark.usefixtures("compiled_detector")
 SEED = 1
 SHORT = {"locomotive": {"rounds": 3}, "walker": {"duration_s": 150.0}}
 """Shortened from 5 rounds and 240 s; the figures move by a few per cent (measured in

@@ -15,7 +15,6 @@ from services.gantry.commission_cli import main
 from services.sim.crane import CraneParams, ramp_following_s
 from tests.gantry.rig import MARKER_MM, CraneRig, feeding
 
-pytestmark = pytest.mark.usefixtures("compiled_detector")
 CONFIGURED = CraneParams(max_speed_mm_s=400.0, max_accel_mm_s2=1500.0, cycle_s=0.25,
                          dead_time_s=0.15, position_time_constant_s=0.06,
                          report_latency_s=0.08, report_jitter_s=0.0,

@@ -16,8 +16,6 @@ FLAT = HeightMap(np.full((3, 3), GROUND_MM, np.float32), -5000, -5000, 5000)
 CAMERA = TrackingCamera(focal_mm=8.0, pixel_mm=0.0075, height_mm=3500.0)
 SETTINGS = GantrySettings(marker_height_mm=MARKER_MM, algorithm="basic", stale_after_s=0.6)
 
-pytestmark = pytest.mark.usefixtures("compiled_detector")
-
 
 def _frame(markers_xy: list[tuple[float, float]], crane_xy: np.ndarray) -> np.ndarray:
     blobs = []

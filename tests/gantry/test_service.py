@@ -22,8 +22,6 @@ from services.gantry.settings import GantrySettings
 from tests.conftest import free_port, wait_for
 from tests.gantry.rig import MARKER_MM, CraneRig, Operator, feed
 
-pytestmark = pytest.mark.usefixtures("compiled_detector")
-
 
 def _feed(rig: dict, robot: Callable[[float], np.ndarray | None], seconds: float,
           stop: threading.Event | None = None) -> None:

@@ -24,7 +24,6 @@ from services.sim.camera_server import CameraServer, SimCamera
 from services.sim.ptz import PtzHead
 from tests.conftest import free_port, wait_for
 
-pytestmark = pytest.mark.usefixtures("compiled_detector")
 MOUNT = Pose(3550, 1090, 2190, 180, 30, 165)
 TARGET = np.array([-300.0, 200.0, 100.0])
 
