@@ -83,10 +83,11 @@ class Bridge:
         self.forwarded += 1
 
     def _typed(self, typed: Typed) -> None:
-        schema = self._foxglove.Schema(name=typed.schema_name, encoding=typed.schema_encoding,
-                                       data=typed.schema_data)
         channel = self.channels.get(typed.topic)
         if channel is None:
+            schema = self._foxglove.Schema(name=typed.schema_name,
+                                           encoding=typed.schema_encoding,
+                                           data=typed.schema_data)
             channel = self.channels[typed.topic] = self._foxglove.Channel(
                 typed.topic, schema=schema, message_encoding=typed.message_encoding,
                 context=self.context)

@@ -104,7 +104,8 @@ class Recorder:
             return
         if any(e.includes(key) for e in self._exprs[:index]):  # an earlier expression has it
             return
-        self._queue.put((str(key), sample.payload.to_bytes(), str(sample.encoding), received))
+        self._queue.put((str(key), sample.payload.to_bytes(), str(sample.encoding), received,
+                         None))
 
     def _run(self) -> None:
         while (item := self._queue.get()) is not None:
@@ -113,8 +114,10 @@ class Recorder:
             except Exception:  # noqa: BLE001 - one bad sample must not end the recording
                 log.exception("cannot record a sample of %s", item[0])
 
-    def _write(self, key: str, payload: bytes, encoding: str, received: float) -> None:
-        msg, topic = self._decode(key, payload)
+    def _write(self, key: str, payload: bytes, encoding: str, received: float,
+               made: m.Message | None) -> None:
+        """One sample; ``made``: the message itself when the recorder made it (video)."""
+        msg, topic = (made, keys.VIDEO) if made is not None else self._decode(key, payload)
         model = topic.model.__name__ if topic is not None else ""
         measured = (msg.measured_s if isinstance(msg, m.Message)
                     else _float_or_none(msg.get("measured_s")) if isinstance(msg, dict) else None)
@@ -153,7 +156,7 @@ class Recorder:
                               height_px=size[1], encoding="jpeg", data=jpeg)
         self._queue.put((keys.VIDEO.key(self.prefix, camera=camera),
                          codec.encode(frame, sent_s=received_s),
-                         f"{codec.CONTENT_TYPE};CameraFrame", received_s))
+                         f"{codec.CONTENT_TYPE};CameraFrame", received_s, frame))
 
     def close(self) -> None:
         """Stop listening, write what is queued, and finish the file (its summary)."""

@@ -67,15 +67,15 @@ class Typed:
     time_s: float
 
 
-_SCHEMAS: dict[type, Any] = {}
+_SCHEMAS: dict[type, tuple[str, str, bytes]] = {}  # (name, encoding, descriptors), made once
 
 
 def _typed(topic: str, msg: Any, time_s: float) -> Typed:
     schema = _SCHEMAS.get(type(msg))
     if schema is None:
-        schema = _SCHEMAS[type(msg)] = type(msg).get_schema()
-    return Typed(topic, schema.name, schema.encoding, bytes(schema.data), "protobuf",
-                 msg.encode(), time_s)
+        found = type(msg).get_schema()
+        schema = _SCHEMAS[type(msg)] = (found.name, found.encoding, bytes(found.data))
+    return Typed(topic, *schema, "protobuf", msg.encode(), time_s)
 
 
 def _time(seconds: float) -> fm.Timestamp:

@@ -133,17 +133,19 @@ class LiveState:
         while self.history and self.history[0][0] < t - self.history_s:
             self.history.popleft()
 
-    def judge(self, now_s: float) -> None:
+    def judge(self, now_s: float, services: list[dict[str, Any]] | None = None) -> None:
         """Alarms begin and end by what is known at ``now_s`` (the service calls this on a
-        timer, so that an alarm's start does not wait for a page to look)."""
+        timer, so that an alarm's start does not wait for a page to look); ``services``: the
+        rows of ``_services(now_s)`` when the caller has them."""
+        rows = self._services(now_s) if services is None else services
         self.alarms.update(
             crane_alarms(self.crane, self.estimate, self.offload, now_s)
-            + service_alarms(self._services(now_s)) + calibration_alarms(self.collections),
-            now_s)
+            + service_alarms(rows) + calibration_alarms(self.collections), now_s)
 
     def view(self, now_s: float) -> dict[str, Any]:
         """Everything the page draws, JSON-ready (images only by sequence number)."""
-        self.judge(now_s)
+        services = self._services(now_s)
+        self.judge(now_s, services)
         return {
             "now_s": now_s,
             "alarms": self.alarms.view(),
@@ -152,7 +154,7 @@ class LiveState:
                         else self.offload.warn_above_pct,
                         "points": [[round(t - now_s, 1), round(e), round(p, 2)]
                                    for t, e, p in self.history]},
-            "services": self._services(now_s),
+            "services": services,
             "robot": None if self.robot is None else {
                 "x_mm": self.robot.x_mm, "y_mm": self.robot.y_mm, "z_mm": self.robot.z_mm,
                 "speed_mm_s": math.hypot(self.robot.vx_mm_s, self.robot.vy_mm_s),
