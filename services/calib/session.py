@@ -50,6 +50,7 @@ class Session:
         self._pending: deque[m.MarkerDetections] = deque(maxlen=200)
         self._snapshots: OrderedDict[float, bytes] = OrderedDict()
         self._camera_state: m.PtzState | None = None
+        self._holding = True  # the camera is held for the collection: its states count
         self._started = time.time()
 
     # --- fed by bus handlers -----------------------------------------------------------------
@@ -70,8 +71,20 @@ class Session:
                 self._snapshots.popitem(last=False)
 
     def on_state(self, msg: m.PtzState) -> None:
-        if msg.status == "calibrating" and msg.measured_s >= self._started:
+        if self._holding and msg.status == "calibrating" and msg.measured_s >= self._started:
             self._camera_state = msg
+
+    @property
+    def camera_state(self) -> m.PtzState | None:
+        """The camera as it reported itself while held for the collection (its pan and tilt
+        are the passpoints')."""
+        return self._camera_state
+
+    def stop_holding(self) -> None:
+        """The collection is over: a state that comes after the camera is released (it may
+        still say "calibrating" while it turns back home) is not the passpoints' pan and
+        tilt."""
+        self._holding = False
 
     def cancel(self) -> None:
         self._cancel.set()
@@ -82,6 +95,7 @@ class Session:
         try:
             finished = self._collect()
         finally:
+            self.stop_holding()
             self._calibration_mode(active=False)
         try:
             if finished:
@@ -150,7 +164,7 @@ class Session:
         cv2.imwrite(str(self.store.image_dir(self.camera) / f"{index:03d}.jpg"), drawn)
 
     def _solve(self) -> None:
-        state = self._camera_state
+        state = self.camera_state
         if state is None:
             self._finish("failed", "the camera never reported being in calibration mode")
             return

@@ -136,3 +136,24 @@ def test_a_binary_passpoint_file_is_named(tmp_path: Path, capsys) -> None:  # no
     assert main([str(path)]) == 2
     err = capsys.readouterr().err
     assert str(path) in err and "not a CSV text file" in err and "Traceback" not in err
+
+
+def test_the_pose_is_solved_at_the_pan_and_tilt_the_camera_was_held_at(tmp_path: Path) -> None:
+    """Once the collection is over and the camera released, it may still say "calibrating"
+    while it turns back home: that state is not the passpoints' pan and tilt (a collection
+    held at pan 6° once stored pan 0°)."""
+    from services.calib.session import Session
+    from services.calib.settings import CalibSettings
+    from services.calib.store import PoseStore
+
+    session = Session(None, CalibSettings(), PoseStore(tmp_path), "ptz1", 10, 60.0,  # type: ignore[arg-type]
+                      lambda pose, report: None)
+
+    def state(pan: float) -> m.PtzState:
+        return m.PtzState(measured_s=session._started + 1, camera="ptz1", status="calibrating",
+                          pan_deg=pan, tilt_deg=-4.0, zoom=1, focal_mm=3.8, aim_error_deg=0.0)
+
+    session.on_state(state(6.0))
+    session.stop_holding()
+    session.on_state(state(0.0))  # turning home, still "calibrating"
+    assert session.camera_state is not None and session.camera_state.pan_deg == 6.0
