@@ -74,6 +74,7 @@ class CalibrationHold:
     _infrared_asserted: float = 0.0  # monotonic time the IR-cut filter was last set off
     _homed_at: float = 0.0  # monotonic time of the last move=home
     _rehold_at: float = 0.0  # monotonic time from which a re-hold may be sent
+    _commanded: bool = False  # the request's hold was sent to the camera (not lost to an error)
 
     def active(self, now: float) -> bool:
         return self.request is not None and now < self.expires_at
@@ -90,16 +91,20 @@ class CalibrationHold:
         entering = not self.active(now)
         moved = self.request is None or _asked(msg) != _asked(self.request)
         self.request, self.expires_at = msg, now + msg.lease_s
+        if entering or moved:
+            self._commanded = False
         if entering:
             log.info("%s: calibration mode (pan %s, tilt %s, zoom %s)", self.camera.name,
                      msg.pan_deg, msg.tilt_deg, msg.zoom)
             self._last_position = None
             self._infrared()
-        if entering or moved:
+        if not self._commanded:
             self._go_to_hold(msg)
 
     def _go_to_hold(self, msg: m.CalibrationMode) -> None:
-        """Command the hold: the request's pan, tilt and zoom; home for what it leaves open."""
+        """Command the hold: the request's pan, tilt and zoom; home for what it leaves open.
+        A command the camera did not take (PtzError) is sent again by the next renewal or
+        snapshot: the camera is never held wherever it happened to stand."""
         if None not in _asked(msg):
             self.hold = (msg.pan_deg, msg.tilt_deg, msg.zoom)  # type: ignore[assignment]
         else:
@@ -107,6 +112,7 @@ class CalibrationHold:
             self.camera.home()
         if any(v is not None for v in _asked(msg)):
             self.camera.move_to(msg.pan_deg, msg.tilt_deg, msg.zoom)
+        self._commanded = True
 
     def _at_hold(self, pan: float, tilt: float, zoom: int) -> bool:
         """True once the camera stands at the hold (a move takes effect only after the
@@ -153,6 +159,8 @@ class CalibrationHold:
         detections. Camera errors propagate (PtzError)."""
         if time.monotonic() - self._infrared_asserted > REASSERT_INFRARED_S:
             self._infrared()
+        if not self._commanded and self.request is not None:
+            self._go_to_hold(self.request)
         captured = time.time()
         jpeg = self.camera.snapshot_jpeg()
         position = self.camera.position()

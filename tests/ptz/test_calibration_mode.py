@@ -13,7 +13,7 @@ from common import keys
 from common import messages as m
 from common.camera import PtzLimits
 from services.ptz.calibration import CalibrationHold
-from services.ptz.camera import AxisPtzCamera, http_client
+from services.ptz.camera import AxisPtzCamera, PtzUnreachable, http_client
 from services.sim.camera_server import CameraServer, SimCamera
 from services.sim.lab import Lab
 from tests.conftest import wait_for
@@ -91,16 +91,55 @@ def test_a_burst_of_requests_is_coalesced_not_queued(service: dict) -> None:
 
 
 
-def test_the_hold_is_home_and_a_camera_moved_away_is_sent_back(lab: Lab) -> None:
-    """Left looking elsewhere before calibration, and moved by another client during it, the
-    camera is held at its home position: no passpoint comes from a foreign view."""
+def _sim_camera(lab: Lab) -> tuple:
+    """The lab's first camera served over VAPIX on loopback: (its settings, server, URL)."""
     cam = lab.settings.cameras[0]
     t0 = time.monotonic()
     sim = SimCamera(cam.name, lab.heads[cam.name], lambda: lab.bright_points(0.0), [],
                     lambda: time.monotonic() - t0, np.random.default_rng(0), cam.user,
                     cam.password)
     server = CameraServer(sim, "127.0.0.1", 0).start()
-    url = f"http://127.0.0.1:{server.port}"
+    return cam, server, f"http://127.0.0.1:{server.port}"
+
+
+class HomeTimesOutOnce(AxisPtzCamera):
+    """A camera whose first ``move=home`` gets no answer in time (a loaded network)."""
+
+    failed = False
+
+    def home(self) -> None:
+        if not self.failed:
+            self.failed = True
+            raise PtzUnreachable(f"{self.name}: ReadTimeout")
+        super().home()
+
+
+def test_a_hold_command_lost_to_a_timeout_is_sent_again(lab: Lab) -> None:
+    """The camera did not answer the command that takes it to its hold: it is sent again,
+    so the passpoints come from the pan and tilt asked for, not from wherever it stood (a
+    clean-clone CI collected at pan 0 for a collection held at pan 6)."""
+    cam, server, url = _sim_camera(lab)
+    detections: list[m.MarkerDetections] = []
+    mode = CalibrationHold(HomeTimesOutOnce(http_client(url, cam.user, cam.password), cam.name),
+                           detections.append, lambda _f: None)
+    try:
+        with pytest.raises(PtzUnreachable):
+            mode.on_request(_request(6.0, -4.0), time.time(), PtzLimits())
+        deadline = time.monotonic() + 5.0
+        while not detections and time.monotonic() < deadline:
+            mode.cycle()
+            time.sleep(0.1)
+        assert detections, "detections once it stands at its hold"
+        assert mode.hold == (6.0, -4.0, 1)
+        assert mode._last_position == mode.hold
+    finally:
+        server.close()
+
+
+def test_the_hold_is_home_and_a_camera_moved_away_is_sent_back(lab: Lab) -> None:
+    """Left looking elsewhere before calibration, and moved by another client during it, the
+    camera is held at its home position: no passpoint comes from a foreign view."""
+    cam, server, url = _sim_camera(lab)
     other = httpx.Client(base_url=url, auth=httpx.DigestAuth(cam.user, cam.password), timeout=3)
     detections: list[m.MarkerDetections] = []
     mode = CalibrationHold(AxisPtzCamera(http_client(url, cam.user, cam.password), cam.name),
