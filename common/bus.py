@@ -233,21 +233,32 @@ class Bus:
 
     # --- publishing -------------------------------------------------------------------------
 
-    def publish(self, topic: Topic[M], msg: M, **params: str) -> None:
-        """Stamp ``sent_s`` and put ``msg`` on the topic's key (drop, never block, if congested)."""
+    def publish(self, topic: Topic[M], msg: M, *, max_age_s: float | None = None,
+                **params: str) -> bool:
+        """Stamp ``sent_s`` and put ``msg`` on the topic's key (drop, never block, if congested).
+
+        With ``max_age_s``, a message measured longer than that before its ``sent_s`` stamp is
+        not sent but counted as stale (the age is judged at the stamp receivers judge it by).
+        True if it was put."""
         if not isinstance(msg, topic.model):
             raise TypeError(
                 f"{topic.path} carries {topic.model.__name__}, not {type(msg).__name__}")
         key = topic.key(self.prefix, **params)
+        sent_s = self._clock()
+        if max_age_s is not None and sent_s - msg.measured_s > max_age_s:
+            self.count_drop(key, codec.STALE, f"measured {sent_s - msg.measured_s:.3f} s "
+                            f"before sending > {max_age_s} s: not sent")
+            return False
         publisher = self._publishers.get(key)
         if publisher is None:
             publisher = self.session.declare_publisher(
                 key, encoding=zenoh.Encoding(f"{codec.CONTENT_TYPE};{topic.model.__name__}"),
                 congestion_control=zenoh.CongestionControl.DROP)
             self._publishers[key] = publisher
-        publisher.put(codec.encode(msg, sent_s=self._clock()))
+        publisher.put(codec.encode(msg, sent_s=sent_s))
         with self._stats_lock:
             _stats_of(self._stats, key).published += 1
+        return True
 
     # --- subscribing ------------------------------------------------------------------------
 

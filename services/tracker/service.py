@@ -12,9 +12,7 @@ out, stamped with their capture time, for calibration and recordings.
 
 from __future__ import annotations
 
-import time
-
-from common import codec, keys
+from common import keys
 from common import messages as m
 from common.node import Node
 from common.robot_picker import RobotPicker, Seen
@@ -38,8 +36,6 @@ def run(node: Node[TrackerSettings], mocap: MotionCapture | None = None) -> None
     mocap = mocap or make_mocap(settings)
     picker = make_picker(settings)
 
-    robot_key = keys.TRACKER_ROBOT.key(node.bus.prefix)
-
     def on_frame(frame: m.MarkerFrame) -> None:
         body = next((b for b in frame.bodies if b.name == settings.robot_body), None) \
             if settings.robot_body else None
@@ -48,19 +44,17 @@ def run(node: Node[TrackerSettings], mocap: MotionCapture | None = None) -> None
             robot = picker.update(frame.measured_s, seen)
         else:
             robot = picker.update(frame.measured_s, frame.markers)
-        age = time.time() - frame.measured_s  # since capture (QTM's stamp on our clock)
-        if robot is not None and age > settings.bus.max_age_s:
-            # a backlog (the tracker stalled): the robot sample is control input, never sent
-            # as fresh; the frame itself goes on below with its true capture time
-            node.bus.count_drop(robot_key, codec.STALE, f"frame {frame.frame} captured "
-                                f"{age:.3f} s ago > {settings.bus.max_age_s} s")
-        elif robot is not None:  # first: the robot sample is what the cameras wait for
+        if robot is not None:  # first: the robot sample is what the cameras wait for
+            # a frame from a backlog (the tracker stalled) gives no robot sample: it is
+            # control input, never sent as fresh (the bus judges its age at the sent stamp);
+            # the frame itself goes on below with its true capture time
             (x, y, z), (vx, vy, vz) = robot
             turn = {} if body is None else {"body": body.name, "qw": body.qw, "qx": body.qx,
                                             "qy": body.qy, "qz": body.qz}
             node.bus.publish(keys.TRACKER_ROBOT, m.RobotPosition(
                 measured_s=frame.measured_s, label="" if body else settings.robot_label,
-                x_mm=x, y_mm=y, z_mm=z, vx_mm_s=vx, vy_mm_s=vy, vz_mm_s=vz, **turn))
+                x_mm=x, y_mm=y, z_mm=z, vx_mm_s=vx, vy_mm_s=vy, vz_mm_s=vz, **turn),
+                max_age_s=settings.bus.max_age_s)
         node.bus.publish(keys.TRACKER_MARKERS, frame)
 
     def on_state(connected: bool, why: str) -> None:

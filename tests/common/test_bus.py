@@ -80,6 +80,24 @@ def test_stale_and_future_samples_never_reach_the_handler(make_bus: Callable[...
     assert consumer.key_stats()["stb/tracker/robot"].dropped == {"stale": 1, "from_future": 1}
 
 
+def test_a_publisher_with_max_age_does_not_send_what_is_already_stale(
+        make_bus: Callable[..., Bus]) -> None:
+    """The age is judged at the ``sent_s`` stamp receivers judge it by: a sample measured
+    longer ago than ``max_age_s`` is counted as stale by its publisher and never put."""
+    producer, consumer = make_bus(), make_bus()
+    got: queue.Queue[m.RobotPosition] = queue.Queue()
+    consumer.subscribe(keys.TRACKER_ROBOT, got.put, latest=False)
+    time.sleep(SETTLE_S)
+    assert not producer.publish(keys.TRACKER_ROBOT, _robot(1.0, time.time() - 0.6),
+                                max_age_s=0.5)
+    assert producer.publish(keys.TRACKER_ROBOT, _robot(2.0, time.time() - 0.1), max_age_s=0.5)
+    arrived = got.get(timeout=2)
+    assert arrived.x_mm == 2.0 and arrived.sent_s - arrived.measured_s <= 0.5
+    assert got.empty()
+    stats = producer.key_stats()["stb/tracker/robot"]
+    assert stats.dropped == {"stale": 1} and stats.published == 1
+
+
 def test_slow_consumer_gets_the_latest_value_and_never_holds_back_the_producer(
         make_bus: Callable[..., Bus]) -> None:
     producer, consumer = make_bus(), make_bus()
