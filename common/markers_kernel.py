@@ -35,7 +35,7 @@ def bright_segments(image: np.ndarray, band_max: np.ndarray, band_rows: int, flo
     rows, cols = image.shape
     bands = band_max.shape[0]
     row_max = np.zeros(rows, np.uint8)
-    row_span = np.zeros((rows, 2), np.int64)
+    row_span = np.empty((rows, 2), np.int64)  # read only where row_max reaches floor
     band_start = np.zeros(bands + 1, np.int64)
     segments = np.empty((cols // 2 + 1, 2), np.int64)  # a band has at most this many
     found = np.empty((0, 2), np.int64)
@@ -80,12 +80,26 @@ def bright_segments(image: np.ndarray, band_max: np.ndarray, band_rows: int, flo
 
 
 @njit(cache=True, nogil=True)
+def _bright_rows(rows: int, band_rows: int, band_start: np.ndarray) -> np.ndarray:
+    """The rows of the bands that have bright segments, top to bottom (the others have
+    nothing at any threshold: not even looked at)."""
+    out = np.empty(rows, np.int64)
+    n = 0
+    for b in range(band_start.shape[0] - 1):
+        if band_start[b] < band_start[b + 1]:
+            for y in range(b * band_rows, min((b + 1) * band_rows, rows)):
+                out[n] = y
+                n += 1
+    return out[:n]
+
+
+@njit(cache=True, nogil=True)
 def run_capacity(row_max: np.ndarray, band_rows: int, band_start: np.ndarray,
-                 segments: np.ndarray, threshold: int, l_min: int) -> int:
+                 segments: np.ndarray, bright: np.ndarray, threshold: int, l_min: int) -> int:
     """The most runs a threshold can give: one per l_min + 1 columns of each segment in each
     row that reaches it, and one more (the lowest threshold gives the most)."""
     capacity = 1
-    for y in range(row_max.shape[0]):
+    for y in bright:
         if row_max[y] >= threshold:
             b = y // band_rows
             for k in range(band_start[b], band_start[b + 1]):
@@ -95,18 +109,17 @@ def run_capacity(row_max: np.ndarray, band_rows: int, band_start: np.ndarray,
 
 @njit(cache=True, nogil=True)
 def _scan_runs(image: np.ndarray, row_max: np.ndarray, row_span: np.ndarray, band_rows: int,
-               band_start: np.ndarray, segments: np.ndarray, threshold: int, l_min: int,
-               runs: np.ndarray, weights: np.ndarray) -> tuple:
+               band_start: np.ndarray, segments: np.ndarray, bright: np.ndarray,
+               threshold: int, l_min: int, runs: np.ndarray, weights: np.ndarray) -> tuple:
     """Runs (row, start, end exclusive; Σw, Σw·x) with w = gray − threshold + 1, in the rows
     whose maximum reaches the threshold, within their band's segments and their span; sorted
     by row, then
     start; written into ``runs`` (n × 3) and ``weights`` (n × 2), which hold
     ``run_capacity`` of them."""
-    rows = image.shape[0]
     run_row, run_start, run_end = runs[:, 0], runs[:, 1], runs[:, 2]
     run_w, run_wx = weights[:, 0], weights[:, 1]
     n = 0
-    for y in range(rows):
+    for y in bright:
         if row_max[y] < threshold:
             continue
         b = y // band_rows
@@ -167,19 +180,22 @@ def _label_runs(run_row: np.ndarray, run_start: np.ndarray, run_end: np.ndarray)
 
 @njit(cache=True, nogil=True)
 def regions_kernel(image: np.ndarray, row_max: np.ndarray, row_span: np.ndarray, band_rows: int,
-                   band_start: np.ndarray, segments: np.ndarray, threshold: int, l_min: int,
-                   small_area: int, runs: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """One row per region, columns u, v, radius_long, radius_short, angle_deg, roundness, area:
-    the brightness-weighted centroid, and the binary region's inertia ellipse (radius =
-    2·√eigenvalue, + 1/12 px² for a pixel's own extent, so a disc of radius R gives R), its
-    angle, roundness and area.
+                   band_start: np.ndarray, segments: np.ndarray, bright: np.ndarray,
+                   threshold: int, l_min: int, small_area: int, refine_from: int,
+                   runs: np.ndarray, weights: np.ndarray) -> tuple:
+    """(table, seeds): one row per region, columns u, v, radius_long, radius_short,
+    angle_deg, roundness, area: the brightness-weighted centroid, and the binary region's
+    inertia ellipse (radius = 2·√eigenvalue, + 1/12 px² for a pixel's own extent, so a disc
+    of radius R gives R), its angle, roundness and area; and a pixel (row, column) of each.
 
     A region smaller than ``small_area`` leaves too few pixels for its binary shape to say
     whether it is round (three pixels make an "L"); its centroid and ellipse come from the
-    brightness-weighted moments of the blurred spot around it (``weighted_ellipse``)."""
+    brightness-weighted moments of the blurred spot around it (``refine``) — here only for
+    those of at least ``refine_from`` pixels (smaller ones cannot be markers: the threshold
+    loop refines them only in the table it returns)."""
     run_row, run_start, run_end, run_w, run_wx = _scan_runs(
-        image, row_max, row_span, band_rows, band_start, segments, threshold, l_min, runs,
-        weights)
+        image, row_max, row_span, band_rows, band_start, segments, bright, threshold, l_min,
+        runs, weights)
     label, count = _label_runs(run_row, run_start, run_end)
     sums = np.zeros((count, 9))
     seed = np.full((count, 2), -1, np.int64)  # a pixel of each region: its first run's start
@@ -217,13 +233,23 @@ def regions_kernel(image: np.ndarray, row_max: np.ndarray, row_span: np.ndarray,
         out[k, 1] = sums[k, 8] / sums[k, 6]
         out[k, 2], out[k, 3], out[k, 4] = long_r, short_r, angle
         out[k, 5], out[k, 6] = long_r / short_r, area
-        if area < small_area:
-            refined = weighted_ellipse(image, out[k, 0], out[k, 1], int(np.ceil(long_r)) + 3,
-                                       threshold, seed[k, 0], seed[k, 1])
+    refine(image, out, seed, threshold, refine_from, small_area)
+    return out, seed
+
+
+@njit(cache=True, nogil=True)
+def refine(image: np.ndarray, table: np.ndarray, seed: np.ndarray, threshold: int,
+           from_area: int, below_area: int) -> None:
+    """Regions of ``from_area`` to ``below_area`` pixels: centroid and ellipse (and so
+    roundness) from the brightness-weighted moments of the spot around them, in place."""
+    for k in range(table.shape[0]):
+        if from_area <= table[k, 6] < below_area:
+            refined = weighted_ellipse(image, table[k, 0], table[k, 1],
+                                       int(np.ceil(table[k, 2])) + 3, threshold, seed[k, 0],
+                                       seed[k, 1])
             if not np.isnan(refined[0]):
-                out[k, :5] = refined
-                out[k, 5] = refined[2] / refined[3]
-    return out
+                table[k, :5] = refined
+                table[k, 5] = refined[2] / refined[3]
 
 
 @njit(cache=True, nogil=True)
@@ -267,28 +293,49 @@ def weighted_ellipse(image: np.ndarray, u: float, v: float, reach: int, threshol
     out = np.full(5, np.nan)
     if not (r0 <= seed_y < r1 and c0 <= seed_x < c1) or image[seed_y, seed_x] <= floor:
         return out
-    seen = np.zeros((r1 - r0, c1 - c0), np.bool_)
-    stack = np.empty(((r1 - r0) * (c1 - c0), 2), np.int64)
+    # seen: the window with a one-pixel frame marked seen, so that no neighbour needs a
+    # bounds check (offset by r0 - 1, c0 - 1). Filled a row's run at a time (scanline); the
+    # sums are exact in any order (weights are multiples of 1/4, far below 2^50).
+    seen = np.zeros((r1 - r0 + 2, c1 - c0 + 2), np.bool_)
+    seen[0, :] = seen[-1, :] = True
+    seen[:, 0] = seen[:, -1] = True
+    oy, ox = 1 - r0, 1 - c0
+    # a run's start is pushed at most once from each run touching it (above, below)
+    stack = np.empty((3 * (r1 - r0) * (c1 - c0) + 1, 2), np.int64)
     stack[0, 0], stack[0, 1] = seed_y, seed_x
-    seen[seed_y - r0, seed_x - c0] = True
     top = 1
     w = sx = sy = sxx = syy = sxy = 0.0
     while top > 0:
         top -= 1
         y, x = stack[top, 0], stack[top, 1]
-        weight = image[y, x] - floor
-        w += weight
-        sx += weight * x
-        sy += weight * y
-        sxx += weight * x * x
-        syy += weight * y * y
-        sxy += weight * x * y
-        for ny in range(max(y - 1, r0), min(y + 2, r1)):
-            for nx in range(max(x - 1, c0), min(x + 2, c1)):
-                if not seen[ny - r0, nx - c0] and image[ny, nx] > floor:
-                    seen[ny - r0, nx - c0] = True
-                    stack[top, 0], stack[top, 1] = ny, nx
+        if seen[y + oy, x + ox]:
+            continue
+        left = x
+        while not seen[y + oy, left - 1 + ox] and image[y, left - 1] > floor:
+            left -= 1
+        right = x
+        while not seen[y + oy, right + 1 + ox] and image[y, right + 1] > floor:
+            right += 1
+        for col in range(left, right + 1):
+            seen[y + oy, col + ox] = True
+            weight = image[y, col] - floor
+            w += weight
+            sx += weight * col
+            sy += weight * y
+            sxx += weight * col * col
+            syy += weight * y * y
+            sxy += weight * col * y
+        for ny in (y - 1, y + 1):  # 8-connected: the runs touching [left - 1, right + 1]
+            col = left - 1
+            while col <= right + 1:
+                if not seen[ny + oy, col + ox] and image[ny, col] > floor:
+                    stack[top, 0], stack[top, 1] = ny, col
                     top += 1
+                    while col <= right + 1 and not seen[ny + oy, col + ox] \
+                            and image[ny, col] > floor:
+                        col += 1
+                else:
+                    col += 1
     if w <= 0:
         return out
     mean_x, mean_y = sx / w, sy / w
@@ -306,31 +353,52 @@ def weighted_ellipse(image: np.ndarray, u: float, v: float, reach: int, threshol
 
 
 @njit(cache=True, nogil=True)
-def threshold_kernel(image: np.ndarray, row_max: np.ndarray, row_span: np.ndarray,
-                     band_rows: int, band_start: np.ndarray, segments: np.ndarray,
+def threshold_kernel(image: np.ndarray, band_max: np.ndarray, band_rows: int,
                      thresholds: np.ndarray, l_min: int, small_area: int, r_lim: float,
-                     min_area: int, max_area: int) -> tuple:
-    """The paper's threshold loop in one call: from the first threshold down, the regions at
-    each threshold the frame reaches, until one has a marker (roundness below ``r_lim``, area
-    within bounds). Returns (threshold, regions table, which regions are markers); the last
-    threshold and table with no marker when none has one, an empty table when the frame
+                     min_area: int, max_area: int, out: np.ndarray) -> tuple:
+    """The paper's threshold loop in one call (each call from Python costs microseconds, and
+    an array handed back two more: the result goes into ``out``): the bright segments of the
+    bands that reach the lowest threshold (``bright_segments``), then from the first
+    threshold down, the regions at each threshold the frame reaches, until one has a marker
+    (roundness below ``r_lim``, area within bounds).
+
+    Returns (threshold, regions): the threshold, and how many regions it gave, whose rows
+    (``regions_kernel``'s columns, then 1.0 for a marker, 0.0 for not) are written into
+    ``out`` (n × 8) as far as it has room — a caller with less room than regions calls again
+    with more. The last threshold with no marker when none has one, no regions when the frame
     reaches none."""
-    brightest = 0
-    for value in row_max:
+    row_max, row_span, band_start, segments = bright_segments(image, band_max, band_rows,
+                                                              thresholds[-1])
+    brightest = 0  # the frame's brightest pixel (where it reaches the floor: a band's)
+    for value in band_max:
         brightest = max(brightest, value)
+    bright = _bright_rows(image.shape[0], band_rows, band_start)
     table = np.empty((0, 7))
-    is_marker = np.zeros(0, np.bool_)
-    capacity = run_capacity(row_max, band_rows, band_start, segments, thresholds[-1], l_min)
+    seed = np.empty((0, 2), np.int64)
+    capacity = run_capacity(row_max, band_rows, band_start, segments, bright, thresholds[-1],
+                            l_min)
     runs = np.empty((capacity, 3), np.int64)  # one buffer for every threshold's runs
     weights = np.empty((capacity, 2), np.float64)
+    chosen = thresholds[-1]
+    found = False
     for t in thresholds:
         if t > brightest:
             continue
-        table = regions_kernel(image, row_max, row_span, band_rows, band_start, segments, t,
-                               l_min, small_area, runs, weights)
-        is_marker = np.empty(table.shape[0], np.bool_)
+        table, seed = regions_kernel(image, row_max, row_span, band_rows, band_start,
+                                     segments, bright, t, l_min, small_area, min_area, runs,
+                                     weights)
+        chosen = t
         for k in range(table.shape[0]):
-            is_marker[k] = table[k, 5] < r_lim and min_area <= table[k, 6] <= max_area
-        if is_marker.any():
-            return t, table, is_marker
-    return thresholds[-1], table, is_marker
+            if table[k, 5] < r_lim and min_area <= table[k, 6] <= max_area:
+                found = True
+                break
+        if found:
+            break
+    # regions too small to be markers were not refined while the loop went on: the table
+    # handed back has them refined too (a frame without a marker tries every threshold)
+    refine(image, table, seed, chosen, 0, min(min_area, small_area))
+    for k in range(min(table.shape[0], out.shape[0])):
+        out[k, :7] = table[k]
+        out[k, 7] = 1.0 if table[k, 5] < r_lim and min_area <= table[k, 6] <= max_area \
+            else 0.0
+    return (chosen if found else thresholds[-1]), table.shape[0]

@@ -98,6 +98,18 @@ def test_too_many_markers(rng: np.random.Generator) -> None:
     assert result.status == "ok" and len(result.markers) == 3
 
 
+def test_more_regions_than_the_result_table_holds_at_first(rng: np.random.Generator) -> None:
+    """400 markers: more than the kernel's first table has room for (256), so the detector
+    grows it and asks again; every marker comes back, and a frame with fewer after it too."""
+    grid = [(30.0 + 32 * i, 25.0 + 26 * j, 4.0) for i in range(20) for j in range(20)]
+    result = detect(disc_frame(rng, grid), max_markers=1000)
+    assert result.status == "ok" and len(result.markers) == len(result.regions) == 400
+    found = sorted((round(m.u), round(m.v)) for m in result.markers)
+    assert found == sorted((round(u), round(v)) for u, v, _ in grid)
+    again = detect(disc_frame(rng, grid[:3]), max_markers=1000)
+    assert len(again.markers) == 3
+
+
 def test_l_min_drops_stray_bright_pixels(rng: np.random.Generator) -> None:
     image = disc_frame(rng, [], noise=0)
     image[rng.integers(0, H, 300), rng.integers(0, W, 300)] = 255
