@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test compose-test lint setup wire-doc clean
+.PHONY: demo test test-system compose-test lint setup wire-doc clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -18,10 +18,15 @@ setup: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/stb up --lab $(or $(LAB),config/demo.toml)
 
-## Lint, then the full test suite.
+## Lint, then the test suite but for the long whole-lab runs (about 6 minutes on 2 cores).
 test: $(STAMP)
 	$(BIN)/ruff check common services tests benchmarks compose_test
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -m "not system"
+
+## The long whole-lab runs on real time (fault campaign, demo calibration, live vs experiment,
+## commissioning, collection end to end, several hosts): about 4 minutes. CI runs both.
+test-system: $(STAMP)
+	$(BIN)/python -m pytest -q -m system
 
 ## The lab under a real Docker engine (root; installs Debian's docker.io when missing):
 ## build, docker compose up with the sim, crash, router restart, down/up (docs/deployment.md §7).

@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from common import keys
 from common import messages as m
@@ -28,6 +29,7 @@ def _pose_of(msg: m.CameraPose) -> Pose:
     return Pose(msg.x_mm, msg.y_mm, msg.z_mm, msg.rx_deg, msg.ry_deg, msg.rz_deg)
 
 
+@pytest.mark.system
 def test_collect_solve_publish_recovers_the_sim_camera(tmp_path: Path) -> None:
     lab, endpoint = _lab_for_up(tmp_path)
     # only what a collection needs (the line belongs to [up]: appended, it fell into [web]

@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from common import keys
 from common import messages as m
@@ -32,6 +33,7 @@ def test_demo_config_calibrates_first() -> None:
     assert load_settings(CalibSettings, demo).collect_missing
 
 
+@pytest.mark.system
 def test_fresh_lab_calibrates_both_cameras_then_the_robot_starts(tmp_path: Path) -> None:
     lab, endpoint = _lab_for_up(tmp_path)
     env = {"STB_SIM__CALIBRATE_FIRST": '["ptz1", "ptz2"]', "STB_CALIB__COLLECT_MISSING": "true"}
@@ -72,6 +74,7 @@ def test_fresh_lab_calibrates_both_cameras_then_the_robot_starts(tmp_path: Path)
         assert _stop(up, signal.SIGINT, timeout=15) == 0
 
 
+@pytest.mark.system
 def test_a_collection_that_sees_nothing_fails_saying_why_and_the_robot_starts(
         tmp_path: Path) -> None:
     """ptz1 held looking at the sky: no passpoint comes; after ``stall_s`` the collection fails

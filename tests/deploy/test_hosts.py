@@ -143,6 +143,7 @@ def _read(crane: ModbusCrane):  # type: ignore[no-untyped-def]
         return None
 
 
+@pytest.mark.system
 @pytest.mark.timeout(240)
 def test_the_chain_across_hosts_survives_cut_links_and_a_router_restart(lab: dict) -> None:
     monitor, calib = lab["bus"]("monitor"), lab["bus"]("calib")

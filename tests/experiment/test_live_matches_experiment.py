@@ -61,6 +61,7 @@ def _rms_in_window(t: np.ndarray, error: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(error[inside] ** 2, axis=1))))
 
 
+@pytest.mark.system
 def test_the_live_service_tracks_as_the_experiment_does(tmp_path: Path, router_endpoint: str,
                                                         crater_file: Path,
                                                         make_bus: Callable[..., Bus]) -> None:

@@ -35,6 +35,7 @@ marker_height_mm = {MARKER_MM}
     return lab
 
 
+@pytest.mark.system
 def test_commissioning_measures_the_crane_that_is_there(
         tmp_path: Path, router_endpoint: str, flat_map: Path, make_bus: Callable[..., Bus],
         capsys) -> None:  # noqa: ANN001

@@ -10,6 +10,7 @@ import pytest
 from benchmarks.faults import STEPS, run, table
 
 
+@pytest.mark.system
 @pytest.mark.timeout(400)
 def test_the_short_campaign_holds_its_goals(tmp_path: Path) -> None:
     steps = [step for step in STEPS if step != "quiet"]  # the control window: the docs' run
