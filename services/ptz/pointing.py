@@ -85,5 +85,8 @@ class PointingCheck:
         if self.error_deg == NOT_SEEN:
             return (f"pointing: the robot marker not seen where the pose puts it in "
                     f"{self._misses} previews in a row (wrong pose? occluded?)")
-        return (f"pointing: the robot marker seen {self.error_deg:.1f}° from where the pose "
-                f"puts it in {self._misses} previews in a row (wrong pose?)")
+        # the spot may be another marker (a static one, with the robot hidden): not named the
+        # robot's
+        return (f"pointing: the nearest marker seen {self.error_deg:.1f}° from where the pose "
+                f"puts the robot's in {self._misses} previews in a row (wrong pose? the robot "
+                f"hidden?)")
