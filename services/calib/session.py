@@ -32,6 +32,13 @@ TICK_S = 0.05
 PROGRESS_S = 0.5
 MOCAP_WAIT_S = 1.0
 SNAPSHOTS_KEPT = 30
+STALL_HINTS = {  # why snapshots gave no passpoint → what to check
+    "no marker": "the wand is not in the camera's view (or the IR cut filter is on)",
+    "too many": "more bright spots than the wand (reflections, markers)",
+    "not moved": "the wand does not move",
+    "marker not in mocap": "the motion capture does not see the wand (is the tracker "
+                           "streaming? is the marker label right?)",
+}
 
 
 class Session:
@@ -229,13 +236,14 @@ class Session:
     def _stalled_text(self, skipped_before: Counter[str]) -> str:
         since = self.collector.skipped - skipped_before
         seen = ", ".join(f"{n} {why}" for why, n in since.most_common()) or "no snapshot at all"
-        hint = {"no marker": "the wand is not in the camera's view (or the IR cut filter is "
-                "on)", "too many": "more bright spots than the wand (reflections, markers)",
-                "not moved": "the wand does not move"}
-        why = hint.get(since.most_common(1)[0][0], "") if since else \
-            "the PTZ service sends no detections (is it running, is the camera still?)"
+        # a hint for every reason seen, the most frequent first (a slow start can give more
+        # snapshots before the mocap stream than after it: the camera's view must still show)
+        hints = [STALL_HINTS[why] for why, _ in since.most_common() if why in STALL_HINTS] \
+            if since else ["the PTZ service sends no detections (is it running, is the camera "
+                           "still?)"]
         return (f"no passpoint for {self.settings.stall_s:g} s ({len(self.collector.times)} of "
-                f"{self.collector.target}; since the last: {seen})" + (f": {why}" if why else ""))
+                f"{self.collector.target}; since the last: {seen})"
+                + (f": {'; '.join(hints)}" if hints else ""))
 
     def _skipped_text(self) -> str:
         skipped = self.collector.skipped

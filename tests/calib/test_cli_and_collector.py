@@ -157,3 +157,24 @@ def test_the_pose_is_solved_at_the_pan_and_tilt_the_camera_was_held_at(tmp_path:
     session.stop_holding()
     session.on_state(state(0.0))  # turning home, still "calibrating"
     assert session.camera_state is not None and session.camera_state.pan_deg == 6.0
+
+
+def test_a_stalled_collection_names_what_to_check_for_every_reason_seen(tmp_path: Path) -> None:
+    """A clean-clone CI's slow start gave more snapshots before the motion capture streamed
+    ("marker not in mocap") than with the camera looking at the sky ("no marker"): both hints
+    are given, the most frequent first, not only the top one."""
+    from collections import Counter
+
+    from services.calib.session import Session
+    from services.calib.settings import CalibSettings
+    from services.calib.store import PoseStore
+
+    session = Session(None, CalibSettings(stall_s=4), PoseStore(tmp_path), "ptz1", 100,  # type: ignore[arg-type]
+                      60.0, lambda pose, report: None)
+    session.collector.skipped.update({"marker not in mocap": 4, "no marker": 2})
+    text = session._stalled_text(Counter())
+    assert text.startswith("no passpoint for 4 s (0 of 100; since the last: 4 marker not in "
+                           "mocap, 2 no marker): the motion capture does not see the wand")
+    assert text.index("motion capture") < text.index("not in the camera's view")
+    assert "no snapshot at all" in session._stalled_text(session.collector.skipped.copy())
+    assert "sends no detections" in session._stalled_text(session.collector.skipped.copy())
