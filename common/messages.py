@@ -220,6 +220,9 @@ class PtzPreview(Message):
     robot_px: list[float] | None = Field(
         None, min_length=2, max_length=2,
         description="[u, v] of the robot marker; None without a pose or a robot")
+    robot_radius_px: float | None = Field(
+        None, ge=0, le=8192, description="how large (radius) the robot marker should appear "
+        "there; None with robot_px")
 
 
 # --- gantry -------------------------------------------------------------------------------------

@@ -31,11 +31,15 @@ from common.camera import Intrinsics
 NOT_SEEN = math.inf  # no marker in the picture where the robot should be
 
 
-def pointing_error_deg(preview: m.PtzPreview, focal_mm: float) -> float | None:
+def pointing_error_deg(preview: m.PtzPreview, focal_mm: float, min_radius_px: float = 0.0
+                       ) -> float | None:
     """The angle from where the robot marker should appear to the nearest marker found
     (``NOT_SEEN`` if none was found); None when there is nothing to judge: no pose or robot,
-    or the robot outside the picture."""
+    the robot outside the picture, or its marker smaller there than ``min_radius_px`` (too
+    small for the detector to find: its absence says nothing about the pose)."""
     if preview.robot_px is None:
+        return None
+    if preview.robot_radius_px is not None and preview.robot_radius_px < min_radius_px:
         return None
     u, v = preview.robot_px
     if not (0 <= u < preview.width_px and 0 <= v < preview.height_px):
@@ -58,17 +62,20 @@ class PointingCheck:
     """The latest measured pointing error, and whether the last ``persist`` judged previews
     all disagreed by more than ``tolerance_deg``."""
 
-    def __init__(self, tolerance_deg: float, persist: int, daylight: bool = True) -> None:
+    def __init__(self, tolerance_deg: float, persist: int, daylight: bool = True,
+                 min_radius_px: float = 0.0) -> None:
         """``daylight``: judge previews taken with the IR-cut filter on too (False while the
-        preview loop takes infrared ones)."""
+        preview loop takes infrared ones); ``min_radius_px``: previews in which the robot
+        marker would be smaller are not judged."""
         self.tolerance_deg, self.persist, self.daylight = tolerance_deg, persist, daylight
+        self.min_radius_px = min_radius_px
         self.error_deg: float | None = None  # of the latest judged preview
         self._misses = 0
 
     def observe(self, preview: m.PtzPreview, focal_mm: float, infrared: bool) -> None:
         if not infrared and not self.daylight:
             return
-        error = pointing_error_deg(preview, focal_mm)
+        error = pointing_error_deg(preview, focal_mm, self.min_radius_px)
         if error is None or (error == NOT_SEEN and not infrared):
             return
         self.error_deg = error

@@ -31,14 +31,32 @@ def robot_pixel(mount: Pose | None, robot: m.RobotPosition | None, pan_deg: floa
     pose or a robot, or when it is behind the camera."""
     if mount is None or robot is None:
         return None
-    xyz = predict(np.array([robot.x_mm, robot.y_mm, robot.z_mm]),
-                  np.array([robot.vx_mm_s, robot.vy_mm_s, robot.vz_mm_s]),
-                  at_s - robot.measured_s, max_ahead_s=1.0)
     intr = Intrinsics(focal_mm, width_px=width_px, height_px=height_px)
-    u, v = project(xyz[None, :], head_pose(mount, pan_deg, tilt_deg), intr)[0]
+    u, v = project(_robot_at(robot, at_s)[None, :], head_pose(mount, pan_deg, tilt_deg), intr)[0]
     if not (np.isfinite(u) and np.isfinite(v)):
         return None
     return [round(float(u), 1), round(float(v), 1)]
+
+
+def robot_radius_px(mount: Pose | None, robot: m.RobotPosition | None, pan_deg: float,
+                    tilt_deg: float, focal_mm: float, width_px: int, height_px: int,
+                    at_s: float, marker_diameter_mm: float) -> float | None:
+    """How large (radius, px) the robot marker appears in that image (pure); None without a
+    pose or a robot, or when it is behind the camera."""
+    if mount is None or robot is None:
+        return None
+    depth = head_pose(mount, pan_deg, tilt_deg).to_camera(_robot_at(robot, at_s)[None, :])[0, 0]
+    if not depth > 0:
+        return None
+    intr = Intrinsics(focal_mm, width_px=width_px, height_px=height_px)
+    return round(float(intr.fy_px * marker_diameter_mm / 2 / depth), 2)
+
+
+def _robot_at(robot: m.RobotPosition, at_s: float) -> np.ndarray:
+    """The robot marker predicted to ``at_s`` from its sample (at most 1 s ahead)."""
+    return predict(np.array([robot.x_mm, robot.y_mm, robot.z_mm]),
+                   np.array([robot.vx_mm_s, robot.vy_mm_s, robot.vz_mm_s]),
+                   at_s - robot.measured_s, max_ahead_s=1.0)
 
 
 class PreviewLoop:
@@ -49,13 +67,15 @@ class PreviewLoop:
                  publish: Callable[[m.PtzPreview, float, bool], None],
                  mount: Callable[[], Pose | None], robot: Callable[[], m.RobotPosition | None],
                  paused: Callable[[], bool], stop: threading.Event,
-                 infrared_every_s: float = 0.0) -> None:
+                 infrared_every_s: float = 0.0, marker_diameter_mm: float = 19.0) -> None:
         """``publish(preview, focal_mm, infrared)``: the preview, the focal length it was taken
         at, and whether the IR-cut filter was off for it (the markers bright). Every
         ``infrared_every_s`` (0: never) a preview is taken with the filter off, for the
-        pointing check, and the filter is set back to auto right after."""
+        pointing check, and the filter is set back to auto right after. ``marker_diameter_mm``:
+        the robot marker's, for how large it should appear."""
         self.camera, self.period_s, self.publish = camera, period_s, publish
         self.infrared_every_s, self._infrared_due = infrared_every_s, 0.0
+        self.marker_diameter_mm = marker_diameter_mm
         self.mount, self.robot, self.paused, self.stop = mount, robot, paused, stop
         self._seq = 0
         self._failing = False
@@ -104,10 +124,14 @@ class PreviewLoop:
                            height)
         self._seq += 1
         focal_mm = focal_mm_for_zoom(position.zoom)
+        mount, robot = self.mount(), self.robot()
+        where = (mount, robot, position.pan_deg, position.tilt_deg, focal_mm, width, height,
+                 captured)
+        robot_px = robot_pixel(*where)
         return m.PtzPreview(
             measured_s=captured, camera=self.camera.name, seq=self._seq, width_px=width,
             height_px=height, jpeg=jpeg, pan_deg=min(max(position.pan_deg, -180.0), 180.0),
             tilt_deg=min(max(position.tilt_deg, -90.0), 90.0), markers=found.markers,
-            robot_px=robot_pixel(self.mount(), self.robot(), position.pan_deg,
-                                 position.tilt_deg, focal_mm, width, height, captured)
+            robot_px=robot_px, robot_radius_px=None if robot_px is None else robot_radius_px(
+                *where, self.marker_diameter_mm)
         ), focal_mm

@@ -62,7 +62,8 @@ def run(node: Node[PtzSettings], camera: PtzCamera | None = None) -> None:
             loop.on_preview,
             mount=lambda: loop.control.pose, robot=lambda: loop.control.robot,
             paused=lambda: loop.calibration.active(time.time()), stop=node.stop,
-            infrared_every_s=settings.pointing_infrared_s)
+            infrared_every_s=settings.pointing_infrared_s,
+            marker_diameter_mm=settings.robot_marker_mm)
         preview.start()
     try:
         loop.run()
@@ -87,7 +88,8 @@ class _Loop:
                      image_fraction=settings.image_fraction),
             ManualOverride(settings.manual_deg, settings.manual_pause_s),
             PointingCheck(settings.pointing_tolerance_deg, settings.pointing_persist,
-                          daylight=settings.pointing_infrared_s == 0),
+                          daylight=settings.pointing_infrared_s == 0,
+                          min_radius_px=settings.pointing_min_marker_px),
             name=camera.name, max_future_s=settings.bus.max_future_s)
         self.lock = threading.Lock()
         name = settings.instance

@@ -49,6 +49,12 @@ class PtzSettings(ServiceSettings):
     pointing_tolerance_deg: float = Field(
         3.0, gt=0, le=90, description="the pointing check (docs/operator.md): a preview whose "
         "robot marker is farther than this from where the pose puts it disagrees")
+    robot_marker_mm: float = Field(19.0, gt=0, le=200, description="the robot marker's "
+                                   "diameter (a standard 19 mm mocap marker)")
+    pointing_min_marker_px: float = Field(
+        1.4, ge=0, le=100, description="a preview in which the robot marker would appear "
+        "smaller than this (radius) is not judged: the detector's filters (area ≥ 3 px, "
+        "roundness < 1.21) do not find it there (docs/operator.md)")
     pointing_persist: int = Field(2, ge=1, le=100, description="this many disagreeing previews "
                                   "in a row degrade the service's status")
     pointing_infrared_s: float = Field(

@@ -10,7 +10,7 @@ from common.camera import Intrinsics, Pose, PtzLimits, head_pose, project
 from common.volume import Volume
 from services.ptz.aim import aim_at, predict
 from services.ptz.follow import Follower
-from services.ptz.preview import robot_pixel
+from services.ptz.preview import robot_pixel, robot_radius_px
 
 MOUNT = Pose(3550.0, 1090.0, 2190.0, 180.0, 30.0, 165.0)
 ROBOT = np.array([0.0, -900.0, 80.0])
@@ -70,3 +70,18 @@ def test_no_robot_pixel_without_a_pose_a_robot_or_with_the_robot_behind_the_came
     assert robot_pixel(MOUNT, None, 0.0, 0.0, 3.8, 704, 576, 1.0) is None
     pan, tilt = aim_at(ROBOT, MOUNT)
     assert robot_pixel(MOUNT, _robot(1.0), pan + 180.0, tilt, 3.8, 704, 576, 1.0) is None
+
+
+def test_a_preview_says_how_large_the_robot_marker_appears() -> None:
+    """Aimed at the robot, its 19 mm marker's radius is fy · 9.5 mm / distance (the sim draws
+    it so): about 1.3 px at 5.3 m at the widest zoom."""
+    pan, tilt = aim_at(ROBOT, MOUNT)
+    distance = float(np.linalg.norm(ROBOT - MOUNT.position))
+    fy = Intrinsics(3.8, width_px=704, height_px=576).fy_px
+    radius = robot_radius_px(MOUNT, _robot(100.0), pan, tilt, 3.8, 704, 576, 100.0, 19.0)
+    assert radius == pytest.approx(fy * 9.5 / distance, abs=0.01)
+    twice = robot_radius_px(MOUNT, _robot(100.0), pan, tilt, 7.6, 704, 576, 100.0, 19.0)
+    assert twice == pytest.approx(2 * radius, abs=0.02)
+    assert robot_radius_px(None, _robot(1.0), pan, tilt, 3.8, 704, 576, 1.0, 19.0) is None
+    assert robot_radius_px(MOUNT, _robot(1.0), pan + 180.0, tilt, 3.8, 704, 576, 1.0,
+                           19.0) is None

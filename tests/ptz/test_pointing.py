@@ -72,3 +72,20 @@ def test_while_infrared_previews_are_taken_daylight_ones_are_not_judged() -> Non
     for _ in range(2):
         check.observe(reflection, FOCAL_MM, infrared=True)  # infrared: the robot's marker
     assert check.problem() is not None
+
+
+def test_a_marker_too_small_to_be_found_is_not_judged() -> None:
+    """Far off at the widest zoom the robot's 19 mm marker is about 1.3 px in radius, and the
+    detector's filters (area ≥ 3 px, roundness < 1.21) miss most of those: such a preview says
+    nothing about the pose (in the demo they made 'wrong pose?' problems every lap)."""
+    far = _preview([300.0, 300.0]).model_copy(update={"robot_radius_px": 1.3})
+    near = _preview([300.0, 300.0]).model_copy(update={"robot_radius_px": 2.0})
+    assert pointing_error_deg(far, FOCAL_MM, min_radius_px=1.4) is None
+    assert pointing_error_deg(near, FOCAL_MM, min_radius_px=1.4) == NOT_SEEN
+    check = PointingCheck(tolerance_deg=3.0, persist=2, min_radius_px=1.4)
+    for _ in range(5):
+        check.observe(far, FOCAL_MM, infrared=True)
+    assert check.problem() is None and check.error_deg is None
+    for _ in range(2):
+        check.observe(near, FOCAL_MM, infrared=True)
+    assert check.problem() is not None and "not seen" in check.problem()
