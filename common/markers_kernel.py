@@ -353,6 +353,12 @@ def weighted_ellipse(image: np.ndarray, u: float, v: float, reach: int, threshol
 
 
 @njit(cache=True, nogil=True)
+def _is_marker(region: np.ndarray, r_lim: float, min_area: int, max_area: int) -> bool:
+    """The paper's filters on a regions-table row: round enough, and of a marker's area."""
+    return region[5] < r_lim and min_area <= region[6] <= max_area
+
+
+@njit(cache=True, nogil=True)
 def threshold_kernel(image: np.ndarray, band_max: np.ndarray, band_rows: int,
                      thresholds: np.ndarray, l_min: int, small_area: int, r_lim: float,
                      min_area: int, max_area: int, out: np.ndarray) -> tuple:
@@ -389,7 +395,7 @@ def threshold_kernel(image: np.ndarray, band_max: np.ndarray, band_rows: int,
                                      weights)
         chosen = t
         for k in range(table.shape[0]):
-            if table[k, 5] < r_lim and min_area <= table[k, 6] <= max_area:
+            if _is_marker(table[k], r_lim, min_area, max_area):
                 found = True
                 break
         if found:
@@ -399,6 +405,5 @@ def threshold_kernel(image: np.ndarray, band_max: np.ndarray, band_rows: int,
     refine(image, table, seed, chosen, 0, min(min_area, small_area))
     for k in range(min(table.shape[0], out.shape[0])):
         out[k, :7] = table[k]
-        out[k, 7] = 1.0 if table[k, 5] < r_lim and min_area <= table[k, 6] <= max_area \
-            else 0.0
+        out[k, 7] = 1.0 if _is_marker(table[k], r_lim, min_area, max_area) else 0.0
     return (chosen if found else thresholds[-1]), table.shape[0]
