@@ -277,9 +277,10 @@ class MocapServer:
                     writer.write(text_packet(PacketType.ERROR, "Expected a command packet"))
                     continue
                 words = body.split()
-                if words[:2] == ["streamframes", "stop"]:
+                verb = [w.lower() for w in words[:2]]  # QTM's commands ignore case
+                if verb == ["streamframes", "stop"]:
                     streamer = _cancel(streamer)
-                elif words[:1] == ["streamframes"]:
+                elif verb[:1] == ["streamframes"]:
                     parsed = parse_stream_command(words[1:], self.source.rate_hz)
                     if isinstance(parsed, str):
                         writer.write(text_packet(PacketType.ERROR, parsed))

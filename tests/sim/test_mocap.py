@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import struct
 import time
 from collections.abc import Awaitable, Callable
 
@@ -202,3 +203,36 @@ def test_frames_are_deterministic_under_the_seed(crater_file, crater) -> None:
         fa, fb, fc = a.mocap_frame(n), b.mocap_frame(n), c.mocap_frame(n)
         np.testing.assert_array_equal(fa.labelled, fb.labelled)
         assert not np.array_equal(np.nan_to_num(fa.labelled), np.nan_to_num(fc.labelled))
+
+
+def test_commands_in_the_sdks_casing_stream_and_stop(lab: Lab) -> None:
+    """QTM's commands are case-insensitive: Qualisys' own C++ and C# SDKs send
+    ``StreamFrames FrequencyDivisor:2 3D`` and ``StreamFrames Stop``, qtm-rt lower case."""
+    header = struct.Struct("<II")
+
+    async def client(port: int) -> tuple[int, int]:
+        reader, writer = await asyncio.open_connection("127.0.0.1", port)
+
+        async def packet() -> tuple[int, bytes]:
+            size, kind = header.unpack(await reader.readexactly(header.size))
+            return kind, await reader.readexactly(size - header.size)
+
+        def command(text: str) -> None:
+            body = text.encode() + b"\0"
+            writer.write(header.pack(header.size + len(body), 1) + body)
+
+        try:
+            assert (await packet())[1].startswith(b"QTM RT Interface connected")
+            command("StreamFrames FrequencyDivisor:2 3D")
+            kinds = [(await asyncio.wait_for(packet(), 2.0))[0] for _ in range(5)]
+            command("StreamFrames Stop")
+            command("QTMVersion")
+            while (reply := await asyncio.wait_for(packet(), 2.0))[0] == 3:  # data in flight
+                pass
+            return kinds.count(3), reply[0]
+        finally:
+            writer.close()
+
+    data_packets, after_stop = _run(lab, client)
+    assert data_packets == 5, "StreamFrames in the SDKs' casing streams data packets"
+    assert after_stop == 1, "after StreamFrames Stop the next packet is the command's reply"
