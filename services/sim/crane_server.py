@@ -109,6 +109,10 @@ class CraneServer:
             log.debug("crane controller: not Modbus/TCP (%s): connection closed", err)
         except (ConnectionError, OSError):
             pass
+        except asyncio.CancelledError:
+            # The sim is stopping with a gantry connected. Ending the task normally keeps
+            # asyncio's stream callback (Python 3.11) from logging the cancellation as an error.
+            pass
         finally:
             writer.close()
 

@@ -217,3 +217,24 @@ def test_the_ramp_following_time_is_dead_time_and_loop_lag_unless_acceleration_s
     limited = CraneParams(dead_time_s=0.1, position_time_constant_s=0.05,
                           max_accel_mm_s2=800.0)
     assert ramp_following_s(limited) > ramp_following_s(free) + 0.05
+
+
+def test_the_sim_stopping_with_a_gantry_connected_logs_no_error(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """The sim ends its event loop with the gantry's Modbus connection open (`stb up` stopped,
+    a benchmark's end): the connection's task is cancelled, which asyncio's stream callback
+    (Python 3.11) used to log as an error with a traceback."""
+    port = free_port()
+    server = CraneServer(CraneModel(CraneParams()), time.monotonic, threading.Lock(),
+                         "127.0.0.1", port)
+
+    async def main() -> None:
+        asyncio.create_task(server.serve())  # noqa: RUF006 - asyncio.run cancels it at the end
+        await asyncio.sleep(0.2)
+        await asyncio.open_connection("127.0.0.1", port)
+        await asyncio.sleep(0.2)  # the server's task for this connection waits for a request
+        # returning now, the connection open: asyncio.run cancels the server and its task
+
+    with caplog.at_level("ERROR"):
+        asyncio.run(main())
+    assert [r.getMessage() for r in caplog.records if r.levelname == "ERROR"] == []
