@@ -3,10 +3,14 @@
     .venv/bin/python -m benchmarks.ptz [--seconds 30] [--scenario locomotive walker]
 
 For each scenario this runs the real chain as separate processes on loopback: the sim's QTM
-RT server and VAPIX cameras, `stb router`, `stb tracker`, `stb ptz --instance ptz1|ptz2`.
-This process plays the calibration service: it serves each camera's true mount pose on
+RT server and VAPIX cameras, `stb router`, `stb tracker`, `stb ptz --instance ptz1|ptz2`,
+and beside it the lab's other services (`stb calib`, `stb gantry`, `stb web`; not with
+``--chain-only``). This process serves each camera's true mount pose on
 stb/calib/{camera}/pose (what a perfect calibration would find), so the figures isolate the
-PTZ chain. Zoom 1 (3.8 mm).
+PTZ chain. Zoom 1 (3.8 mm). The sim's cameras stand in for cameras that render on processors
+of their own: their process runs at SCHED_IDLE (``--sim-cameras normal``: their rendering
+competes with the lab for the two cores). ``--peer-link``: tracker and PTZ services as Zenoh
+peers (docs/deployment.md).
 
 Two phases of ``--seconds`` each:
 
@@ -51,19 +55,25 @@ from services.sim.settings import CraneSettings, MocapSettings, PtzCameraSetting
 from tests.ports import free_port
 
 CENTRE = np.array([352.0, 288.0])
+LAB_SERVICES = ("calib", "gantry", "web")
+"""The lab's services besides the chain (router, tracker, PTZ), run beside it by default."""
 SEARCH_PX = 40
 SEARCH_ROUNDNESS = 1.5
 
 
 def _sim_process(settings_json: str, part: str, t0: float,
-                 conn: mp.connection.Connection) -> None:
+                 conn: mp.connection.Connection, idle: bool = False) -> None:
     """Part of the sim in a process of its own, on the shared sim time ``t0``: the QTM server
     and crane ("devices"), or the cameras, so that rendering snapshots cannot delay mocap
     frames (a real QTM is not slowed down by a camera). For each measuring phase it sends back
-    the cameras' command logs and when each mocap frame was written."""
+    the cameras' command logs and when each mocap frame was written. ``idle``: the process
+    runs at ``SCHED_IDLE`` (no privilege needed to lower oneself) — it gets the CPU only when
+    no process of the lab wants it, as hardware of its own would never take it from them."""
     from services.sim.clock import Clock
     from services.sim.service import DeviceLoop, start_cameras
 
+    if idle:
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
     settings = SimSettings.model_validate_json(settings_json)
     lab = Lab.build(settings)
     clock = Clock(t0)
@@ -90,8 +100,13 @@ def _sim_process(settings_json: str, part: str, t0: float,
         server.close()
 
 
-def run_scenario(scenario: str, seconds: float, workdir: Path, realtime_priority: int = 0
-                 ) -> dict:
+def run_scenario(scenario: str, seconds: float, workdir: Path, realtime_priority: int = 0,
+                 cameras_idle: bool = True, services: tuple[str, ...] = LAB_SERVICES,
+                 peer_link: bool = False) -> dict:
+    """One scenario's two phases; ``cameras_idle``: the sim's cameras render at SCHED_IDLE
+    (they stand in for cameras rendering on processors of their own); ``services``: the
+    lab's other services, run beside the chain as in the lab; ``peer_link``: tracker and PTZ
+    services as Zenoh peers, the robot samples going straight from one to the other."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     base = SimSettings()
     settings = SimSettings(
@@ -105,12 +120,15 @@ def run_scenario(scenario: str, seconds: float, workdir: Path, realtime_priority
     for part in ("devices", "cameras"):
         parent, child = mp.Pipe()
         sims.append(mp.get_context("spawn").Process(
-            target=_sim_process, args=(settings.model_dump_json(), part, t0, child)))
+            target=_sim_process, args=(settings.model_dump_json(), part, t0, child,
+                                       cameras_idle and part == "cameras")))
         sims[-1].start()
         pipes.append(parent)
     t0_wall = [pipe.recv() for pipe in pipes][1]
     lab = Lab.build(settings)  # the same lab (same seed): the robot's true path
-    lab_file = _lab_file(workdir / f"{scenario}.toml", endpoint, settings, realtime_priority)
+    lab_file = _lab_file(workdir / f"{scenario}.toml", endpoint, settings, realtime_priority,
+                         peer_link)
+    chain = 2 + len(settings.cameras)  # router, tracker, the PTZ services
     procs = [_stb("router", "--listen", endpoint, lab=lab_file)]
     session = _open(endpoint)
     bus = Bus(session, BusSettings(zenoh=ZenohSettings(connect=[endpoint])))
@@ -123,8 +141,12 @@ def run_scenario(scenario: str, seconds: float, workdir: Path, realtime_priority
             bus.serve_latest(keys.CALIB_POSE, lambda p=pose: p, camera=cam.name)
         procs += [_stb("tracker", lab=lab_file)]
         procs += [_stb("ptz", "--instance", cam.name, lab=lab_file) for cam in settings.cameras]
+        procs += [_stb(service, lab=lab_file) for service in services]
         time.sleep(max(0.0, t0 - time.monotonic()) + 3.0)  # start-up and first aim
-        realtime = [os.sched_getscheduler(p.pid) == os.SCHED_FIFO for p in procs]
+        ended = [p.args[3] for p in procs if p.poll() is not None]
+        if ended:
+            raise RuntimeError(f"stb {', '.join(ended)} ended at start-up (lab file {lab_file})")
+        realtime = [os.sched_getscheduler(p.pid) == os.SCHED_FIFO for p in procs[:chain]]
         quiet = _phase(pipes, lambda: time.sleep(seconds))
         errors: dict[str, list[float]] = {}
         loaded = _phase(pipes, lambda: errors.update(
@@ -136,6 +158,9 @@ def run_scenario(scenario: str, seconds: float, workdir: Path, realtime_priority
         # what the chain's processes (router, tracker, PTZ) actually run with, not what was asked
         summary["scheduling"] = (f"SCHED_FIFO {realtime_priority}" if all(realtime) else
                                  "normal" if not any(realtime) else "mixed")
+        summary["sim_cameras"] = "SCHED_IDLE" if cameras_idle else "normal"
+        summary["bus"] = "peer link" if peer_link else "via the router"
+        summary["services"] = ["router", "tracker", "ptz x2", *services]
         return summary
     finally:
         for proc in procs[::-1]:
@@ -261,13 +286,21 @@ def _true_pose(cam: PtzCameraSettings) -> m.CameraPose:
                         focal_mm=3.8, mean_error_px=0.0, passpoints=0)
 
 
-def _lab_file(path: Path, endpoint: str, settings: SimSettings, realtime_priority: int
-              ) -> Path:
+def _lab_file(path: Path, endpoint: str, settings: SimSettings, realtime_priority: int,
+              peer_link: bool = False) -> Path:
     priority = f"realtime_priority = {realtime_priority}"
     lines = ["[bus.zenoh]", f'connect = ["{endpoint}"]', "[router]", priority, "[ptz]",
-             priority, "[tracker]", priority, f"qtm_port = {settings.mocap.port}"]
+             priority, "[tracker]", priority, f"qtm_port = {settings.mocap.port}",
+             "[gantry]", f"crane_port = {settings.crane.port}",
+             f'height_map = "{settings.crater_file}"', "[calib]",
+             f'data_dir = "{path.parent / "calib"}"', "[web]", f"port = {free_port()}",
+             f'height_map = "{settings.crater_file}"']
     for cam in settings.cameras:
         lines += [f"[ptz.cameras.{cam.name}]", f'url = "http://127.0.0.1:{cam.port}"']
+    if peer_link:  # docs/deployment.md: each other directly, the router for the rest
+        for section in ("tracker", "ptz"):
+            lines += [f"[{section}.bus.zenoh]", 'mode = "peer"', f'connect = ["{endpoint}"]',
+                      'listen = ["tcp/127.0.0.1:0"]']
     path.write_text("\n".join(lines) + "\n")
     return path
 
@@ -297,20 +330,37 @@ def main() -> None:
     parser.add_argument("--realtime-priority", type=int, default=10, metavar="N",
                         help="router, tracker and PTZ at SCHED_FIFO priority N, as the lab "
                              "runs them (docs/deployment.md); 0 = normal scheduling")
+    parser.add_argument("--sim-cameras", choices=["idle", "normal"], default="idle",
+                        help="the sim's cameras render at SCHED_IDLE (default: they stand in "
+                             "for cameras with processors of their own) or with normal "
+                             "scheduling, their rendering competing with the lab for the CPU")
+    parser.add_argument("--chain-only", action="store_true",
+                        help="without the lab's other services (" + ", ".join(LAB_SERVICES)
+                             + ")")
+    parser.add_argument("--peer-link", action="store_true",
+                        help="tracker and PTZ services as Zenoh peers (docs/deployment.md): "
+                             "robot samples go straight from the tracker to the PTZ services")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        results = [run_scenario(s, args.seconds, Path(tmp), args.realtime_priority)
+        results = [run_scenario(s, args.seconds, Path(tmp), args.realtime_priority,
+                                cameras_idle=args.sim_cameras == "idle",
+                                services=() if args.chain_only else LAB_SERVICES,
+                                peer_link=args.peer_link)
                    for s in args.scenario]
     if args.json:
         print(json.dumps(results, indent=2))
         return
-    print("| scenario | scheduling | camera | snapshots (lost) | error px median | p95 | "
-          "commands | latency ms p50 | p99 | while pulling snapshots: p50 | p99 |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print(f"running: {', '.join(results[0]['services'])}; the sim's QTM and crane, and its "
+          "cameras, in two processes of their own\n")
+    print("| scenario | scheduling | sim's cameras | tracker → PTZ | camera | snapshots (lost) "
+          "| error px median | p95 | commands | latency ms p50 | p99 | while pulling snapshots: "
+          "p50 | p99 |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in results:
         for name, c in r["cameras"].items():
-            print(f"| {r['scenario']} | {r['scheduling']} | {name} | "
+            print(f"| {r['scenario']} | {r['scheduling']} | {r['sim_cameras']} | {r['bus']} | "
+                  f"{name} | "
                   f"{c['snapshots']} ({c['marker_lost']}) | "
                   f"{_fmt(c['error_px_median'])} | {_fmt(c['error_px_p95'])} | "
                   f"{c['commands']} | {_fmt(c['latency_ms_p50'])} | "
