@@ -22,9 +22,9 @@ Two phases of ``--seconds`` each:
 * pointing error: 4 times a second each camera's snapshot (VAPIX image.cgi, IR cut filter
   set off just before it) is searched for the robot's marker near where the true robot
   projects; its distance from the image centre (352, 288) in pixels: median, p95, and how
-  many snapshots lost it. The latency during this phase is reported too: rendering and
-  searching the snapshots loads the same two cores (in the lab, the cameras render in their
-  own hardware).
+  many snapshots lost it. The latency during this phase is reported too: searching the
+  snapshots loads the same two cores (and rendering them, with ``--sim-cameras normal``;
+  in the lab, the cameras render in their own hardware).
 """
 
 from __future__ import annotations
