@@ -16,7 +16,7 @@ from collections.abc import Callable
 import numpy as np
 
 from common import messages as m
-from common.camera import Intrinsics, Pose, focal_mm_for_zoom, head_pose, project
+from common.camera import Intrinsics, Pose, focal_mm_for_zoom, head_pose, project_camera
 from common.markers import detect, to_message
 from services.ptz.aim import predict
 from services.ptz.camera import PtzCamera, PtzError, decode_jpeg
@@ -24,32 +24,36 @@ from services.ptz.camera import PtzCamera, PtzError, decode_jpeg
 log = logging.getLogger(__name__)
 
 
+def robot_view(mount: Pose | None, robot: m.RobotPosition | None, pan_deg: float,
+               tilt_deg: float, focal_mm: float, width_px: int, height_px: int, at_s: float,
+               marker_diameter_mm: float = 19.0) -> tuple[list[float] | None, float | None]:
+    """Where the robot marker appears in an image taken at ``at_s`` and how large (radius,
+    px), from one prediction (pure); (None, None) without a pose or a robot, or when it is
+    behind the camera."""
+    if mount is None or robot is None:
+        return None, None
+    in_camera = head_pose(mount, pan_deg, tilt_deg).to_camera(_robot_at(robot, at_s)[None, :])
+    intr = Intrinsics(focal_mm, width_px=width_px, height_px=height_px)
+    u, v = project_camera(in_camera, intr)[0]
+    if not (np.isfinite(u) and np.isfinite(v)):  # behind the camera
+        return None, None
+    radius = intr.fy_px * marker_diameter_mm / 2 / in_camera[0, 0]
+    return [round(float(u), 1), round(float(v), 1)], round(float(radius), 2)
+
+
 def robot_pixel(mount: Pose | None, robot: m.RobotPosition | None, pan_deg: float,
                 tilt_deg: float, focal_mm: float, width_px: int, height_px: int,
                 at_s: float) -> list[float] | None:
-    """Where the robot marker appears in an image taken at ``at_s`` (pure); None without a
-    pose or a robot, or when it is behind the camera."""
-    if mount is None or robot is None:
-        return None
-    intr = Intrinsics(focal_mm, width_px=width_px, height_px=height_px)
-    u, v = project(_robot_at(robot, at_s)[None, :], head_pose(mount, pan_deg, tilt_deg), intr)[0]
-    if not (np.isfinite(u) and np.isfinite(v)):
-        return None
-    return [round(float(u), 1), round(float(v), 1)]
+    """Where the robot marker appears in that image (``robot_view``'s pixel)."""
+    return robot_view(mount, robot, pan_deg, tilt_deg, focal_mm, width_px, height_px, at_s)[0]
 
 
 def robot_radius_px(mount: Pose | None, robot: m.RobotPosition | None, pan_deg: float,
                     tilt_deg: float, focal_mm: float, width_px: int, height_px: int,
                     at_s: float, marker_diameter_mm: float) -> float | None:
-    """How large (radius, px) the robot marker appears in that image (pure); None without a
-    pose or a robot, or when it is behind the camera."""
-    if mount is None or robot is None:
-        return None
-    depth = head_pose(mount, pan_deg, tilt_deg).to_camera(_robot_at(robot, at_s)[None, :])[0, 0]
-    if not depth > 0:
-        return None
-    intr = Intrinsics(focal_mm, width_px=width_px, height_px=height_px)
-    return round(float(intr.fy_px * marker_diameter_mm / 2 / depth), 2)
+    """How large (radius, px) the robot marker appears in that image (``robot_view``'s)."""
+    return robot_view(mount, robot, pan_deg, tilt_deg, focal_mm, width_px, height_px, at_s,
+                      marker_diameter_mm)[1]
 
 
 def _robot_at(robot: m.RobotPosition, at_s: float) -> np.ndarray:
@@ -124,14 +128,12 @@ class PreviewLoop:
                            height)
         self._seq += 1
         focal_mm = focal_mm_for_zoom(position.zoom)
-        mount, robot = self.mount(), self.robot()
-        where = (mount, robot, position.pan_deg, position.tilt_deg, focal_mm, width, height,
-                 captured)
-        robot_px = robot_pixel(*where)
+        robot_px, radius_px = robot_view(self.mount(), self.robot(), position.pan_deg,
+                                         position.tilt_deg, focal_mm, width, height, captured,
+                                         self.marker_diameter_mm)
         return m.PtzPreview(
             measured_s=captured, camera=self.camera.name, seq=self._seq, width_px=width,
             height_px=height, jpeg=jpeg, pan_deg=min(max(position.pan_deg, -180.0), 180.0),
             tilt_deg=min(max(position.tilt_deg, -90.0), 90.0), markers=found.markers,
-            robot_px=robot_px, robot_radius_px=None if robot_px is None else robot_radius_px(
-                *where, self.marker_diameter_mm)
+            robot_px=robot_px, robot_radius_px=radius_px
         ), focal_mm
