@@ -28,9 +28,19 @@ class BusFaults:
     """The bus's faults, as a part of ``Campaign``."""
 
     def fuzz(self, per_key: int, again: bool = False) -> None:
+        """Fuzz every key a service subscribes to; ``again``: twice more, for a leak."""
         topics = [t for t in vars(keys).values() if isinstance(t, keys.Topic)
                   and t not in MEASURED]
-        pids, memory, start = self.pids(), self.settled_memory(), time.monotonic()
+        pids, start, rounds, sent = self.pids(), time.monotonic(), [], 0
+        for _ in range(2 if again else 1):
+            memory = self.settled_memory()
+            sent = self._fuzz_once(topics, per_key)
+            rounds.append((memory, self.snapshot_memory()))
+        what = f"{per_key} payloads on each of {len(topics)} keys ({sent} in " \
+            f"{(time.monotonic() - start) / len(rounds):.0f} s)"
+        self._survived("fuzz" + " again" * again, what, start, pids, rounds, again=again)
+
+    def _fuzz_once(self, topics: list[keys.Topic], per_key: int) -> int:
         sent = 0
         for topic in topics:
             params = {name: "ptz1" for name in topic.params}
@@ -48,18 +58,32 @@ class BusFaults:
         for camera in MOUNTS:  # a fuzzed request may have started a collection: end it
             self.bus.publish(keys.CALIB_COLLECT, m.CollectRequest(
                 measured_s=time.time(), camera=camera, action="cancel"), camera=camera)
-        what = f"{per_key} payloads on each of {len(topics)} keys ({sent} in " \
-            f"{time.monotonic() - start:.0f} s)"
-        self._survived("fuzz" + " again" * again, what, start, pids, memory, again=again)
+        return sent
 
     def quiet(self) -> None:
         """The control: the same wait as a fault's, with no fault."""
         pids, memory, start = self.pids(), self.settled_memory(), time.monotonic()
         time.sleep(5)
-        self._survived("nothing (control)", "5 s without a fault", start, pids, memory)
+        self._survived("nothing (control)", "5 s without a fault", start, pids,
+                       [(memory, self.snapshot_memory())])
 
     def churn(self, count: int, again: bool = False) -> None:
-        pids, memory, start = self.pids(), self.settled_memory(), time.monotonic()
+        """Distinct keys under subscribed wildcards; ``again``: twice more, for a leak."""
+        pids, start, rounds = self.pids(), time.monotonic(), []
+        for _ in range(2 if again else 1):
+            memory = self.settled_memory()
+            self._churn_once(count)
+            rounds.append((memory, self.snapshot_memory()))
+        heard = self.meters.health_heard_after(time.monotonic() - 1.5)
+        too_large = sum(s.dropped.get("too_large", 0) for k, s in self.bus.key_stats().items()
+                        if k.startswith("stb/health/"))
+        extra = {"health messages too large": too_large,
+                 "services heard in the last 1.5 s": len(heard)}
+        self._survived("key churn" + " again" * again, f"8 bytes on each of {count} distinct "
+                       "keys", start, pids, rounds, again=again, extra=extra,
+                       ok=too_large == 0 and len(heard) >= len(ALIVE))
+
+    def _churn_once(self, count: int) -> None:
         patterns = ["stb/ptz/churn{}/state", "stb/calib/churn{}/progress",
                     "stb/health/churn/{}", "stb/sim/truth/robot/churn{}"]
         for i in range(count):
@@ -67,14 +91,6 @@ class BusFaults:
             if i % 1000 == 999:
                 time.sleep(0.01)
         time.sleep(2 if self.short else 3)
-        heard = self.meters.health_heard_after(time.monotonic() - 1.5)
-        too_large = sum(s.dropped.get("too_large", 0) for k, s in self.bus.key_stats().items()
-                        if k.startswith("stb/health/"))
-        extra = {"health messages too large": too_large,
-                 "services heard in the last 1.5 s": len(heard)}
-        self._survived("key churn" + " again" * again, f"8 bytes on each of {count} distinct "
-                       "keys", start, pids, memory, again=again, extra=extra,
-                       ok=too_large == 0 and len(heard) >= len(ALIVE))
 
     def decode_bombs(self) -> None:
         pid = self.meters.pid("gantry")
