@@ -95,7 +95,9 @@ class Monitor:
 
 
 def run(seconds: float, rate_hz: float, markers: int, workdir: Path,
-        profile: Path | None = None) -> dict:
+        profile: Path | None = None, floor: bool = False) -> dict:
+    """``floor``: ``benchmarks.tracker_floor`` (receive and two puts a frame, nothing else) in
+    the tracker's place."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     settings = _settings(workdir, rate_hz, markers)
     Lab.build(settings)  # writes the crater file once, before the sim process reads it
@@ -112,7 +114,11 @@ def run(seconds: float, rate_hz: float, markers: int, workdir: Path,
     session = _open(endpoint)
     monitor = Monitor(session)
     try:
-        if profile is None:
+        if floor:
+            procs.append(subprocess.Popen(
+                [sys.executable, "-m", "benchmarks.tracker_floor", "--qtm-port",
+                 str(settings.mocap.port), "--connect", endpoint]))
+        elif profile is None:
             procs.append(_stb("tracker", lab=lab_file))
         else:  # the same command under cProfile
             procs.append(subprocess.Popen(
@@ -122,13 +128,18 @@ def run(seconds: float, rate_hz: float, markers: int, workdir: Path,
         if not monitor.flowing.wait(60):
             raise RuntimeError("no marker frame from the tracker within 60 s")
         time.sleep(2.0)  # streaming, past the start-up
-        pids = {"tracker": procs[1].pid, "sim (QTM)": sim.pid, "router": procs[0].pid,
-                "monitor": os.getpid()}
+        pids = {"tracker" + " floor" * floor: procs[1].pid, "sim (QTM)": sim.pid,
+                "router": procs[0].pid, "monitor": os.getpid()}
         parent.send("start")  # the sim logs what it writes from now
         cpu = _phase(monitor, pids, seconds)
         parent.send("stop")
         sent = dict(parent.recv()["mocap_sent"])
         parent.send("end")
+        if floor:
+            return {"rate_hz": rate_hz, "seconds": seconds, "frames_sent": len(sent),
+                    "marker_samples": len(monitor.markers), "robot_samples": len(monitor.robot),
+                    "cpu_share": {name: round(share, 3) for name, share in cpu.items()},
+                    "floor": True}
         return _summary(seconds, rate_hz, sent, monitor, cpu)
     finally:
         monitor.close()
@@ -241,15 +252,26 @@ def main() -> None:
                         help="on the whole simulated lab under stb up (every service running)")
     parser.add_argument("--profile", type=Path, metavar="FILE",
                         help="run the tracker under cProfile, its statistics into FILE")
+    parser.add_argument("--floor", action="store_true",
+                        help="benchmarks.tracker_floor in the tracker's place: QTM's stream "
+                        "received and two Zenoh puts a frame, nothing else")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         result = (run_loaded(args.seconds, args.rate, args.markers, Path(tmp)) if args.lab
-                  else run(args.seconds, args.rate, args.markers, Path(tmp), args.profile))
+                  else run(args.seconds, args.rate, args.markers, Path(tmp), args.profile,
+                           args.floor))
     if args.json:
         print(json.dumps(result, indent=2))
         return
     r = result
+    if r.get("floor"):
+        print(f"sim, router, the tracker's floor: {r['rate_hz']:.0f} Hz, {r['seconds']:.0f} s: "
+              f"the sim wrote {r['frames_sent']} frames; the monitor got "
+              f"{r['marker_samples']} marker and {r['robot_samples']} robot samples")
+        print("CPU (share of one core): " + ", ".join(
+            f"{name} {share:.0%}" for name, share in r["cpu_share"].items()))
+        return
     sent = "" if r["frames_sent"] is None else f"the sim wrote {r['frames_sent']} frames; "
     print(f"{r.get('lab', 'sim, router, tracker')}: {r['rate_hz']:.0f} Hz, "
           f"{r['markers_per_frame']:.1f} markers a frame, {r['seconds']:.0f} s: {sent}the monitor "
