@@ -77,7 +77,8 @@ class Controller:
                                      s.lens_height_mm)
         self.predictor = make_predictor(s.algorithm, seed=s.seed, horizon_s=min(
             prediction_horizon(s.reaction_s, 1 / s.control_hz), s.max_horizon_s),
-            particle=(s.pf_velocity if s.algorithm == "pf-velocity" else s.pf_position).options())
+            particle=(s.pf_velocity if s.algorithm == "pf-velocity" else s.pf_position).options(),
+            kalman=s.default_filter.options())
         self.guard = SetpointGuard(
             Workspace(s.x_min_mm, s.x_max_mm, s.y_min_mm, s.y_max_mm, s.workspace_margin_mm),
             s.max_speed_mm_s, s.max_accel_mm_s2, s.stale_after_s)

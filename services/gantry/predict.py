@@ -16,7 +16,7 @@ trustworthy to say (the safety layer then holds the crane).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Literal, Protocol
 
 import numpy as np
@@ -155,6 +155,20 @@ def prediction_horizon(reaction_s: float, period_s: float) -> float:
 PAPER_HORIZON_S = prediction_horizon(0.5, 0.25)  # the paper's crane: 0.5 s reaction, 4 Hz
 
 
+@dataclass(frozen=True)
+class KalmanOptions:
+    """``default``'s filter: its measurement noise, its two models' acceleration noise and how
+    readily the mix switches between them (``[gantry.default_filter]``)."""
+
+    measurement_noise_mm: float = 25.0
+    calm_accel_mm_s2: float = 40.0
+    agile_accel_mm_s2: float = 150.0
+    stay: float = 0.97  # chance a model stays in charge from one period to the next
+
+
+_KALMAN = KalmanOptions()
+
+
 @dataclass
 class KalmanPredictor:
     """Two constant-velocity Kalman filters mixed by an IMM (filterpy): a calm one (small
@@ -167,10 +181,10 @@ class KalmanPredictor:
     name: AlgorithmName = "default"
     horizon_s: float = PAPER_HORIZON_S
     max_horizon_s: float = 1.0
-    measurement_noise_mm: float = 25.0
-    calm_accel_mm_s2: float = 40.0
-    agile_accel_mm_s2: float = 150.0
-    stay: float = 0.97  # chance a model stays in charge from one period to the next
+    measurement_noise_mm: float = _KALMAN.measurement_noise_mm
+    calm_accel_mm_s2: float = _KALMAN.calm_accel_mm_s2
+    agile_accel_mm_s2: float = _KALMAN.agile_accel_mm_s2
+    stay: float = _KALMAN.stay
     max_gap_s: float = 1.0
     """A marker lost for up to this long is picked up again with the filters' state (the
     crane holds meanwhile: the safety layer sees no estimate); after longer, start afresh."""
@@ -244,7 +258,8 @@ class ParticleOptions:
 
 
 def make_predictor(name: AlgorithmName, *, seed: int = 0, horizon_s: float = PAPER_HORIZON_S,
-                   particle: ParticleOptions = ParticleOptions()) -> Predictor:
+                   particle: ParticleOptions = ParticleOptions(),
+                   kalman: KalmanOptions = _KALMAN) -> Predictor:
     pf = {"particles": particle.particles, "seed": seed,
           "velocity_noise_mm_s": particle.velocity_noise_mm_s,
           "diff_max_mm": particle.diff_max_mm}
@@ -257,5 +272,5 @@ def make_predictor(name: AlgorithmName, *, seed: int = 0, horizon_s: float = PAP
     if name == "pf-velocity":
         return ParticleFilter(name, "velocity", "linear", **pf)
     if name == "default":
-        return KalmanPredictor(horizon_s=horizon_s)
+        return KalmanPredictor(horizon_s=horizon_s, **asdict(kalman))
     raise ValueError(f"unknown algorithm {name!r}; choose one of {', '.join(ALGORITHMS)}")

@@ -9,9 +9,10 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validat
 from common.crane_registers import RegisterMap
 from common.settings import ServiceSettings, above_its_minimum
 from services.gantry.cycle import AFTER_REPORT_S
-from services.gantry.predict import AlgorithmName, ParticleOptions
+from services.gantry.predict import AlgorithmName, KalmanOptions, ParticleOptions
 
 _PF = ParticleOptions()
+_KF = KalmanOptions()
 
 
 class ParticleFilterSettings(BaseModel):
@@ -26,6 +27,28 @@ class ParticleFilterSettings(BaseModel):
 
     def options(self) -> ParticleOptions:
         return ParticleOptions(**self.model_dump())
+
+
+class DefaultFilterSettings(BaseModel):
+    """``default``'s filter (ours: two constant-velocity Kalman filters mixed by an IMM,
+    docs/experiments.md). The defaults suit both of the paper's robots in the sim; a lab may
+    set them for its own robot and compare with ``stb experiment gantry --lab FILE``."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    measurement_noise_mm: float = Field(
+        _KF.measurement_noise_mm, gt=0, le=1000,
+        description="how far a located position may be off (the crane's report included)")
+    calm_accel_mm_s2: float = Field(
+        _KF.calm_accel_mm_s2, gt=0, le=10_000,
+        description="the calm model's acceleration noise: it does not chase a robot's sway")
+    agile_accel_mm_s2: float = Field(
+        _KF.agile_accel_mm_s2, gt=0, le=10_000,
+        description="the agile model's acceleration noise: a fast robot's turns")
+    stay: float = Field(_KF.stay, gt=0.5, lt=1,
+                        description="chance a model stays in charge from one period to the next")
+
+    def options(self) -> KalmanOptions:
+        return KalmanOptions(**self.model_dump())
 
 
 class GantrySettings(ServiceSettings):
@@ -83,6 +106,8 @@ class GantrySettings(ServiceSettings):
         ParticleFilterSettings(), description="pf-position and pf-position-gauss")
     pf_velocity: ParticleFilterSettings = Field(ParticleFilterSettings(),
                                                 description="pf-velocity")
+    default_filter: DefaultFilterSettings = Field(DefaultFilterSettings(),
+                                                  description="the default algorithm's filter")
     cable_length_mm: float = Field(2000.0, gt=0, description="gravity-offload cable")
     offload_warn_pct: float = Field(5.0, gt=0, le=100, description="warn above this sideways "
                                     "share of the cable's pull")

@@ -123,6 +123,28 @@ def test_the_lab_files_gantry_settings_are_the_ones_run(tmp_path: Path, crater_f
     assert "gantry.max_speed_mm_s" in capsys.readouterr().err
 
 
+def test_the_lab_files_default_filter_is_the_one_run(tmp_path: Path, crater_file: Path,
+                                                     capsys) -> None:  # noqa: ANN001
+    """``[gantry.default_filter]`` reaches ``default``'s filter: a filter that believes its
+    measurements a thousand times less follows the path later, so farther behind."""
+    args = ["gantry", "--trajectory", str(_path_csv(tmp_path)), "--algorithm", "default",
+            "--crater", str(crater_file), "--json"]
+    assert main(args) == 0
+    as_shipped = json.loads(capsys.readouterr().out)["results"][0]
+    lab = tmp_path / "lab.toml"
+    lab.write_text("[gantry.default_filter]\nmeasurement_noise_mm = 800.0\n"
+                   "calm_accel_mm_s2 = 5.0\nagile_accel_mm_s2 = 10.0\n")
+    assert main([*args, "--lab", str(lab)]) == 0
+    sluggish = json.loads(capsys.readouterr().out)["results"][0]
+    assert sluggish["rms_mm"] > 1.5 * as_shipped["rms_mm"], (as_shipped, sluggish)
+    for text, field in (("stay = 1.0", "gantry.default_filter.stay"),
+                        ("calm_accel_mm_s2 = 0", "gantry.default_filter.calm_accel_mm_s2"),
+                        ("noise_mm = 3", "gantry.default_filter.noise_mm")):
+        lab.write_text(f"[gantry.default_filter]\n{text}\n")
+        assert main([*args, "--lab", str(lab)]) == 2
+        assert field in capsys.readouterr().err
+
+
 def test_help_explains_the_commands(capsys) -> None:  # noqa: ANN001
     assert main([]) == 2
     out = capsys.readouterr().out
