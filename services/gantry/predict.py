@@ -160,8 +160,8 @@ class KalmanOptions:
     """``default``'s filter: its measurement noise, its two models' acceleration noise and how
     readily the mix switches between them (``[gantry.default_filter]``)."""
 
-    measurement_noise_mm: float = 25.0
-    calm_accel_mm_s2: float = 40.0
+    measurement_noise_mm: float = 15.0
+    calm_accel_mm_s2: float = 20.0
     agile_accel_mm_s2: float = 150.0
     stay: float = 0.97  # chance a model stays in charge from one period to the next
 

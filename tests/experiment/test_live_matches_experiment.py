@@ -99,4 +99,5 @@ def test_the_live_service_tracks_as_the_experiment_does(tmp_path: Path, router_e
                           marker_height_mm=MARKER_HEIGHT_MM["locomotive"])
     experiment = run(make_lab("locomotive", 1, crater_file), settings, end_s=END_S)
     simulated = _rms_in_window(experiment.t_s, experiment.error_mm)
+    print(f"live {live:.1f} mm, experiment {simulated:.1f} mm")
     assert live == pytest.approx(simulated, rel=0.15), (live, simulated)
