@@ -138,8 +138,7 @@ def run(seconds: float, rate_hz: float, markers: int, workdir: Path,
         if floor:
             return {"rate_hz": rate_hz, "seconds": seconds, "frames_sent": len(sent),
                     "marker_samples": len(monitor.markers), "robot_samples": len(monitor.robot),
-                    "cpu_share": {name: round(share, 3) for name, share in cpu.items()},
-                    "floor": True}
+                    "cpu_share": _cpu_shares(cpu), "floor": True}
         return _summary(seconds, rate_hz, sent, monitor, cpu)
     finally:
         monitor.close()
@@ -234,8 +233,17 @@ def _summary(seconds: float, rate_hz: float, sent: dict[int, float], monitor: Mo
         "publish_ms_p99": _percentile(publish_ms, 99),
         "monitor_ms_p50": _percentile(latency_ms, 50),
         "monitor_ms_p99": _percentile(latency_ms, 99),
-        "cpu_share": {name: round(share, 3) for name, share in cpu.items()},
+        "cpu_share": _cpu_shares(cpu),
     }
+
+
+def _cpu_shares(cpu: dict[str, float]) -> dict[str, float]:
+    return {name: round(share, 3) for name, share in cpu.items()}
+
+
+def _cpu_line(result: dict) -> str:
+    return "CPU (share of one core): " + ", ".join(
+        f"{name} {share:.0%}" for name, share in result["cpu_share"].items())
 
 
 def _percentile(values: np.ndarray, q: float) -> float | None:
@@ -269,8 +277,7 @@ def main() -> None:
         print(f"sim, router, the tracker's floor: {r['rate_hz']:.0f} Hz, {r['seconds']:.0f} s: "
               f"the sim wrote {r['frames_sent']} frames; the monitor got "
               f"{r['marker_samples']} marker and {r['robot_samples']} robot samples")
-        print("CPU (share of one core): " + ", ".join(
-            f"{name} {share:.0%}" for name, share in r["cpu_share"].items()))
+        print(_cpu_line(r))
         return
     sent = "" if r["frames_sent"] is None else f"the sim wrote {r['frames_sent']} frames; "
     print(f"{r.get('lab', 'sim, router, tracker')}: {r['rate_hz']:.0f} Hz, "
@@ -283,8 +290,7 @@ def main() -> None:
               f"p50 {r['monitor_ms_p50']:.2f} ms, p99 {r['monitor_ms_p99']:.2f} ms")
     print(f"frame captured (tracker's clock) → published: p50 "
           f"{r['capture_to_publish_ms_p50']:.2f} ms, p99 {r['capture_to_publish_ms_p99']:.2f} ms")
-    print("CPU (share of one core): " + ", ".join(
-        f"{name} {share:.0%}" for name, share in r["cpu_share"].items()))
+    print(_cpu_line(r))
 
 
 if __name__ == "__main__":

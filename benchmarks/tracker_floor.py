@@ -23,15 +23,13 @@ import zenoh
 
 from common import codec, keys
 from common import messages as m
-from common.bus import open_session
+from common.bus import declare_publisher, open_session
 from common.settings import ZenohSettings
 
 
 async def _stream(port: int, session: zenoh.Session, seconds: float) -> None:
-    publishers = [session.declare_publisher(
-        topic.key("stb"), encoding=zenoh.Encoding(f"{codec.CONTENT_TYPE};{topic.model.__name__}"),
-        congestion_control=zenoh.CongestionControl.DROP)
-        for topic in (keys.TRACKER_ROBOT, keys.TRACKER_MARKERS)]
+    publishers = [declare_publisher(session, topic.key(keys.DEFAULT_PREFIX), topic.model)
+                  for topic in (keys.TRACKER_ROBOT, keys.TRACKER_MARKERS)]
     robot = codec.encode(m.RobotPosition(measured_s=time.time(), label="robot", x_mm=1.0,
                                          y_mm=2.0, z_mm=3.0, vx_mm_s=0.0, vy_mm_s=0.0,
                                          vz_mm_s=0.0), sent_s=time.time())

@@ -96,6 +96,14 @@ def open_session(z: ZenohSettings) -> zenoh.Session:
         raise BusUnreachable(f"cannot open a Zenoh {z.mode} session on {where}: {err}") from err
 
 
+def declare_publisher(session: zenoh.Session, key: str, model: type) -> zenoh.Publisher:
+    """A publisher as the bus declares one: the message's encoding named, and samples dropped,
+    never blocking the sender, when the link is congested."""
+    return session.declare_publisher(
+        key, encoding=zenoh.Encoding(f"{codec.CONTENT_TYPE};{model.__name__}"),
+        congestion_control=zenoh.CongestionControl.DROP)
+
+
 OTHER_KEYS = "(other keys)"
 """Where the counts and log lines of keys beyond ``MAX_KEYS`` go: a flood of distinct keys
 (4,000 garbage keys grew a health message to 131 KB, past the bus's limit) stays bounded."""
@@ -251,9 +259,7 @@ class Bus:
             return False
         publisher = self._publishers.get(key)
         if publisher is None:
-            publisher = self.session.declare_publisher(
-                key, encoding=zenoh.Encoding(f"{codec.CONTENT_TYPE};{topic.model.__name__}"),
-                congestion_control=zenoh.CongestionControl.DROP)
+            publisher = declare_publisher(self.session, key, topic.model)
             self._publishers[key] = publisher
         publisher.put(codec.encode(msg, sent_s=sent_s))
         with self._stats_lock:

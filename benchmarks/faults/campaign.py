@@ -142,9 +142,10 @@ class Campaign(BusFaults, ProcessFaults):
         bound = GOAL_FLAT_MB if again else GOAL_MEMORY_MB
         misses = ((["crash"] if deaths or self.pids() != pids else []) +
                   (["memory"] if grown > bound else []) + ([] if ok else ["check"]))
-        each = " / ".join(f"{after[worst] - before[worst]:+.1f}" for before, after in rounds)
-        growth = (f"least growth over {len(rounds)} rounds {worst} {grown:+.1f} MB ({each})"
-                  if len(rounds) > 1 else f"largest growth {worst} {grown:+.1f} MB")
+        growth = f"largest growth {worst} {grown:+.1f} MB"
+        if len(rounds) > 1:
+            each = " / ".join(f"{after[worst] - before[worst]:+.1f}" for before, after in rounds)
+            growth = f"least growth over {len(rounds)} rounds {worst} {grown:+.1f} MB ({each})"
         extra_text = "".join(f"; {k} {v}" for k, v in (extra or {}).items())
         goal = (f"0 crashes; no service's own memory grows by more than {bound:g} MB in each "
                 f"of {len(rounds)} rounds (no leak)" if again else
