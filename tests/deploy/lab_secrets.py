@@ -51,7 +51,14 @@ def secured_router(config: Path, workdir: Path, secrets: Path
         for s in sessions:
             s.close()
         router.terminate()
-        router.wait(timeout=10)
+        # longer than Zenoh's own close timeout (10 s: a session's close may wait that long
+        # for its links before giving up, eclipse-zenoh/zenoh#2675), then the router is gone
+        try:
+            router.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            router.kill()
+            router.wait(timeout=10)
+            raise
 
 
 def identity(secrets: Path, user: str, endpoint: str, **changes: object) -> ZenohSettings:
