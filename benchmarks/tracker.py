@@ -1,6 +1,7 @@
 """The tracker at QTM's full rate: frames dropped, frame → publish latency, CPU per process.
 
     .venv/bin/python -m benchmarks.tracker [--seconds 20] [--rate 1000] [--markers 20]
+    .venv/bin/python -m benchmarks.tracker --ladder 2 --seconds 10   # floor levels, tracker
 
 Runs the real path as separate processes on loopback: the sim's QTM RT server (its
 "devices" part, with the crane, as in ``benchmarks.ptz``) streaming at ``--rate`` Hz with
@@ -19,6 +20,11 @@ Measured over one phase of ``--seconds``:
   (through the router); p50 / p99;
 * CPU of the tracker, the sim's QTM process, the router and this monitor: their user + system
   time over the phase (/proc), as a share of one core.
+
+``--floor LEVEL`` puts ``benchmarks.tracker_floor`` in the tracker's place (what receiving and
+two puts a frame cost, then reading the markers, then the picker; its docstring has the
+levels); ``--ladder N`` runs each level and the tracker in turn, N times, and prints their CPU
+in one table.
 """
 
 from __future__ import annotations
@@ -37,6 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.ptz import _open, _sim_process, _stb
+from benchmarks.tracker_floor import LEVELS
 from common import codec, keys
 from common import messages as m
 from services.sim.lab import Lab
@@ -95,9 +102,9 @@ class Monitor:
 
 
 def run(seconds: float, rate_hz: float, markers: int, workdir: Path,
-        profile: Path | None = None, floor: bool = False) -> dict:
-    """``floor``: ``benchmarks.tracker_floor`` (receive and two puts a frame, nothing else) in
-    the tracker's place."""
+        profile: Path | None = None, floor: str | None = None) -> dict:
+    """``floor``: ``benchmarks.tracker_floor`` at that level (``receive``: two puts a frame,
+    nothing else) in the tracker's place."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     settings = _settings(workdir, rate_hz, markers)
     Lab.build(settings)  # writes the crater file once, before the sim process reads it
@@ -117,7 +124,7 @@ def run(seconds: float, rate_hz: float, markers: int, workdir: Path,
         if floor:
             procs.append(subprocess.Popen(
                 [sys.executable, "-m", "benchmarks.tracker_floor", "--qtm-port",
-                 str(settings.mocap.port), "--connect", endpoint]))
+                 str(settings.mocap.port), "--connect", endpoint, "--level", floor]))
         elif profile is None:
             procs.append(_stb("tracker", lab=lab_file))
         else:  # the same command under cProfile
@@ -128,8 +135,9 @@ def run(seconds: float, rate_hz: float, markers: int, workdir: Path,
         if not monitor.flowing.wait(60):
             raise RuntimeError("no marker frame from the tracker within 60 s")
         time.sleep(2.0)  # streaming, past the start-up
-        pids = {"tracker" + " floor" * floor: procs[1].pid, "sim (QTM)": sim.pid,
-                "router": procs[0].pid, "monitor": os.getpid()}
+        name = f"tracker floor ({floor})" if floor else "tracker"
+        pids = {name: procs[1].pid, "sim (QTM)": sim.pid, "router": procs[0].pid,
+                "monitor": os.getpid()}
         parent.send("start")  # the sim logs what it writes from now
         cpu = _phase(monitor, pids, seconds)
         parent.send("stop")
@@ -138,7 +146,7 @@ def run(seconds: float, rate_hz: float, markers: int, workdir: Path,
         if floor:
             return {"rate_hz": rate_hz, "seconds": seconds, "frames_sent": len(sent),
                     "marker_samples": len(monitor.markers), "robot_samples": len(monitor.robot),
-                    "cpu_share": _cpu_shares(cpu), "floor": True}
+                    "cpu_share": _cpu_shares(cpu), "floor": floor}
         return _summary(seconds, rate_hz, sent, monitor, cpu)
     finally:
         monitor.close()
@@ -250,6 +258,33 @@ def _percentile(values: np.ndarray, q: float) -> float | None:
     return float(np.percentile(values, q)) if values.size else None
 
 
+def _ladder(rounds: int, seconds: float, rate_hz: float, markers: int, as_json: bool) -> None:
+    """Each floor level and the tracker in turn, ``rounds`` times (alternating, so that the
+    machine's drift spreads over all of them); their CPU and the sim's QTM's per run."""
+    steps = [*LEVELS, "tracker"]
+    cpu: dict[str, list[tuple[float, float]]] = {step: [] for step in steps}
+    for done in range(rounds * len(steps)):
+        step = steps[done % len(steps)]
+        with tempfile.TemporaryDirectory() as tmp:
+            r = run(seconds, rate_hz, markers, Path(tmp),
+                    floor=None if step == "tracker" else step)
+        shares = list(r["cpu_share"].values())  # the one in the tracker's place first
+        cpu[step].append((shares[0], r["cpu_share"]["sim (QTM)"]))
+        print(f"[{done + 1}/{rounds * len(steps)}] {step}: {shares[0]:.0%} of a core",
+              file=sys.stderr, flush=True)
+    if as_json:
+        print(json.dumps(cpu, indent=2))
+        return
+    print(f"{rate_hz:.0f} Hz, about {markers} markers a frame, {seconds:.0f} s a run, "
+          f"{rounds} runs each, alternating (share of one core):")
+    print("| in the tracker's place | its CPU, each run | the sim's QTM |")
+    print("|---|---|---|")
+    for step in steps:
+        name = "the tracker (`stb tracker`)" if step == "tracker" else f"floor: {step}"
+        print(f"| {name} | " + ", ".join(f"{c:.0%}" for c, _ in cpu[step]) + " | "
+              + ", ".join(f"{q:.0%}" for _, q in cpu[step]) + " |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -260,11 +295,18 @@ def main() -> None:
                         help="on the whole simulated lab under stb up (every service running)")
     parser.add_argument("--profile", type=Path, metavar="FILE",
                         help="run the tracker under cProfile, its statistics into FILE")
-    parser.add_argument("--floor", action="store_true",
-                        help="benchmarks.tracker_floor in the tracker's place: QTM's stream "
-                        "received and two Zenoh puts a frame, nothing else")
+    parser.add_argument("--floor", nargs="?", const="receive", choices=LEVELS,
+                        help="benchmarks.tracker_floor in the tracker's place; receive (the "
+                        "default): QTM's stream received and two Zenoh puts a frame, nothing "
+                        "else; read: and the markers read and packed; pick: and the picker")
+    parser.add_argument("--ladder", type=int, metavar="ROUNDS",
+                        help="each floor level and the tracker in turn, ROUNDS times: their "
+                        "CPU in one table")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
+    if args.ladder:
+        _ladder(args.ladder, args.seconds, args.rate, args.markers, args.json)
+        return
     with tempfile.TemporaryDirectory() as tmp:
         result = (run_loaded(args.seconds, args.rate, args.markers, Path(tmp)) if args.lab
                   else run(args.seconds, args.rate, args.markers, Path(tmp), args.profile,
@@ -274,7 +316,8 @@ def main() -> None:
         return
     r = result
     if r.get("floor"):
-        print(f"sim, router, the tracker's floor: {r['rate_hz']:.0f} Hz, {r['seconds']:.0f} s: "
+        print(f"sim, router, the tracker's floor ({r['floor']}): {r['rate_hz']:.0f} Hz, "
+              f"{r['seconds']:.0f} s: "
               f"the sim wrote {r['frames_sent']} frames; the monitor got "
               f"{r['marker_samples']} marker and {r['robot_samples']} robot samples")
         print(_cpu_line(r))
