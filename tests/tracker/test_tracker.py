@@ -275,6 +275,14 @@ def test_a_body_lost_by_qtm_gives_no_robot_sample_never_a_zero_or_its_marker(
     node = Node("tracker", TrackerSettings(robot_body="robot"), service_bus)
     robots: list[m.RobotPosition] = []
     watcher.subscribe(keys.TRACKER_ROBOT, robots.append, latest=False)
+    # the body's 20 frames go out in 0.2 s: only once the watcher's subscription has reached
+    # the tracker's session (a CI run lost the first few to its propagation)
+    probe = m.RobotPosition(measured_s=time.time(), x_mm=-1.0, y_mm=0.0, z_mm=0.0,
+                            vx_mm_s=0.0, vy_mm_s=0.0, vz_mm_s=0.0)
+    wait_for(lambda: service_bus.publish(keys.TRACKER_ROBOT, probe) and robots, timeout=10,
+             period=0.05)
+    time.sleep(0.3)  # the probes still on their way
+    robots.clear()
     thread = threading.Thread(target=run, args=(node, LosingBody()))
     thread.start()
     try:
