@@ -254,6 +254,17 @@ class Client:
                  **bus_env})
         return done.returncode, (done.stdout + done.stderr).strip()
 
+    def answer(self, command: str, *, timeout_s: float = 30.0) -> tuple[int, str]:
+        """``operator_once`` again while the gantry does not answer at all (just restarted on
+        a loaded machine, its command path may still be coming up): its first answer,
+        accepted or refused."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            status, said = self.operator_once(command)
+            if "no answer within" not in said or time.monotonic() > deadline:
+                return status, said
+            time.sleep(1.0)
+
     def operator(self, command: str, *, timeout_s: float = 60.0) -> str:
         """``stb gantry COMMAND`` as the operator, again until the gantry accepts it (arming
         waits for the robot in the tracking camera's view)."""

@@ -104,7 +104,7 @@ def test_a_crashed_gantry_is_restarted_by_the_engine_disarmed_with_the_fault_lat
     assert modes == {"disarmed"}, f"a restarted gantry arms itself: {modes}"
     # The crash stopped the crane's watchdog heartbeat: the controller latched the fault, and
     # only an operator clears it.
-    status, said = lab["client"].operator_once("arm")
+    status, said = lab["client"].answer("arm")
     assert status != 0 and "latched" in said, said
     lab["client"].operator("reset")
     lab["client"].operator("arm")
