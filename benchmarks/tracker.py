@@ -135,8 +135,7 @@ def run(seconds: float, rate_hz: float, markers: int, workdir: Path,
         if not monitor.flowing.wait(60):
             raise RuntimeError("no marker frame from the tracker within 60 s")
         time.sleep(2.0)  # streaming, past the start-up
-        name = f"tracker floor ({floor})" if floor else "tracker"
-        pids = {name: procs[1].pid, "sim (QTM)": sim.pid, "router": procs[0].pid,
+        pids = {_in_place(floor): procs[1].pid, "sim (QTM)": sim.pid, "router": procs[0].pid,
                 "monitor": os.getpid()}
         parent.send("start")  # the sim logs what it writes from now
         cpu = _phase(monitor, pids, seconds)
@@ -258,6 +257,11 @@ def _percentile(values: np.ndarray, q: float) -> float | None:
     return float(np.percentile(values, q)) if values.size else None
 
 
+def _in_place(floor: str | None) -> str:
+    """The name of the process in the tracker's place, as the CPU figures call it."""
+    return f"tracker floor ({floor})" if floor else "tracker"
+
+
 def _ladder(rounds: int, seconds: float, rate_hz: float, markers: int, as_json: bool) -> None:
     """Each floor level and the tracker in turn, ``rounds`` times (alternating, so that the
     machine's drift spreads over all of them); their CPU and the sim's QTM's per run."""
@@ -268,9 +272,9 @@ def _ladder(rounds: int, seconds: float, rate_hz: float, markers: int, as_json: 
         with tempfile.TemporaryDirectory() as tmp:
             r = run(seconds, rate_hz, markers, Path(tmp),
                     floor=None if step == "tracker" else step)
-        shares = list(r["cpu_share"].values())  # the one in the tracker's place first
-        cpu[step].append((shares[0], r["cpu_share"]["sim (QTM)"]))
-        print(f"[{done + 1}/{rounds * len(steps)}] {step}: {shares[0]:.0%} of a core",
+        share = r["cpu_share"][_in_place(None if step == "tracker" else step)]
+        cpu[step].append((share, r["cpu_share"]["sim (QTM)"]))
+        print(f"[{done + 1}/{rounds * len(steps)}] {step}: {share:.0%} of a core",
               file=sys.stderr, flush=True)
     if as_json:
         print(json.dumps(cpu, indent=2))
