@@ -167,6 +167,11 @@ def test_2_calibration_progress_per_camera(tab: object, quiet: Quiet) -> None:
     quiet.bus.publish(keys.PTZ_SNAPSHOT, m.CameraFrame(
         measured_s=taken, camera="ptz1", seq=9, width_px=704, height_px=576, encoding="jpeg",
         data=jpeg), camera="ptz1")
+    canvas = tab.locator("#camera-ptz1 canvas")  # type: ignore[attr-defined]
+    # the page may draw the snapshot before its markers arrive (they come on their own key):
+    # here it does, and it must draw the markers over it when they come
+    wait_for(lambda: canvas.get_attribute("data-seq") == "snapshot-9", timeout=5)
+    assert canvas.get_attribute("data-markers") == "0"
     quiet.bus.publish(keys.PTZ_DETECTIONS, m.MarkerDetections(
         measured_s=taken, camera="ptz1", status="ok", threshold=230, width_px=704,
         height_px=576, markers=[m.DetectedMarker(
@@ -174,7 +179,6 @@ def test_2_calibration_progress_per_camera(tab: object, quiet: Quiet) -> None:
             roundness=1.0, area_px=113)]), camera="ptz1")
     text = wait_for(lambda: "12 of 40" in _text(tab, "#camera-ptz1") and _text(
         tab, "#camera-ptz1"), timeout=5)
-    canvas = tab.locator("#camera-ptz1 canvas")  # type: ignore[attr-defined]
     wait_for(lambda: canvas.get_attribute("data-markers") == "1", timeout=5)
     assert canvas.get_attribute("data-kind") == "calibration snapshot"
     assert "calibrating: 12 of 40 passpoints" in text and "passed over: no marker 24" in text

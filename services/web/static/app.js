@@ -325,7 +325,7 @@ function drawOffload(state) {
                          `(limit ${o.warn_above_pct} %)`], o.warning ? "warn" : ""));
 }
 
-const previewSeq = {};
+const previewDrawn = {};  // per camera: the picture and overlay last drawn
 
 function calibrationText(cal) {
   // "12 of 20 passpoints · 35 snapshots passed over (no marker 30) · about 40 s left"
@@ -377,10 +377,14 @@ function drawCameras(state) {
     }
     div.classList.toggle("alarm", Boolean(cam.pointing_problem) || Boolean(calFailed));
     const p = cam.preview;
-    if (p && previewSeq[name] !== p.seq) {
-      previewSeq[name] = p.seq;
+    // a snapshot's markers may arrive after the snapshot itself: redraw when they do
+    const drawn = p && `${p.seq}|${JSON.stringify(p.markers)}`;
+    if (p && previewDrawn[name] !== drawn) {
+      previewDrawn[name] = drawn;
       const img = new Image();
-      img.onload = () => drawPreview(div.querySelector("canvas"), img, p);
+      img.onload = () => {  // a later picture may have loaded first: draw only the latest
+        if (previewDrawn[name] === drawn) drawPreview(div.querySelector("canvas"), img, p);
+      };
       img.src = `preview/${encodeURIComponent(name)}.jpg?seq=${p.seq}`;
     }
   }
