@@ -34,7 +34,6 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 
-from common.markers_kernel import threshold_kernel
 from common.messages import DetectedMarker, MarkerDetections
 
 Status = Literal["ok", "none", "too_many"]
@@ -84,6 +83,11 @@ def detect(frame: np.ndarray, *, threshold: int = 230, t_lim: int = 203, step: i
 
     Raises ValueError for anything but a 2-D uint8 array, or inconsistent parameters.
     """
+    # numba loads here, on the first detection, not where the module is imported: the calib
+    # service only draws markers, and loading numba (0.35 s, seconds on a loaded machine)
+    # would delay its restart (docs/reliability.md)
+    from common.markers_kernel import threshold_kernel
+
     image = _checked(frame, threshold, t_lim, step, r_lim, l_min, min_area, max_area,
                      max_markers)
     if image.size == 0:

@@ -108,6 +108,7 @@ def run_node(service: str, settings: ServiceSettings, body: Callable[[Node], Non
     ``body`` must return soon after ``node.stop`` is set. Returns the process exit code.
     """
     use_realtime_priority(settings.realtime_priority)  # before Zenoh's threads: they inherit it
+    opening = time.monotonic()
     try:
         session = open_session(settings.zenoh_settings())
     except BusUnreachable as err:
@@ -120,7 +121,8 @@ def run_node(service: str, settings: ServiceSettings, body: Callable[[Node], Non
     try:
         bus.declare_alive(service, settings.instance)
         health.start()
-        log.info("%s/%s running (prefix %s)", service, settings.instance, bus.prefix)
+        log.info("%s/%s running (prefix %s; the bus took %.2f s)", service, settings.instance,
+                 bus.prefix, time.monotonic() - opening)
         body(node)
     except StartupError as err:
         log.error("%s/%s cannot start: %s", service, settings.instance, err)

@@ -17,6 +17,7 @@ from benchmarks.faults.rows import (
     POLL_S,
     Row,
     duration_text,
+    quick_restart,
 )
 from common.crane_registers import DEFAULT_MAP, ENABLED, FAULTED
 
@@ -26,34 +27,45 @@ class ProcessFaults:
 
     def kill_each(self) -> None:
         for service in [s for s in SERVICES if s != "router"]:
-            pid = self.meters.pid(service)
-            if pid is None:
+            if self.meters.pid(service) is None:
                 self.rows.append(Row(f"SIGKILL {service}", "alive ≤ 2 s", "no pid heard", False))
                 continue
-            at = time.monotonic()
-            os.kill(pid, signal.SIGKILL)
-            wait_until(lambda s=service, t=at: self.meters.alive_again(ALIVE[s], t) is not None,
-                       20)
-            back = self.meters.alive_again(ALIVE[service], at)
-            figures = {"alive_again_s": back}
-            text = f"alive again after {duration_text(back)}"
-            held = back is not None and back <= GOAL_ALIVE_S
+            kills = [self._kill(service)]
+            if not quick_restart([k["alive_again_s"] for k in kills]):
+                kills.append(self._kill(service))  # once more, on warm caches (docs/reliability.md)
+            backs = [k["alive_again_s"] for k in kills]
+            text = "alive again after " + ", then ".join(duration_text(b) for b in backs)
+            held = quick_restart(backs)
+            figures: dict = {"alive_again_s": backs}
             if service == "gantry":
-                trip = self.meters.first_status(at, ENABLED, present=False)
-                figures["crane_disabled_s"] = trip
-                text += f"; crane disabled after {duration_text(trip)}"
-                held = held and trip is not None and trip <= GOAL_WATCHDOG_S + 2 * POLL_S
-            if service in ("gantry", "sim"):  # it comes back disarmed; the crane disabled
-                self.follow()
+                trips = [k["crane_disabled_s"] for k in kills]
+                figures["crane_disabled_s"] = trips
+                text += "; crane disabled after " + ", then ".join(duration_text(t) for t in trips)
+                held = held and all(t is not None and t <= GOAL_WATCHDOG_S + 2 * POLL_S
+                                    for t in trips)
             self.rows.append(Row(f"SIGKILL {service}", "alive ≤ 2 s" + (
                 "; crane disabled ≤ 0.5 s" if "crane_disabled_s" in figures else ""),
                 text, held, figures))
             self.log(f"SIGKILL {service}: {text}")
-            # the next kill once this one is up again (its health from the new process): each
-            # restart measured alone, not while the one before still loads
-            wait_until(lambda s=service, p=pid: self.meters.pid(s) not in (None, p), 10)
-            time.sleep(0.3 if self.short else 1)
         self.router_restart()
+
+    def _kill(self, service: str) -> dict[str, float | None]:
+        """SIGKILL the service once; when it is alive again (and the crane disabled, for the
+        gantry), and its new process is up: the times."""
+        pid = self.meters.pid(service)
+        at = time.monotonic()
+        os.kill(pid, signal.SIGKILL)  # type: ignore[arg-type]
+        wait_until(lambda: self.meters.alive_again(ALIVE[service], at) is not None, 20)
+        figures = {"alive_again_s": self.meters.alive_again(ALIVE[service], at)}
+        if service == "gantry":
+            figures["crane_disabled_s"] = self.meters.first_status(at, ENABLED, present=False)
+        if service in ("gantry", "sim"):  # it comes back disarmed; the crane disabled
+            self.follow()
+        # the next kill once this one is up again (its health from the new process): each
+        # restart measured alone, not while the one before still loads
+        wait_until(lambda: self.meters.pid(service) not in (None, pid), 10)
+        time.sleep(0.3 if self.short else 1)
+        return figures
 
     def router_restart(self) -> None:
         routers = [p for p in children(self.up.pid) if "services.router" in cmdline(p)]

@@ -25,7 +25,6 @@ from typing import Any
 
 import cv2
 import numpy as np
-from matplotlib import colormaps
 
 from common.heightmap import HeightMap
 
@@ -37,12 +36,14 @@ PREVIEW_PATH = re.compile(r"^/preview/([A-Za-z0-9_.-]{1,64})\.jpg$")
 COMMAND_PATH = re.compile(r"^/gantry/(arm|disarm|stop|reset)$")
 
 
-COLOURS = "terrain"
+COLOURS = "terrain"  # matplotlib's; it loads when the map is first drawn, not at start-up
 SCALE_STEPS = 11  # colours the page's scale is drawn from, lowest to highest
 
 
 def map_png(height_map: HeightMap) -> bytes:
     """The height map as a colour PNG, row 0 at the top = the largest y (north up)."""
+    from matplotlib import colormaps
+
     h = height_map.heights_mm.astype(float)
     span = float(h.max() - h.min()) or 1.0
     rgba = colormaps[COLOURS]((h - h.min()) / span)
@@ -56,6 +57,8 @@ def map_png(height_map: HeightMap) -> bytes:
 def map_info(height_map: HeightMap) -> dict[str, Any]:
     """The map's extent and its colour scale: the lowest and highest height and the colours
     between them, as the PNG shows them."""
+    from matplotlib import colormaps
+
     h = height_map.heights_mm
     steps = colormaps[COLOURS](np.linspace(0.0, 1.0, SCALE_STEPS))
     return {"extent_mm": list(height_map.extent_mm), "image": True,
