@@ -63,10 +63,13 @@ class Campaign(BusFaults, ProcessFaults):
                    or found, timeout=3)
         return found[0] if found else None
 
-    def follow(self, timeout: float = 60.0) -> bool:
-        """Reset a latched fault if there is one, arm, and wait until the crane tracks."""
+    def follow(self, timeout: float = 60.0, since_s: float = 0.0) -> bool:
+        """Reset a latched fault if there is one, arm, and wait until the crane tracks, as
+        the gantry's states measured after ``since_s`` (wall clock) say."""
         def tracking() -> bool:
             state = self.meters.states[-1] if self.meters.states else None
+            if state is not None and state.measured_s <= since_s:
+                return False  # a state from before (a killed gantry's last one)
             if state is not None and state.mode != "armed":
                 self.operator("reset")  # clears a latched fault, as an operator would
                 self.operator("arm")  # refused without a fresh estimate: asked again

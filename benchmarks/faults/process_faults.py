@@ -40,7 +40,9 @@ class ProcessFaults:
             if service == "gantry":
                 trips = [k["crane_disabled_s"] for k in kills]
                 figures["crane_disabled_s"] = trips
-                text += "; crane disabled after " + ", then ".join(duration_text(t) for t in trips)
+                text += "; crane disabled after " + ", then ".join(
+                    duration_text(t) if t is not None else "(not enabled before the kill)"
+                    for t in trips)
                 held = held and all(t is not None and t <= GOAL_WATCHDOG_S + 2 * POLL_S
                                     for t in trips)
             self.rows.append(Row(f"SIGKILL {service}", "alive ≤ 2 s" + (
@@ -57,13 +59,15 @@ class ProcessFaults:
         os.kill(pid, signal.SIGKILL)  # type: ignore[arg-type]
         wait_until(lambda: self.meters.alive_again(ALIVE[service], at) is not None, 20)
         figures = {"alive_again_s": self.meters.alive_again(ALIVE[service], at)}
-        if service == "gantry":
-            figures["crane_disabled_s"] = self.meters.first_status(at, ENABLED, present=False)
-        if service in ("gantry", "sim"):  # it comes back disarmed; the crane disabled
-            self.follow()
+        if service == "gantry":  # from an enabled crane only (else: None, the goal missed)
+            enabled = bool(self.meters.status_at(at - 2 * POLL_S) & ENABLED)
+            figures["crane_disabled_s"] = (self.meters.first_status(at, ENABLED, present=False)
+                                           if enabled else None)
         # the next kill once this one is up again (its health from the new process): each
         # restart measured alone, not while the one before still loads
         wait_until(lambda: self.meters.pid(service) not in (None, pid), 10)
+        if service in ("gantry", "sim"):  # it comes back disarmed; the crane disabled
+            self.follow(since_s=time.time())
         time.sleep(0.3 if self.short else 1)
         return figures
 
