@@ -116,8 +116,13 @@ class Session:
         deadline = self._started + self.timeout_s
         renew_at = progress_at = 0.0
         gained = (0, self._started, Counter(self.collector.skipped))  # passpoints, when, skips
+        held = False
         while not self.node.stop.is_set():
             now = time.time()
+            if not held and self._camera_state is not None:
+                # the stall clock starts again when the PTZ service holds the camera: a
+                # collection may start before that service is up, or while the camera turns
+                held, gained = True, (gained[0], now, gained[2])
             if self._cancel.is_set():
                 self._finish("cancelled", "cancelled")
                 return False
@@ -239,8 +244,10 @@ class Session:
         # a hint for every reason seen, the most frequent first (a slow start can give more
         # snapshots before the mocap stream than after it: the camera's view must still show)
         hints = [STALL_HINTS[why] for why, _ in since.most_common() if why in STALL_HINTS] \
-            if since else ["the PTZ service sends no detections (is it running, is the camera "
-                           "still?)"]
+            if since else ["the PTZ service sends no detections (is the camera still?)"
+                           if self._camera_state is not None else
+                           "the PTZ service has not taken the camera into calibration mode "
+                           "(is it running?)"]
         return (f"no passpoint for {self.settings.stall_s:g} s ({len(self.collector.times)} of "
                 f"{self.collector.target}; since the last: {seen})"
                 + (f": {'; '.join(hints)}" if hints else ""))

@@ -32,7 +32,8 @@ class CalibSettings(ServiceSettings):
     count: int = Field(100, ge=6, le=10_000, description="passpoints per collection")
     timeout_s: float = Field(600.0, gt=0, description="a collection gives up after this long")
     stall_s: float = Field(60.0, gt=0, description="a collection that gains no passpoint for "
-                           "this long fails, saying what the snapshots showed")
+                           "this long (from when the camera is held) fails, saying what the "
+                           "snapshots showed")
     min_spacing_mm: float = Field(50.0, ge=0, description="a passpoint needs the marker this "
                                   "far from the previous one")
     hold: dict[str, Hold] = Field(default_factory=dict, description="per camera: pan, tilt, "

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -177,4 +179,51 @@ def test_a_stalled_collection_names_what_to_check_for_every_reason_seen(tmp_path
                            "mocap, 2 no marker): the motion capture does not see the wand")
     assert text.index("motion capture") < text.index("not in the camera's view")
     assert "no snapshot at all" in session._stalled_text(session.collector.skipped.copy())
+    assert "has not taken the camera into calibration mode" in session._stalled_text(
+        session.collector.skipped.copy())
+    session.on_state(m.PtzState(measured_s=session._started + 1, camera="ptz1",
+                                status="calibrating", pan_deg=0.0, tilt_deg=0.0, zoom=1,
+                                focal_mm=3.8, aim_error_deg=0.0))
     assert "sends no detections" in session._stalled_text(session.collector.skipped.copy())
+
+
+def _quiet_node() -> object:
+    """What a session needs of its node: a stop event and a bus to publish on."""
+    from types import SimpleNamespace
+
+    return SimpleNamespace(stop=threading.Event(),
+                           bus=SimpleNamespace(publish=lambda *args, **kwargs: None))
+
+
+def test_a_collection_never_held_stalls_after_stall_s_naming_the_ptz_service(
+        tmp_path: Path) -> None:
+    from services.calib.session import Session
+    from services.calib.settings import CalibSettings
+    from services.calib.store import PoseStore
+
+    session = Session(_quiet_node(), CalibSettings(stall_s=0.3), PoseStore(tmp_path),  # type: ignore[arg-type]
+                      "ptz1", 100, 60.0, lambda pose, report: None)
+    assert session._collect() is False
+    assert session.state == "failed"
+    assert "has not taken the camera into calibration mode" in session.message
+
+
+def test_the_stall_clock_starts_again_when_the_camera_is_held(tmp_path: Path) -> None:
+    """A collection started before the PTZ service is up (calib starts faster) gets its whole
+    ``stall_s`` of snapshots once the camera is held (a CI run failed after 4 s with "no
+    snapshot at all": the PTZ service was still starting)."""
+    from services.calib.session import Session
+    from services.calib.settings import CalibSettings
+    from services.calib.store import PoseStore
+
+    session = Session(_quiet_node(), CalibSettings(stall_s=0.3), PoseStore(tmp_path),  # type: ignore[arg-type]
+                      "ptz1", 100, 60.0, lambda pose, report: None)
+    held_after_s = 0.2
+    timer = threading.Timer(held_after_s, session.on_state, [m.PtzState(
+        measured_s=time.time() + held_after_s, camera="ptz1", status="calibrating",
+        pan_deg=0.0, tilt_deg=0.0, zoom=1, focal_mm=3.8, aim_error_deg=0.0)])
+    started = time.monotonic()
+    timer.start()
+    assert session._collect() is False
+    assert time.monotonic() - started >= held_after_s + 0.3
+    assert "sends no detections" in session.message
