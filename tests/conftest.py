@@ -26,15 +26,24 @@ def client_settings(endpoint: str, **bus: object) -> BusSettings:
     return BusSettings(zenoh=ZenohSettings(mode="client", connect=[endpoint]), **bus)
 
 
-def wait_for(predicate: Callable[[], object], timeout: float = 5.0, period: float = 0.02) -> object:
-    """Poll ``predicate`` until it returns something truthy; fail the test on timeout."""
+def poll(predicate: Callable[[], object], timeout: float = 5.0, period: float = 0.02) -> object:
+    """Poll ``predicate`` until it returns something truthy, and return that; None on
+    timeout."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         value = predicate()
         if value:
             return value
         time.sleep(period)
-    pytest.fail(f"condition not met within {timeout} s: {predicate}")
+    return None
+
+
+def wait_for(predicate: Callable[[], object], timeout: float = 5.0, period: float = 0.02) -> object:
+    """Poll ``predicate`` until it returns something truthy; fail the test on timeout."""
+    value = poll(predicate, timeout, period)
+    if not value:
+        pytest.fail(f"condition not met within {timeout} s: {predicate}")
+    return value
 
 
 def open_when_up(settings: ZenohSettings, timeout: float = 15.0) -> zenoh.Session:

@@ -156,7 +156,7 @@ def test_the_chain_across_hosts_survives_cut_links_and_a_router_restart(lab: dic
     monitor.subscribe(keys.PTZ_STATE, ptz.append, latest=False)
     monitor.subscribe(keys.HEALTH, health.append, latest=False)
     operator = Operator(lab["bus"]("operator"))  # the crane moves once an operator arms it
-    wait_for(lambda: operator.send("arm").accepted, timeout=60, period=0.5)
+    operator.arm_within(60)
     wait_for(lambda: any(s.status == "tracking" for s in states), timeout=60, period=0.2)
     _publish_true_pose(calib)
     wait_for(lambda: ptz and ptz[-1].status == "tracking" and ptz[-1].aim_error_deg < 3.0,

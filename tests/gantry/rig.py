@@ -12,6 +12,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 import numpy as np
+import pytest
 from pymodbus.client import ModbusTcpClient
 
 from common import keys
@@ -21,7 +22,7 @@ from common.crane_registers import DEFAULT_MAP, RegisterMap
 from services.sim.crane import CraneModel, CraneParams
 from services.sim.crane_server import ESTOP_REGISTER, CraneServer
 from services.sim.render import Blob, TrackingCamera, draw
-from tests.conftest import free_port, wait_for
+from tests.conftest import free_port, poll, wait_for
 
 CAMERA = TrackingCamera(focal_mm=8.0, pixel_mm=0.0075, height_mm=3500.0)
 GROUND_MM, MARKER_MM = 100.0, 80.0
@@ -89,12 +90,34 @@ class Operator:
 
     def send(self, command: str, timeout: float = 3.0) -> m.GantryCommandReply:
         wait_for(lambda: self.states, timeout=10)  # the gantry is up (and listening)
+        ident = self._publish(command)
+        return wait_for(lambda: self._reply(ident), timeout=timeout)  # type: ignore[return-value]
+
+    def arm_within(self, timeout: float) -> m.GantryCommandReply:
+        """Arm as an operator at a lab that is still starting would: wait for the gantry, ask
+        again while it does not answer or refuses (no estimate yet), at most ``timeout``."""
+        deadline = time.monotonic() + timeout
+        answer = None
+        while time.monotonic() < deadline:
+            if self.states:
+                ident = self._publish("arm")
+                answer = poll(lambda i=ident: self._reply(i), timeout=3) or answer  # type: ignore[assignment]
+                if answer is not None and answer.accepted:
+                    return answer
+            time.sleep(0.5)
+        pytest.fail(f"the gantry was not armed within {timeout:g} s: "
+                    + (f"last answer {answer.detail!r}" if answer else
+                       "it answered nothing" if self.states else "it published no state"))
+
+    def _publish(self, command: str) -> str:
         ident = f"test-{next(_ids)}"
         self.bus.publish(keys.GANTRY_COMMAND, m.GantryCommand(
             measured_s=time.time(), command=command, operator="test operator",  # type: ignore[arg-type]
             reason="test", id=ident))
-        return wait_for(lambda: next((r for r in self.replies if r.id == ident), None),
-                        timeout=timeout)  # type: ignore[return-value]
+        return ident
+
+    def _reply(self, ident: str) -> m.GantryCommandReply | None:
+        return next((r for r in self.replies if r.id == ident), None)
 
     def mode(self) -> str | None:
         return self.states[-1].mode if self.states else None

@@ -46,7 +46,7 @@ def live_lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveLab]:
         bus.subscribe(keys.GANTRY_STATE, crane.append, latest=False)
         bus.subscribe(keys.PTZ_STATE, lambda s: ptz.__setitem__(s.camera, s), latest=False)
         operator = Operator(bus)  # the crane moves once an operator arms the gantry
-        wait_for(lambda: operator.send("arm").accepted, timeout=40, period=0.5)
+        operator.arm_within(40)
         wait_for(lambda: crane and crane[-1].status == "tracking", timeout=40, period=0.2)
         wait_for(lambda: all(ptz.get(c) and ptz[c].status == "tracking" for c in MOUNTS),
                  timeout=20, period=0.2)
