@@ -22,7 +22,7 @@ from common.node import stop_on_signals
 from common.settings import LogLevel, ServiceSettings
 from services.entry import ToolError, checked_key_exprs, tool_session, tool_settings
 from services.recording.foxglove import json_copy
-from services.recording.record import crater, decode
+from services.recording.record import crater, decode, latest_samples
 from services.recording.typed import CRATER, LabScene, Typed
 
 log = logging.getLogger(__name__)
@@ -140,6 +140,9 @@ def serve(args: argparse.Namespace) -> int:
         except RuntimeError as err:
             raise ToolError(f"cannot serve on {settings.host}:{settings.port}: {err}") from err
         subscribers = [session.declare_subscriber(e, bridge.on_sample) for e in exprs]
+        for expr in exprs:  # what was published before we joined (camera poses)
+            for sample in latest_samples(session, expr, timeout_s=1.0):
+                bridge.on_sample(sample)
         print(f"stb foxglove: serving {' '.join(exprs)} on ws://{settings.host}:{server.port} "
               "(Foxglove: Open connection → Foxglove WebSocket; layout: "
               "docs/foxglove-layout.json). Ctrl-C ends.", file=sys.stderr, flush=True)

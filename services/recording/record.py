@@ -10,7 +10,7 @@ import sys
 import threading
 import time
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
@@ -63,6 +63,15 @@ class Stats:
     payload_bytes: int = 0
 
 
+def latest_samples(session: zenoh.Session, expr: zenoh.KeyExpr | str,
+                   timeout_s: float) -> Iterator[zenoh.Sample]:
+    """What the queryables under ``expr`` hold now (camera poses, published once at
+    calibration), for a tool that joins the bus after they were published."""
+    for reply in session.get(expr, timeout=timeout_s):
+        if reply.ok is not None:
+            yield reply.ok
+
+
 class Recorder:
     """Subscribes to key expressions and writes what arrives from a thread of its own; the
     Zenoh callback only queues (key, payload, encoding, receive time)."""
@@ -91,10 +100,9 @@ class Recorder:
         many replies were queued."""
         replies = 0
         for index, expr in enumerate(self._exprs):
-            for reply in self._session.get(expr, timeout=timeout_s):
-                if reply.ok is not None:
-                    self._on_sample(index, reply.ok)
-                    replies += 1
+            for sample in latest_samples(self._session, expr, timeout_s):
+                self._on_sample(index, sample)
+                replies += 1
         return replies
 
     def _on_sample(self, index: int, sample: zenoh.Sample) -> None:

@@ -180,13 +180,14 @@ def test_stb_foxglove_serves_the_typed_scene_images_and_json_series(
     crater_file = tmp_path / "crater.npz"
     generate_crater(CraterShape(), np.random.default_rng(1)).save(crater_file)
     port = free_port()
+    bus = make_bus()
+    # the pose was published before the bridge started: it asks the calib's queryable for it
+    bus.serve_latest(keys.CALIB_POSE, _pose, camera="ptz1")
     proc = stb_process("foxglove", "--connect", router_endpoint, "--set", f"port={port}",
                        "--set", f"height_map={crater_file}", "--set", "bus.zenoh.listen=[]")
-    bus = make_bus()
     try:
         wait_for(lambda: proc.poll() is not None or _listening(port), timeout=20, period=0.2)
         assert proc.poll() is None, proc.stderr.read()
-        bus.publish(keys.CALIB_POSE, _pose(), camera="ptz1")
         stop = False
 
         async def publish() -> None:
