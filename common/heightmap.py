@@ -11,10 +11,14 @@ File format (``.npz``, numpy's zip of arrays): ``heights_mm`` (float32, rows × 
 
 from __future__ import annotations
 
+import io
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from common.files import write_atomically
 
 
 @dataclass(frozen=True)
@@ -67,11 +71,12 @@ class HeightMap:
         return g / n if n > 1e-9 else np.zeros(2)
 
     def save(self, path: Path) -> None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with open(path, "wb") as f:
-            np.savez_compressed(f, heights_mm=self.heights_mm.astype(np.float32),
-                                origin_mm=np.array([self.origin_x_mm, self.origin_y_mm]),
-                                resolution_mm=np.array(self.resolution_mm))
+        """Write the map whole or not at all: other processes read it as it is written."""
+        buffer = io.BytesIO()
+        np.savez_compressed(buffer, heights_mm=self.heights_mm.astype(np.float32),
+                            origin_mm=np.array([self.origin_x_mm, self.origin_y_mm]),
+                            resolution_mm=np.array(self.resolution_mm))
+        write_atomically(path, buffer.getvalue())
 
     @classmethod
     def load(cls, path: Path) -> HeightMap:
@@ -81,7 +86,7 @@ class HeightMap:
                 heights = np.asarray(data["heights_mm"], dtype=np.float32)
                 origin = np.asarray(data["origin_mm"], dtype=float)
                 resolution = float(data["resolution_mm"])
-        except (OSError, KeyError, ValueError) as err:
+        except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile) as err:
             raise ValueError(f"{path} is not a crater height map: {err}") from err
         if heights.ndim != 2 or min(heights.shape) < 2 or not np.all(np.isfinite(heights)):
             raise ValueError(f"{path}: heights_mm must be a finite 2-D grid of at least 2 × 2")

@@ -26,10 +26,26 @@ def store_poses(data_dir: Path, version: int = 0) -> None:
                    {"method": "stored"})
 
 
-def write_up_lab(folder: Path, services: list[str], pose_version: int = 0
-                 ) -> tuple[Path, str, int]:
+OPERATOR = ("olga", "olga-operator-pw")
+VIEWER = ("victor", "victor-viewer-pw")
+"""The page's users in a lab written with ``users=True``: (name, password)."""
+
+
+def write_users(path: Path) -> Path:
+    """A users file with ``OPERATOR`` and ``VIEWER``."""
+    from services.web.users import Role, Users
+
+    users = Users.load(path)
+    users.add(OPERATOR[0], Role.OPERATOR, OPERATOR[1])
+    users.add(VIEWER[0], Role.VIEWER, VIEWER[1])
+    return path
+
+
+def write_up_lab(folder: Path, services: list[str], pose_version: int = 0,
+                 users: bool = False) -> tuple[Path, str, int]:
     """A lab file in ``folder`` running ``services`` under ``stb up``, the poses stored:
-    (the lab file, the router's endpoint, the web page's port)."""
+    (the lab file, the router's endpoint, the web page's port). With ``users`` the page needs
+    a sign-in (``OPERATOR``, ``VIEWER``); without, it is open on loopback."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     lab, _ = write_lab(folder, endpoint, folder / "crater.npz")
     web_port = free_port()
@@ -38,5 +54,7 @@ def write_up_lab(folder: Path, services: list[str], pose_version: int = 0
         f.write(f'\n[router]\nlisten = ["{endpoint}"]\n[up]\nlog_dir = "{folder / "logs"}"\n'
                 f'services = [{listed}]\n[web]\nport = {web_port}\n'
                 f'height_map = "{folder / "crater.npz"}"\n')
+        if users:
+            f.write(f'users_file = "{write_users(folder / "users.json")}"\n')
     store_poses(folder / "calib", pose_version)
     return lab, endpoint, web_port

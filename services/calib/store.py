@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 from pathlib import Path
 
 import numpy as np
 from pydantic import ValidationError
 
 from common import messages as m
+from common.files import write_atomically
 from common.passpoints import Passpoints, Track, write_passpoints
 
 log = logging.getLogger(__name__)
@@ -43,11 +43,8 @@ class PoseStore:
 
     def save(self, pose: m.CameraPose, report: dict) -> Path:
         path = self.camera_dir(pose.camera) / "pose.json"
-        path.parent.mkdir(parents=True, exist_ok=True)
         text = json.dumps({"pose": pose.model_dump(mode="json"), "report": report}, indent=1)
-        tmp = path.with_suffix(".tmp")
-        tmp.write_text(text)
-        os.replace(tmp, path)  # a crash never leaves half a pose behind
+        write_atomically(path, text.encode())  # a crash never leaves half a pose behind
         return path
 
     def save_version(self, pose: m.CameraPose) -> None:

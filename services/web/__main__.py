@@ -1,5 +1,10 @@
 """``stb web``: the operator's live page on http://HOST:PORT (default 127.0.0.1:8080).
 
+Sign-in first: users and roles in ``[web] users_file`` (``stb web user add NAME --role
+operator|viewer``); a viewer sees, an operator also commands. Without a users file the page
+listens on loopback only and everyone on this machine is the operator. TLS with
+``tls_certificate`` and ``tls_key``.
+
 A top view of the crater height map with the robot's track, the crane and its error circle,
 each PTZ camera and where it looks; each camera's latest preview with the markers found and the
 robot marker's expected pixel; every service's liveliness and health; the gravity-offload
@@ -21,6 +26,11 @@ from services.args import service_args
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["user"]:
+        from services.web.user_cli import main as user_main
+
+        return user_main(argv[1:])
     args = service_args("web", __doc__ or "", argv)
     from services.entry import run_service
     from services.web.service import run

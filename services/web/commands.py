@@ -1,5 +1,6 @@
 """The page's gantry buttons: each press is an operator's command on the bus
-(stb/gantry/command, as ``web:<browser address>``) and the gantry's answer comes back."""
+(stb/gantry/command, naming the signed-in user and their address: ``alice (web 10.0.0.5)``)
+and the gantry's answer comes back."""
 
 from __future__ import annotations
 
@@ -30,13 +31,14 @@ class GantryCommander:
                 self._replies.pop(next(iter(self._replies)))
             self._changed.notify_all()
 
-    def send(self, command: str, client: str) -> dict:
-        """Send ``command`` and wait for the answer: {accepted, detail, mode}."""
+    def send(self, command: str, operator: str) -> dict:
+        """Send ``command`` as ``operator`` and wait for the answer: {accepted, detail,
+        mode}."""
         if command not in COMMANDS:
             raise ValueError(f"unknown command {command!r}")
         ident = f"web-{os.getpid()}-{next(self._ids)}"
         self.bus.publish(keys.GANTRY_COMMAND, m.GantryCommand(
-            measured_s=time.time(), command=command, operator=f"web:{client}"[:128],  # type: ignore[arg-type]
+            measured_s=time.time(), command=command, operator=operator[:128],  # type: ignore[arg-type]
             reason="from the operator page", id=ident))
         with self._changed:
             answered = self._changed.wait_for(lambda: ident in self._replies, self.timeout_s)

@@ -10,20 +10,46 @@ import zenoh
 
 from common import keys
 from common.node import Node, StartupError
+from services.web.app import build_app
 from services.web.commands import GantryCommander
-from services.web.server import CraterImage, WebServer
+from services.web.crater_image import CraterImage
+from services.web.gate import Gate
+from services.web.server import WebServer
 from services.web.settings import WebSettings
 from services.web.state import LiveState
+from services.web.users import Users, UsersFileError
 
 log = logging.getLogger(__name__)
 JUDGE_PERIOD_S = 0.5  # alarms begin and end on time even while no page looks
 TOPICS = (keys.TRACKER_ROBOT, keys.CALIB_PROGRESS, keys.GANTRY_STATE, keys.GANTRY_ESTIMATE,
           keys.GANTRY_OFFLOAD, keys.PTZ_STATE, keys.PTZ_PREVIEW, keys.PTZ_SNAPSHOT,
           keys.PTZ_DETECTIONS, keys.TRUTH_ROBOT)
+COMMAND_TOPICS = (keys.GANTRY_COMMAND, keys.GANTRY_COMMAND_REPLY)  # the page's command history
+
+
+def open_gate(settings: WebSettings) -> Gate:
+    """Who may use the page: the users file's users, or (loopback only) everyone here."""
+    session_s = settings.session_h * 3600
+    if settings.users_file is None:
+        log.warning("no users_file: the page on %s is open to everyone on this machine, as "
+                    "operator (add users with: stb web user add NAME --role operator)",
+                    settings.host)
+        return Gate(None, session_s, tls=settings.tls is not None)
+    try:
+        users = Users.load(settings.users_file)
+    except UsersFileError as err:
+        raise StartupError(str(err)) from err
+    if not len(users):
+        raise StartupError(f"users file {settings.users_file} has no users: add one with "
+                           f"stb web user add NAME --role operator --users "
+                           f"{settings.users_file}")
+    log.info("%d users may sign in (%s)", len(users), settings.users_file)
+    return Gate(users, session_s, tls=settings.tls is not None)
 
 
 def run(node: Node[WebSettings]) -> None:
     settings = node.settings
+    gate = open_gate(settings)
     state = LiveState(track_s=settings.track_s, history_s=settings.history_s)
     lock = threading.Lock()
 
@@ -47,21 +73,24 @@ def run(node: Node[WebSettings]) -> None:
 
     for topic in TOPICS:
         node.bus.subscribe(topic, on_message)
+    for topic in COMMAND_TOPICS:
+        node.bus.subscribe(topic, on_message, latest=False)
     node.bus.subscribe(keys.HEALTH, on_message, latest=True)
     node.bus.subscribe(keys.CALIB_POSE, on_message, latest=False)
     for pose in node.bus.query_latest(keys.CALIB_POSE, timeout_s=1.0):
         on_message(pose)
     tokens = node.bus.session.liveliness().declare_subscriber(
         keys.alive_pattern(node.bus.prefix), on_alive, history=True)
+    app = build_app(gate, view, preview, CraterImage(settings.height_map),
+                    push_period_s=1 / settings.push_hz, max_streams=settings.max_streams,
+                    command=GantryCommander(node.bus).send)
     try:
-        server = WebServer(settings.host, settings.port, view, preview,
-                           CraterImage(settings.height_map), 1 / settings.push_hz, node.stop,
-                           GantryCommander(node.bus).send)
+        server = WebServer(app, settings.host, settings.port, settings.tls)
     except OSError as err:
         tokens.undeclare()
-        raise StartupError(f"cannot listen on {settings.host}:{settings.port}: {err}") from err
+        raise StartupError(f"cannot serve on {settings.host}:{settings.port}: {err}") from err
     server.start()
-    log.info("operator page on http://%s:%d/", settings.host, server.port)
+    log.info("operator page on %s://%s:%d/", server.scheme, settings.host, server.port)
     try:
         while not node.stop.wait(JUDGE_PERIOD_S):
             with lock:

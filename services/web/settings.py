@@ -1,10 +1,12 @@
-"""Web page settings: where it listens and what it draws the crater from."""
+"""Web page settings: where it listens, who may sign in, TLS, and what it draws the crater
+from."""
 
 from __future__ import annotations
 
+import ipaddress
 from pathlib import Path
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from common.settings import ServiceSettings
 
@@ -12,8 +14,18 @@ from common.settings import ServiceSettings
 class WebSettings(ServiceSettings):
     section = "web"
 
-    host: str = Field("127.0.0.1", description="address to listen on; 0.0.0.0 for the lab LAN")
+    host: str = Field("127.0.0.1", description="address to listen on; 0.0.0.0 for the lab LAN "
+                      "(needs users_file)")
     port: int = Field(8080, ge=0, le=65535)
+    users_file: Path | None = Field(
+        None, description="who may sign in (stb web user add NAME --role operator|viewer); "
+        "without one the page serves loopback only, everyone on this machine as operator")
+    tls_certificate: Path | None = Field(None, description="PEM certificate: serve https")
+    tls_key: Path | None = Field(None, description="PEM private key of tls_certificate")
+    session_h: float = Field(12.0, gt=0, le=24 * 30, description="a sign-in lasts this long, "
+                             "hours")
+    max_streams: int = Field(50, ge=1, le=10_000, description="open live views (event "
+                             "streams) at once; more are refused until one closes")
     height_map: Path | None = Field(Path("run/sim/crater.npz"),
                                     description="crater height map (.npz) drawn under the "
                                     "tracks; missing file: a plain grid")
@@ -21,3 +33,30 @@ class WebSettings(ServiceSettings):
     history_s: float = Field(300.0, gt=0, le=3600, description="crane error and sideways "
                              "pull plotted, seconds")
     push_hz: float = Field(5.0, gt=0, le=30, description="page updates a second")
+
+    @model_validator(mode="after")
+    def _safe_to_serve(self) -> WebSettings:
+        if (self.tls_certificate is None) != (self.tls_key is None):
+            raise ValueError("tls_certificate and tls_key go together: give both or neither")
+        if self.users_file is None and not is_loopback(self.host):
+            raise ValueError(
+                f"host {self.host!r} reaches beyond this machine, and there is no users_file: "
+                "anyone on the network could move the crane. Add users (stb web user add NAME "
+                "--role operator --users FILE) and set users_file, or keep host = 127.0.0.1")
+        return self
+
+    @property
+    def tls(self) -> tuple[Path, Path] | None:
+        if self.tls_certificate is None or self.tls_key is None:
+            return None
+        return self.tls_certificate, self.tls_key
+
+
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` is reachable only from this machine (127.x, ::1, localhost)."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False

@@ -19,6 +19,7 @@ HISTORY_STEP_S = 1.0  # the plot's resolution: the largest error and pull of eac
 # A lab has a handful of cameras, robots and services; names beyond these many (a key churn)
 # push out the longest unheard, so that memory stays flat whatever arrives.
 MAX_CAMERAS, MAX_ROBOTS, MAX_SERVICES = 16, 8, 64
+MAX_COMMANDS = 20  # the page's command history: the latest operators' commands and answers
 GROUND_Z_MM = 0.0
 LOOK_MAX_MM = 8000.0
 
@@ -74,6 +75,7 @@ class LiveState:
     collecting_since: dict[str, float] = field(default_factory=dict)
     history: deque[list[float]] = field(default_factory=deque)  # [t, error mm, pull %]
     alarms: AlarmBoard = field(default_factory=AlarmBoard)
+    commands: dict[str, dict[str, Any]] = field(default_factory=dict)  # by id, oldest first
 
     def on_alive(self, service: str, instance: str, alive: bool) -> None:
         (self.alive.add if alive else self.alive.discard)((service, instance))
@@ -120,6 +122,8 @@ class LiveState:
             _keep(self.health, (msg.service, msg.instance), msg, MAX_SERVICES)
         elif isinstance(msg, m.RobotTruth):
             _keep(self.truth, msg.robot, msg, MAX_ROBOTS)
+        elif isinstance(msg, m.GantryCommand | m.GantryCommandReply):
+            self._command(msg)
 
     def _remember(self, offload: m.GravityOffload) -> None:
         """The plot's history: per ``HISTORY_STEP_S``, the largest error and pull."""
@@ -141,6 +145,19 @@ class LiveState:
         self.alarms.update(
             crane_alarms(self.crane, self.estimate, self.offload, now_s)
             + service_alarms(rows) + calibration_alarms(self.collections), now_s)
+
+    def _command(self, msg: m.GantryCommand | m.GantryCommandReply) -> None:
+        """A command or its answer (either may come first: each key has its thread)."""
+        entry = self.commands.get(msg.id) or {"at_s": msg.measured_s, "command": msg.command,
+                                              "by": "", "reason": "", "accepted": None,
+                                              "detail": ""}
+        if isinstance(msg, m.GantryCommand):
+            entry.update(at_s=msg.measured_s, by=msg.operator, reason=msg.reason)
+        else:
+            entry.update(accepted=msg.accepted, detail=msg.detail)
+        self.commands[msg.id] = entry
+        while len(self.commands) > MAX_COMMANDS:
+            del self.commands[next(iter(self.commands))]
 
     def view(self, now_s: float) -> dict[str, Any]:
         """Everything the page draws, JSON-ready (images only by sequence number)."""
@@ -178,6 +195,8 @@ class LiveState:
                 "warn_above_pct": self.offload.warn_above_pct,
                 "warning": self.offload.warning},
             "cameras": self._cameras(),
+            "commands": [dict(c) for c in sorted(self.commands.values(),
+                                                 key=lambda c: -c["at_s"])],
         }
 
     def _services(self, now_s: float) -> list[dict[str, Any]]:

@@ -35,7 +35,7 @@ class LiveLab:
 @pytest.fixture(scope="package")
 def live_lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveLab]:
     tmp = tmp_path_factory.mktemp("live")
-    lab, endpoint, web_port = write_up_lab(tmp, SERVICES)
+    lab, endpoint, web_port = write_up_lab(tmp, SERVICES, users=True)
     up = stb_process("up", "--lab", str(lab), "--no-view")
     session = None
     try:

@@ -3,6 +3,7 @@ against the live sim lab: it loads, shows every service alive, and the robot mov
 
 from __future__ import annotations
 
+import base64
 import json
 import os
 import time
@@ -16,6 +17,7 @@ import pytest
 
 from tests.conftest import wait_for
 from tests.operator.conftest import SERVICES, LiveLab
+from tests.uplab import OPERATOR, VIEWER
 
 CHROMIUM = os.environ.get("STB_CHROMIUM", "/usr/bin/chromium")
 FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -48,12 +50,33 @@ def chromium() -> Iterator[object]:
             browser.close()
 
 
+def sign_in(tab: object, url: str, user: tuple[str, str]) -> None:
+    """Open the page, which shows the sign-in form, and sign in as ``user``."""
+    tab.goto(url, wait_until="load")  # type: ignore[attr-defined]
+    tab.fill("#user", user[0])  # type: ignore[attr-defined]
+    tab.fill("#password", user[1])  # type: ignore[attr-defined]
+    tab.click("button[type='submit']")  # type: ignore[attr-defined]
+    tab.wait_for_selector("#map", timeout=15_000)  # type: ignore[attr-defined]
+    wait_for(lambda: tab.locator("#who").inner_text().startswith(user[0]),  # type: ignore[attr-defined]
+             timeout=10)
+
+
+def basic(user: tuple[str, str]) -> dict[str, str]:
+    return {"Authorization": "Basic " + base64.b64encode(":".join(user).encode()).decode()}
+
+
 @pytest.fixture(scope="module")
-def page(live_lab: LiveLab) -> Iterator[object]:
+def browser_() -> Iterator[object]:
     with chromium() as browser:
-        tab = browser.new_page(viewport={"width": 1400, "height": 900})  # type: ignore[attr-defined]
-        tab.goto(live_lab.web_url, wait_until="load")
-        yield tab
+        yield browser
+
+
+@pytest.fixture(scope="module")
+def page(live_lab: LiveLab, browser_: object) -> Iterator[object]:
+    tab = browser_.new_page(viewport={"width": 1400, "height": 900})  # type: ignore[attr-defined]
+    sign_in(tab, live_lab.web_url, OPERATOR)
+    yield tab
+    tab.close()
 
 
 def _expected_services() -> set[str]:
@@ -85,7 +108,8 @@ def test_the_robot_moves_on_the_page_while_the_sim_runs(page: object, live_lab: 
     text = page.locator("#robot-xy").inner_text()  # type: ignore[attr-defined]
     assert text.startswith("robot: ") and "mm" in text
     # The page draws what the server says: the robot's canvas position matches its state.
-    with urllib.request.urlopen(f"{live_lab.web_url}/state.json", timeout=5) as reply:
+    with urllib.request.urlopen(urllib.request.Request(
+            f"{live_lab.web_url}/state.json", headers=basic(VIEWER)), timeout=5) as reply:
         state = json.load(reply)
     assert state["robot"] is not None and len(state["track"]) > 5
     page.screenshot(path=str(tmp_path / "page.png"))  # type: ignore[attr-defined]
@@ -112,7 +136,7 @@ def test_camera_previews_the_plot_and_offload_figures_are_shown(page: object,
     page.screenshot(path=str(shots / "page-following.png"))  # type: ignore[attr-defined]
 
 
-def test_the_gantry_buttons_stop_reset_and_arm_it(page: object) -> None:
+def test_the_gantry_buttons_stop_reset_and_arm_it(page: object, live_lab: LiveLab) -> None:
     mode = page.locator("#gantry-mode")  # type: ignore[attr-defined]
     answer = page.locator("#gantry-answer")  # type: ignore[attr-defined]
     # The fixture armed the gantry. On the loaded test machine a stall may since have let the
@@ -121,12 +145,23 @@ def test_the_gantry_buttons_stop_reset_and_arm_it(page: object) -> None:
     wait_for(lambda: mode.inner_text().startswith(("mode: armed", "mode: stopped")), timeout=10)
     for button, expected in (("stop", "mode: stopped"), ("reset", "mode: disarmed"),
                              ("arm", "mode: armed")):
-        page.click(f"button[data-command='{button}']")  # type: ignore[attr-defined]
+        if button == "stop":  # Stop from the keyboard, anywhere on the page
+            page.keyboard.press("Escape")  # type: ignore[attr-defined]
+        else:
+            page.click(f"button[data-command='{button}']")  # type: ignore[attr-defined]
         if button == "arm":  # after a tripped watchdog, until the controller reports it reset
             _press_until_done(page, answer, button)
         wait_for(lambda b=button: answer.inner_text().startswith(f"{b}: done"), timeout=10)
         wait_for(lambda e=expected: mode.inner_text().startswith(e), timeout=5)
-    assert "(web:127.0.0.1)" in mode.inner_text(), "who armed it"
+    assert "(olga (web 127.0.0.1))" in mode.inner_text(), "who armed it, by name"
+    history = page.locator("#commands tr[data-by='olga (web 127.0.0.1)']")  # type: ignore[attr-defined]
+    wait_for(lambda: history.count() >= 3, timeout=10)
+    assert history.first.get_attribute("data-command-row") == "arm"
+    with urllib.request.urlopen(urllib.request.Request(
+            f"{live_lab.web_url}/state.json", headers=basic(VIEWER)), timeout=5) as reply:
+        crane = json.load(reply)["crane"]
+    assert crane["mode"] == "armed" and crane["mode_by"] == "olga (web 127.0.0.1)", \
+        "the gantry's own state names the operator"
     page.click("button[data-command='reset']")  # type: ignore[attr-defined]
     wait_for(lambda: answer.inner_text().startswith("reset: refused"), timeout=10)
     assert "disarm or stop before a reset" in answer.inner_text(), "the gantry's reason"
@@ -146,8 +181,47 @@ def _press_until_done(page: object, answer: object, button: str) -> None:
         page.click(f"button[data-command='{button}']")  # type: ignore[attr-defined]
 
 
-def test_a_command_from_another_site_is_refused(live_lab: LiveLab) -> None:
-    request = urllib.request.Request(f"{live_lab.web_url}/gantry/stop", method="POST")
+def test_without_credentials_everything_answers_401(live_lab: LiveLab) -> None:
+    for path in ("/state.json", "/events", "/map.json", "/map.png", "/preview/ptz1.jpg",
+                 "/app.js"):
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(f"{live_lab.web_url}{path}", timeout=5)
+        assert refused.value.code == 401, path
+    for command in ("arm", "disarm", "stop", "reset"):
+        request = urllib.request.Request(f"{live_lab.web_url}/gantry/{command}", method="POST")
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(request, timeout=5)
+        assert refused.value.code == 401
+    with urllib.request.urlopen(live_lab.web_url, timeout=5) as reply:
+        form = reply.read()
+    assert b'id="signin"' in form and b"canvas" not in form, "only the sign-in form"
+
+
+def test_a_viewer_sees_the_page_with_every_control_disabled_and_is_refused(
+        live_lab: LiveLab, browser_: object) -> None:
+    tab = browser_.new_page(viewport={"width": 1400, "height": 900})  # type: ignore[attr-defined]
+    try:
+        sign_in(tab, live_lab.web_url, VIEWER)
+        wait_for(lambda: tab.locator("#connection").inner_text() == "live", timeout=15)
+        controls = tab.locator("[data-command]")
+        assert controls.count() >= 4
+        assert all(controls.nth(i).is_disabled() for i in range(controls.count()))
+        # the server refuses too: the viewer's own session, with its CSRF token, from the page
+        statuses = tab.evaluate("""async () => {
+            const me = await (await fetch("session.json")).json();
+            const out = [];
+            for (const c of ["arm", "disarm", "stop", "reset"]) {
+              const r = await fetch(`gantry/${c}`, {method: "POST",
+                                                    headers: {"X-CSRF-Token": me.csrf}});
+              out.push(r.status);
+            }
+            return out; }""")
+        assert statuses == [403, 403, 403, 403]
+        tab.keyboard.press("Escape")  # no stop from a viewer's keyboard either
+    finally:
+        tab.close()
+    request = urllib.request.Request(f"{live_lab.web_url}/gantry/stop", method="POST",
+                                     headers=basic(VIEWER))
     with pytest.raises(urllib.error.HTTPError) as refused:
-        urllib.request.urlopen(request, timeout=5)  # no X-STB-Command header
+        urllib.request.urlopen(request, timeout=5)
     assert refused.value.code == 403

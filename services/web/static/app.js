@@ -432,11 +432,50 @@ function drawGantry(state) {
   pill.className = c.mode;
 }
 
+// Who is signed in (session.json): their name and role, and the CSRF token every command
+// carries. A viewer's controls stay disabled; the server refuses their commands too (403).
+let me = null;
+
+function signedOut() { window.location.reload(); }  // the server answers with the sign-in form
+
+async function loadSession() {
+  const reply = await fetch("session.json");
+  if (reply.status === 401) return signedOut();
+  me = await reply.json();
+  document.getElementById("who").textContent = me.open
+    ? "open page: no users file, everyone on this machine is operator"
+    : `${me.user} (${me.role})`;
+  document.getElementById("who").className = me.open ? "warn" : "";
+  document.getElementById("signout").hidden = me.open;
+  for (const control of document.querySelectorAll("[data-command]")) {
+    control.disabled = !me.may_command;
+    control.title = me.may_command ? "" : "viewers do not command: sign in as an operator";
+  }
+}
+
+function drawCommands(state) {
+  const table = document.getElementById("commands");
+  const rows = (state.commands || []).slice(0, 8).map((c) => {
+    const answer = c.accepted === null ? "…" : (c.accepted ? "done" : "refused");
+    return `<tr data-command-row="${esc(c.command)}" data-by="${esc(c.by)}">` +
+      `<td>${clock(c.at_s)}</td><td>${esc(c.command)}</td><td>${esc(c.by)}</td>` +
+      `<td class="${c.accepted === false ? "warn" : ""}" title="${esc(c.detail)}">` +
+      `${answer}</td></tr>`;
+  });
+  table.innerHTML = rows.length ? rows.join("") : "<tr><td>none yet</td></tr>";
+}
+
+function esc(text) {
+  return String(text).replace(/[&<>"']/g, (ch) => `&#${ch.charCodeAt(0)};`);
+}
+
 async function command(name) {
   const answer = document.getElementById("gantry-answer");
   answer.textContent = `${name}…`;
   try {
-    const reply = await fetch(`gantry/${name}`, {method: "POST", headers: {"X-STB-Command": "1"}});
+    const reply = await fetch(`gantry/${name}`, {method: "POST",
+                                                 headers: {"X-CSRF-Token": me ? me.csrf : ""}});
+    if (reply.status === 401) return signedOut();
     const body = await reply.json();
     answer.textContent = `${name}: ${body.accepted ? "done" : "refused"} — ${body.detail}`;
     answer.className = body.accepted ? "" : "warn";
@@ -449,6 +488,17 @@ async function command(name) {
 for (const button of document.querySelectorAll("button[data-command]")) {
   button.addEventListener("click", () => command(button.dataset.command));
 }
+// Stop from the keyboard at any moment: Escape.
+document.addEventListener("keydown", (event) => {
+  if (event.key === "Escape") {
+    event.preventDefault();
+    if (me && me.may_command) command("stop");
+  }
+});
+document.getElementById("signout").addEventListener("click", async () => {
+  await fetch("signout", {method: "POST"});
+  signedOut();
+});
 
 function draw(state) {
   latest = state;
@@ -457,6 +507,7 @@ function draw(state) {
   if (!state) return;
   drawAlarms(state);
   drawGantry(state);
+  drawCommands(state);
   drawServices(state);
   drawOffload(state);
   drawCameras(state);
@@ -474,6 +525,7 @@ function connect() {
   events.onmessage = (event) => draw(JSON.parse(event.data));
   events.onerror = () => {
     status.textContent = "reconnecting…"; status.className = "down";
+    loadSession().catch(() => {});  // signed out (expired, or the service restarted)?
     const banner = document.getElementById("alarms");
     banner.className = "on";
     banner.textContent = "⚠ no connection to the web service: what you see may be old";
@@ -481,6 +533,7 @@ function connect() {
 }
 
 draw(null);  // the waiting texts, before anything arrives
+loadSession().catch(() => {});
 loadMap();
 fetch("state.json").then((r) => r.json()).then((state) => { if (!latest) draw(state); })
   .catch(() => {});
