@@ -29,6 +29,7 @@ from tests.conftest import open_when_up
 from tests.deploy.lab_secrets import identity, identity_env, make_secrets
 from tests.ports import free_port
 from tests.services.test_processes import AliveWatcher
+from tests.uplab import write_users
 
 PROJECT = "stb-compose-test"
 LAB_FILE_IN_CONTAINERS = "/config/compose-sim.toml"
@@ -82,7 +83,8 @@ def lab_folder(*, offline_router: bool, router_names: tuple[str, ...] = ()
                                       raise_limits=may_raise_limits(),
                                       router_names=router_names)
         client = Client(f"tls/localhost:{ports['router']}",
-                        folder / "deploy" / "zenoh" / "secrets")
+                        folder / "deploy" / "zenoh" / "secrets",
+                        web_url=f"https://127.0.0.1:{ports['web']}")
         try:
             yield folder, files, client
         finally:
@@ -101,7 +103,7 @@ def project_folder(folder: Path, *, offline_router: bool, raise_limits: bool,
     shutil.copytree(ROOT / "config", folder / "config")
     (folder / "deploy" / "zenoh").mkdir(parents=True)
     shutil.copy(ROOT / "deploy" / "zenoh" / "router.json5", folder / "deploy" / "zenoh")
-    make_secrets(folder, *router_names)
+    write_users(make_secrets(folder, *router_names) / "web-users.json")  # the page's users
     files = ["docker-compose.yml"]
     if offline_router:
         shutil.copy(ROOT / "deploy" / "docker" / "compose.offline.yml", folder)
@@ -227,8 +229,8 @@ class Client:
     """The host's side of the bus: sessions as the lab's identities through the router's
     port (TLS and passwords from ``secrets``; without, plain TCP as ``stb up`` has it)."""
 
-    def __init__(self, endpoint: str, secrets: Path | None = None) -> None:
-        self.endpoint, self.secrets = endpoint, secrets
+    def __init__(self, endpoint: str, secrets: Path | None = None, web_url: str = "") -> None:
+        self.endpoint, self.secrets, self.web_url = endpoint, secrets, web_url
         self._sessions: list[zenoh.Session] = []
 
     def settings(self, user: str) -> ZenohSettings:

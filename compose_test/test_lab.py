@@ -29,6 +29,8 @@ from compose_test.lab import (
     up,
     wait_until,
 )
+from tests.uplab import OPERATOR, VIEWER
+from tests.webpage import PageClient
 
 
 def _expected(lab: dict) -> list[tuple[str, str]]:
@@ -153,6 +155,34 @@ def test_the_monitor_cannot_put_a_setpoint_through_the_router(lab: dict) -> None
     with lock:
         assert len(got) >= 4, "the gantry's own setpoints (4 Hz, armed) must arrive"
         assert b"from the monitor" not in got
+
+
+def test_the_page_needs_a_sign_in_over_tls_and_names_the_operator(lab: dict) -> None:
+    """The operator's page from outside the containers, as a browser on the lab's LAN sees it:
+    HTTPS with the lab CA's certificate, nothing before a sign-in, a viewer refused, an
+    operator's command in the gantry's own state under their name."""
+    page = PageClient(lab["client"].web_url, lab["client"].secrets / "ca.pem")
+    status, _, form = page.request("GET", "/")
+    assert status == 200 and b'id="signin"' in form and b"canvas" not in form
+    for path in ("/state.json", "/events", "/map.png", "/preview/ptz1.jpg"):
+        assert page.request("GET", path)[0] == 401, path
+    assert page.request("POST", "/gantry/stop")[0] == 401
+    assert page.request("GET", "/state.json", auth=VIEWER)[0] == 200
+    assert page.request("POST", "/gantry/stop", auth=VIEWER)[0] == 403
+    cookie, csrf, set_cookie = page.sign_in(OPERATOR)
+    assert {"secure", "httponly", "samesite=strict"} <= {
+        part.strip().lower() for part in set_cookie.split(";")}
+    states: list[m.CraneState] = []
+    lab["client"].bus("monitor").subscribe(keys.GANTRY_STATE, states.append, latest=False)
+    status, answer = page.command("disarm", cookie, csrf)
+    assert status == 200 and answer["accepted"], answer
+    wait_until(lambda: states and states[-1].mode == "disarmed"
+               and states[-1].mode_by.startswith("olga (web "), 10,
+               "the gantry's state names the page's operator")
+    deadline = time.monotonic() + 60
+    while not (answer := page.command("arm", cookie, csrf)[1])["accepted"]:
+        assert time.monotonic() < deadline, f"arm from the page: {answer}"
+        time.sleep(1.0)
 
 
 def test_the_calibration_survives_down_and_up(lab: dict, watch: Watch) -> None:

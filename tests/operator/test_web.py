@@ -3,7 +3,6 @@ against the live sim lab: it loads, shows every service alive, and the robot mov
 
 from __future__ import annotations
 
-import base64
 import json
 import os
 import time
@@ -18,6 +17,7 @@ import pytest
 from tests.conftest import wait_for
 from tests.operator.conftest import SERVICES, LiveLab
 from tests.uplab import OPERATOR, VIEWER
+from tests.webpage import basic
 
 CHROMIUM = os.environ.get("STB_CHROMIUM", "/usr/bin/chromium")
 FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -59,10 +59,6 @@ def sign_in(tab: object, url: str, user: tuple[str, str]) -> None:
     tab.wait_for_selector("#map", timeout=15_000)  # type: ignore[attr-defined]
     wait_for(lambda: tab.locator("#who").inner_text().startswith(user[0]),  # type: ignore[attr-defined]
              timeout=10)
-
-
-def basic(user: tuple[str, str]) -> dict[str, str]:
-    return {"Authorization": "Basic " + base64.b64encode(":".join(user).encode()).decode()}
 
 
 @pytest.fixture(scope="module")

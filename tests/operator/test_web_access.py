@@ -6,11 +6,9 @@ from __future__ import annotations
 import base64
 import http.client
 import json
-import ssl
 import subprocess
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -23,6 +21,7 @@ from services.web.server import WebServer
 from services.web.settings import WebSettings
 from services.web.users import Role, User, Users, UsersFileError
 from tests.conftest import stb_process
+from tests.webpage import PageClient, basic
 
 ALICE, VICTOR = ("alice", "alice-password-1"), ("victor", "victor-password-1")
 PROTECTED = ["/app.js", "/state.json", "/events", "/map.json", "/map.png", "/preview/ptz1.jpg",
@@ -162,42 +161,12 @@ def test_the_gate_brakes_guessing_with_its_clock(users_file: Path) -> None:
 # --- the server over HTTP(S) ------------------------------------------------------------------
 
 
-@dataclass
-class Page:
-    port: int
-    commands: list[tuple[str, str]]
-    tls: ssl.SSLContext | None = None
+class Page(PageClient):
+    """The page under test, and the commands that reached its gantry."""
 
-    def request(self, method: str, path: str, *, auth: tuple[str, str] | None = None,
-                cookie: str | None = None, headers: dict | None = None, body: object = None,
-                ) -> tuple[int, dict, bytes]:
-        conn = (http.client.HTTPSConnection("127.0.0.1", self.port, context=self.tls, timeout=10)
-                if self.tls else http.client.HTTPConnection("127.0.0.1", self.port, timeout=10))
-        sent = dict(headers or {})
-        if auth:
-            sent["Authorization"] = "Basic " + base64.b64encode(":".join(auth).encode()).decode()
-        if cookie:
-            sent["Cookie"] = cookie
-        data = None
-        if body is not None:
-            data = json.dumps(body).encode()
-            sent.setdefault("Content-Type", "application/json")
-        try:
-            conn.request(method, path, body=data, headers=sent)
-            reply = conn.getresponse()
-            content = b"" if path == "/events" and reply.status == 200 else reply.read()
-            return reply.status, {k.lower(): v for k, v in reply.getheaders()}, content
-        finally:
-            conn.close()
-
-    def sign_in(self, user: str, password: str) -> tuple[str, str]:
-        """(cookie, csrf) of a new session."""
-        status, headers, body = self.request("POST", "/signin", body={"user": user,
-                                                                       "password": password})
-        assert status == 200, body
-        cookie = headers["set-cookie"].split(";")[0]
-        csrf = json.loads(self.request("GET", "/session.json", cookie=cookie)[2])["csrf"]
-        return cookie, csrf
+    def __init__(self, url: str, cafile: Path | None, commands: list[tuple[str, str]]) -> None:
+        super().__init__(url, cafile)
+        self.commands = commands
 
 
 def _serve(users: Users | None, tmp: Path, tls: tuple[Path, Path] | None = None,
@@ -213,12 +182,9 @@ def _serve(users: Users | None, tmp: Path, tls: tuple[Path, Path] | None = None,
                     CraterImage(tmp / "none.npz"), push_period_s=0.05,
                     max_streams=max_streams, command=command)
     web = WebServer(app, "127.0.0.1", 0, tls).start()
-    context = None
-    if tls:
-        context = ssl.create_default_context(cafile=str(tls[0]))
-        context.check_hostname = False
+    page = Page(f"{web.scheme}://127.0.0.1:{web.port}", tls[0] if tls else None, commands)
     try:
-        yield Page(web.port, commands, context), web
+        yield page, web
     finally:
         web.close()
 
@@ -277,7 +243,7 @@ def test_a_browser_session_needs_its_csrf_token_and_ends_at_sign_out(page: Page)
 
 
 def test_a_viewer_session_sees_but_may_not_command(page: Page) -> None:
-    cookie, csrf = page.sign_in(*VICTOR)
+    cookie, csrf, _ = page.sign_in(VICTOR)
     assert page.request("GET", "/state.json", cookie=cookie)[0] == 200
     for command in ("arm", "disarm", "stop", "reset"):
         status, _, body = page.request("POST", f"/gantry/{command}", cookie=cookie,
@@ -305,8 +271,7 @@ def test_event_streams_are_bounded(users_file: Path, tmp_path: Path) -> None:
         streams = []
         for _ in range(2):
             conn = http.client.HTTPConnection("127.0.0.1", page.port, timeout=10)
-            conn.request("GET", "/events", headers={"Authorization": "Basic " + base64.b64encode(
-                ":".join(VICTOR).encode()).decode()})
+            conn.request("GET", "/events", headers=basic(VICTOR))
             reply = conn.getresponse()
             assert reply.status == 200 and reply.readline().startswith(b"data: ")
             streams.append(conn)
