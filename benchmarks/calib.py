@@ -19,7 +19,6 @@ the sets), and the time ratio against the paper's figures and against OpenCV.
 
 from __future__ import annotations
 
-import argparse
 import json
 import platform
 import time
@@ -31,6 +30,7 @@ import numpy as np
 
 from common.camera import Intrinsics, Pose, pose_distance
 from common.passpoints import Passpoints
+from services.args import Parser
 from services.calib.pnp import camera_matrix, pose_from_cv
 from services.calib.solve import Options, Solution, solve
 from services.calib.synthetic import PAPER_GUESS, PAPER_POSE, passpoints
@@ -60,7 +60,7 @@ def methods() -> dict[str, Callable[[Passpoints], tuple[Pose, int]]]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
+    parser = Parser(description=__doc__)
     parser.add_argument("--sets", type=int, default=10)
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()

@@ -13,7 +13,6 @@ before the clock starts), for ``auto`` and for the paper's ``cmaes`` from its gu
 
 from __future__ import annotations
 
-import argparse
 import json
 import subprocess
 import sys
@@ -24,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from common.passpoints import write_passpoints
+from services.args import Parser
 from services.calib.synthetic import PAPER_GUESS, PAPER_POSE, passpoints
 from tests.services.test_help_is_light import COMMANDS
 
@@ -46,7 +46,7 @@ def _wall(command: list[str], runs: int) -> tuple[float, float, str]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = Parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=int, default=5)
     args = parser.parse_args()
     median, worst, _ = _wall([sys.executable, "-c", "pass"], args.runs)

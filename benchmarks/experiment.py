@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 import services.gantry.control as control
+from services.args import Parser
 from services.experiment import gantry as experiment
 from services.gantry.predict import ALGORITHMS
 from services.gantry.settings import GantrySettings
@@ -74,7 +75,7 @@ def profile_walker(crater: Path) -> dict[str, float]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__,
+    parser = Parser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenarios", default="locomotive,walker")
     parser.add_argument("--seeds", default="1,2,3")

@@ -29,6 +29,7 @@ import cv2
 import numpy as np
 
 from common.markers import detect
+from services.args import Parser
 
 THRESHOLD = 230
 
@@ -112,7 +113,7 @@ SETS = {  # name: (markers, reflections, noise) — the light frames are the com
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__,
+    parser = Parser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--frames", type=int, default=200)
     parser.add_argument("--rounds", type=int, default=5)

@@ -19,7 +19,6 @@ snapshots a second one camera could deliver on one core.
 
 from __future__ import annotations
 
-import argparse
 import tempfile
 import time
 from pathlib import Path
@@ -27,6 +26,7 @@ from pathlib import Path
 import httpx
 import numpy as np
 
+from services.args import Parser
 from services.sim.camera_server import CameraServer, SimCamera
 from services.sim.lab import Lab
 from services.sim.scene import GroundView
@@ -63,7 +63,7 @@ def _times(client: httpx.Client, snapshots: int, moving: bool, infrared: bool) -
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = Parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--snapshots", type=int, default=60)
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:

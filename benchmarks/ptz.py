@@ -49,6 +49,7 @@ from common.bus import Bus, BusUnreachable, open_session
 from common.camera import Intrinsics, Pose, focal_mm_for_zoom, head_pose, project
 from common.markers import closest, detect
 from common.settings import BusSettings, ZenohSettings
+from services.args import Parser
 from services.ptz import vapix
 from services.sim.lab import Lab
 from services.sim.settings import CraneSettings, MocapSettings, PtzCameraSettings, SimSettings
@@ -322,7 +323,7 @@ def _open(endpoint: str):  # noqa: ANN202 - a zenoh.Session
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__,
+    parser = Parser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=30.0)
     parser.add_argument("--scenario", nargs="+", default=["locomotive", "walker"],

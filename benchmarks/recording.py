@@ -38,6 +38,7 @@ from benchmarks.tracker import _cpu_s, _lab_processes
 from common import keys
 from common.bus import Bus
 from common.settings import BusSettings, ZenohSettings
+from services.args import Parser
 from tests.gantry.rig import Operator
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -144,7 +145,7 @@ def table(results: list[dict]) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__,
+    parser = Parser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=30.0)
     parser.add_argument("--video-fps", type=float, default=5.0)

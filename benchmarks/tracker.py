@@ -46,6 +46,7 @@ from benchmarks.ptz import _open, _sim_process, _stb
 from benchmarks.tracker_floor import LEVELS
 from common import codec, keys
 from common import messages as m
+from services.args import Parser
 from services.sim.lab import Lab
 from services.sim.settings import CraneSettings, MocapSettings, SimSettings
 from tests.ports import free_port
@@ -290,7 +291,7 @@ def _ladder(rounds: int, seconds: float, rate_hz: float, markers: int, as_json: 
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__,
+    parser = Parser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=20.0)
     parser.add_argument("--rate", type=float, default=1000.0, help="QTM frame rate, Hz")

@@ -38,6 +38,7 @@ from common import messages as m
 from common.bus import declare_publisher, open_session
 from common.robot_picker import RobotPicker, Seen
 from common.settings import ZenohSettings
+from services.args import Parser
 from services.tracker.mocap import _XYZ, _XYZ_ID, ClockSync, _component, labels_from_xml
 
 LEVELS = ("receive", "read", "pick")
@@ -104,7 +105,7 @@ async def _stream(port: int, session: zenoh.Session, seconds: float, level: str)
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__,
+    parser = Parser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--qtm-port", type=int, required=True)
     parser.add_argument("--connect", required=True, help="the router's endpoint")

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -15,13 +16,26 @@ from typing import Any
 from common.errors import ConfigError
 
 EXIT_CONFIG = 2
+NUMBERS = re.compile(r"^-\.?\d[\d.,eE+-]*$")
+"""A value that starts with a minus: -5, -.5, -1e3, -100,200,3000 (a vector)."""
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse, but a value that starts with a minus and is a number or a comma-separated
+    vector of them is a value, never an option: ``--initial -100,200,3000,180,0,180`` and
+    ``--target -1200,300,0`` work as written (plain argparse takes only a lone number so)."""
+
+    def _parse_optional(self, arg_string: str) -> tuple | None:  # type: ignore[override]
+        if NUMBERS.match(arg_string):
+            return None
+        return super()._parse_optional(arg_string)
 
 
 def base_parser(prog: str, description: str) -> argparse.ArgumentParser:
     """A command's parser with the common flags; ``description`` (a module docstring) is
     shown as written, its RST literals as plain text."""
-    parser = argparse.ArgumentParser(prog=prog, description=plain(description),
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = Parser(prog=prog, description=plain(description),
+                    formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--lab", type=Path, metavar="FILE",
                         help="lab config file (TOML); default: $STB_LAB, else built-in defaults")
     parser.add_argument("--instance", help="instance name (default: from config, else 'main')")

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import argparse
 import importlib
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 from common.errors import ConfigError
-from services.args import EXIT_CONFIG
+from services.args import EXIT_CONFIG, Parser
 from services.registry import SERVICES, TOOLS, settings_class
 
 
@@ -39,7 +38,7 @@ def _usage() -> str:
 
 def _config(argv: list[str]) -> int:
     """``stb config check --lab FILE``: validate every section a service would read."""
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="stb config", description="stb config check --lab FILE: validate a lab file as "
         "every service would read it — each section and each field; an error names the "
         "field (for example gantry.x_max_mm) and the exit code is 2.")

@@ -8,11 +8,11 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from services.args import plain
+from services.args import Parser, plain
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="stb detect", description=plain(__doc__ or ""))
+    parser = Parser(prog="stb detect", description=plain(__doc__ or ""))
     parser.add_argument("images", nargs="+", type=Path, metavar="IMAGE")
     parser.add_argument("--threshold", type=int, default=230, help="first gray threshold")
     parser.add_argument("--t-lim", type=int, default=203, help="lowest threshold (paper: 203)")

@@ -40,6 +40,7 @@ from pathlib import Path
 
 from benchmarks.faults.campaign import STEPS, run, table
 from benchmarks.faults.lab import ROOT
+from services.args import Parser
 
 IN_NAMESPACE = "STB_FAULTS_IN_NAMESPACE"
 
@@ -60,7 +61,7 @@ def in_own_namespace(argv: list[str]) -> int | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.faults",
+    parser = Parser(prog="python -m benchmarks.faults",
                                      description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--short", action="store_true", help="a few seconds per fault")

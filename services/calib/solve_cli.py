@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from services.args import plain
+from services.args import Parser, plain
 
 if TYPE_CHECKING:  # imported once the flags are parsed: --help answers at once
     from common.camera import Pose
@@ -25,7 +25,7 @@ EXIT_NO_POSE = 3
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="stb calib solve", description=plain(__doc__ or ""),
+    parser = Parser(prog="stb calib solve", description=plain(__doc__ or ""),
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("passpoints", type=Path, help="CSV: X,Y,Z,u,v[,t]")
     parser.add_argument("--initial", help="rough pose tx,ty,tz,rx,ry,rz (mm, deg) for the "

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 from common.errors import ConfigError
-from services.args import plain
+from services.args import Parser, plain
 from services.experiment.paper import TABLES
 from services.gantry.algorithms import ALGORITHMS
 
@@ -58,7 +58,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog=PROG, description=plain(__doc__ or ""),
+    parser = Parser(prog=PROG, description=plain(__doc__ or ""),
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     commands = parser.add_subparsers(dest="command", metavar="gantry|identify")
     g = commands.add_parser("gantry", help="the gantry experiments: Tables 3 and 4",

@@ -2,21 +2,20 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from services.args import plain
+from services.args import Parser, plain
 
 if TYPE_CHECKING:  # imported once the flags are parsed: --help answers at once
     from common.camera import Pose
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="stb ptz aim", description=plain(__doc__ or ""))
+    parser = Parser(prog="stb ptz aim", description=plain(__doc__ or ""))
     parser.add_argument("--pose", type=Path, required=True,
                         help="the pose: as stb calib solve --json prints it (position_mm, "
                              "orientation_deg) or as the calib service stores it "
@@ -24,7 +23,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--target", required=True,
                         help="X,Y,Z in mm (world frame), e.g. -1200,300,0")
     parser.add_argument("--json", action="store_true")
-    args = parser.parse_args(_joined(sys.argv[1:] if argv is None else list(argv)))
+    args = parser.parse_args(sys.argv[1:] if argv is None else list(argv))
     import numpy as np
 
     from common.camera import PtzLimits
@@ -42,18 +41,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     out = {"pan_deg": pan, "tilt_deg": tilt}
     print(json.dumps(out) if args.json else f"pan {pan:.3f}°  tilt {tilt:.3f}°")
     return 0
-
-
-def _joined(argv: list[str]) -> list[str]:
-    """``--target -1200,300,0`` as ``--target=-1200,300,0``: argparse takes a value that starts
-    with a minus for an option unless it is a single number."""
-    out: list[str] = []
-    for arg in argv:
-        if out and out[-1] == "--target" and arg.startswith("-"):
-            out[-1] = f"--target={arg}"
-        else:
-            out.append(arg)
-    return out
 
 
 def _read_pose(path: Path) -> Pose:

@@ -15,11 +15,11 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from services.args import plain
+from services.args import Parser, plain
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="stb report", description=plain(__doc__ or ""),
+    parser = Parser(prog="stb report", description=plain(__doc__ or ""),
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("recording", type=Path, metavar="IN.mcap")
     parser.add_argument("--out", type=Path, required=True, metavar="DIR")
