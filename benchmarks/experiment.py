@@ -76,7 +76,7 @@ def profile_walker(crater: Path) -> dict[str, float]:
 
 def main() -> None:
     parser = Parser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+                    formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenarios", default="locomotive,walker")
     parser.add_argument("--seeds", default="1,2,3")
     parser.add_argument("--crater", type=Path, default=Path("run/sim/crater.npz"))

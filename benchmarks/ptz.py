@@ -324,7 +324,7 @@ def _open(endpoint: str):  # noqa: ANN202 - a zenoh.Session
 
 def main() -> None:
     parser = Parser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+                    formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=30.0)
     parser.add_argument("--scenario", nargs="+", default=["locomotive", "walker"],
                         choices=["locomotive", "walker"])

@@ -146,7 +146,7 @@ def table(results: list[dict]) -> str:
 
 def main() -> None:
     parser = Parser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+                    formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=30.0)
     parser.add_argument("--video-fps", type=float, default=5.0)
     args = parser.parse_args()

@@ -292,7 +292,7 @@ def _ladder(rounds: int, seconds: float, rate_hz: float, markers: int, as_json: 
 
 def main() -> None:
     parser = Parser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+                    formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=20.0)
     parser.add_argument("--rate", type=float, default=1000.0, help="QTM frame rate, Hz")
     parser.add_argument("--markers", type=int, default=20, help="markers a frame (about)")

@@ -106,7 +106,7 @@ async def _stream(port: int, session: zenoh.Session, seconds: float, level: str)
 
 def main() -> None:
     parser = Parser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+                    formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--qtm-port", type=int, required=True)
     parser.add_argument("--connect", required=True, help="the router's endpoint")
     parser.add_argument("--seconds", type=float, default=3600.0)

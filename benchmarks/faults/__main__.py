@@ -62,8 +62,8 @@ def in_own_namespace(argv: list[str]) -> int | None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = Parser(prog="python -m benchmarks.faults",
-                                     description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+                    description=__doc__.split("\n\n")[0],
+                    formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--short", action="store_true", help="a few seconds per fault")
     parser.add_argument("--per-key", type=int, default=None, help="fuzz payloads per key "
                         "(default 10000; --short: 300)")

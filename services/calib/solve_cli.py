@@ -26,7 +26,7 @@ EXIT_NO_POSE = 3
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = Parser(prog="stb calib solve", description=plain(__doc__ or ""),
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+                    formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("passpoints", type=Path, help="CSV: X,Y,Z,u,v[,t]")
     parser.add_argument("--initial", help="rough pose tx,ty,tz,rx,ry,rz (mm, deg) for the "
                         "paper's searches; method auto needs none")

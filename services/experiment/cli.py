@@ -59,7 +59,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _parser() -> argparse.ArgumentParser:
     parser = Parser(prog=PROG, description=plain(__doc__ or ""),
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+                    formatter_class=argparse.RawDescriptionHelpFormatter)
     commands = parser.add_subparsers(dest="command", metavar="gantry|identify")
     g = commands.add_parser("gantry", help="the gantry experiments: Tables 3 and 4",
                             description="Run the paper's gantry experiment on a simulated clock.")

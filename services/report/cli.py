@@ -20,7 +20,7 @@ from services.args import Parser, plain
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = Parser(prog="stb report", description=plain(__doc__ or ""),
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+                    formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("recording", type=Path, metavar="IN.mcap")
     parser.add_argument("--out", type=Path, required=True, metavar="DIR")
     parser.add_argument("--lab", type=Path, metavar="FILE", help="lab config (height map path)")
