@@ -288,6 +288,13 @@ class CraneState(Message):
     mode_by: str = Field("", max_length=128, description="who changed the mode last")
     mode_reason: str = Field("", max_length=500, description="why")
     mode_since_s: float = Field(0.0, description="when, UNIX seconds")
+    command: str = Field("", max_length=16, description="the last operator's command the "
+                         "gantry answered (arm, disarm, stop, reset; empty: none yet)")
+    command_by: str = Field("", max_length=128, description="who sent it (a name; from the "
+                            "page: 'user (web address)')")
+    command_s: float = Field(0.0, description="when the gantry answered it, UNIX seconds")
+    command_accepted: bool = Field(False, description="its answer")
+    command_detail: str = Field("", max_length=500, description="why refused, or what changed")
 
 
 class GantryCommand(Message):
@@ -295,7 +302,7 @@ class GantryCommand(Message):
     it (deploy/zenoh/router.json5)."""
 
     command: GantryCommandName
-    operator: str = Field(max_length=128, description="who asks (a name, or web:<address>)")
+    operator: str = Field(max_length=128, description="who asks (a name; from the page: 'user (web address)')")
     reason: str = Field("", max_length=500)
     id: str = Field(max_length=64, description="chosen by the sender; the reply repeats it")
 

@@ -25,6 +25,7 @@ from benchmarks.faults.lab import (
 from benchmarks.faults.meters import Meters
 from benchmarks.faults.process_faults import ProcessFaults
 from benchmarks.faults.rows import GOAL_FLAT_MB, GOAL_MEMORY_MB, Row, largest, least_growth
+from benchmarks.faults.web_faults import WebFaults
 from common import keys
 from common import messages as m
 from common.bus import Bus
@@ -32,13 +33,13 @@ from common.settings import BusSettings, ZenohSettings
 from services.gantry.settings import GantrySettings
 
 
-class Campaign(BusFaults, ProcessFaults):
-    """The operator's side and the bookkeeping; the faults are in the two bases."""
+class Campaign(BusFaults, ProcessFaults, WebFaults):
+    """The operator's side and the bookkeeping; the faults are in the bases."""
 
     def __init__(self, up: subprocess.Popen, meters: Meters, bus: Bus, session: zenoh.Session,
-                 short: bool, crane_port: int) -> None:
+                 short: bool, crane_port: int, web_url: str = "") -> None:
         self.up, self.meters, self.bus, self.session = up, meters, bus, session
-        self.short, self.crane_port = short, crane_port
+        self.short, self.crane_port, self.web_url = short, crane_port, web_url
         self.gantry = GantrySettings()
         self.max_age_s = BusSettings().max_age_s
         self.rows: list[Row] = []
@@ -164,7 +165,8 @@ class Campaign(BusFaults, ProcessFaults):
         self.log(f"{fault}: {self.rows[-1].measured}")
 
 
-STEPS = ["quiet", "fuzz", "churn", "bombs", "frames", "pose", "stalls", "tracker", "modbus", "kill"]
+STEPS = ["quiet", "fuzz", "churn", "bombs", "frames", "pose", "streams", "stalls", "tracker",
+         "modbus", "kill"]
 
 
 def run(short: bool, per_key: int, churn: int, folder: Path,
@@ -176,7 +178,8 @@ def run(short: bool, per_key: int, churn: int, folder: Path,
         bus = Bus(session, settings)
         meters = Meters(session, bus, ports["crane"])
         try:
-            campaign = Campaign(up, meters, bus, session, short, ports["crane"])
+            campaign = Campaign(up, meters, bus, session, short, ports["crane"],
+                                f"http://127.0.0.1:{ports['web']}")
             campaign.log("lab starting; waiting until every service is alive")
             if not wait_until(lambda: all(campaign.meters.pid(s) for s in ALIVE), 90, 0.5):
                 raise SystemExit(f"the lab did not come up: see {folder / 'logs'}")
@@ -194,6 +197,7 @@ def run(short: bool, per_key: int, churn: int, folder: Path,
                 "bombs": campaign.decode_bombs,
                 "frames": lambda: campaign.spoofed_frames(baseline),
                 "pose": campaign.spoofed_pose,
+                "streams": campaign.event_streams,
                 "stalls": lambda: [campaign.stall("gantry", seconds) for seconds in
                                    ((0.3, 1.0) if short else (0.3, 1.0, 3.0))],
                 "tracker": lambda: campaign.stall("tracker", 2.0),

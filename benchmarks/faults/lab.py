@@ -28,7 +28,7 @@ ALIVE = {"sim": "sim/main", "tracker": "tracker/main", "calib": "calib/main",
 def running_lab(folder: Path, mocap: dict[str, float] | None = None
                 ) -> Iterator[tuple[subprocess.Popen, Path, str]]:
     """``stb up`` with every service; ``mocap``: settings of the sim's QTM to change."""
-    lab, endpoint, _ = write_up_lab(folder, SERVICES, pose_version=1)
+    lab, endpoint, _ = write_up_lab(folder, SERVICES, pose_version=1, users=True)
     if mocap:
         settings = "".join(f"{name} = {value}\n" for name, value in mocap.items())
         lab.write_text(lab.read_text().replace("[sim.mocap]\n", "[sim.mocap]\n" + settings, 1))
@@ -101,7 +101,7 @@ def ports_of(lab: Path) -> dict:
     import tomllib
 
     doc = tomllib.loads(lab.read_text())
-    return {"crane": doc["sim"]["crane"]["port"]}
+    return {"crane": doc["sim"]["crane"]["port"], "web": doc["web"]["port"]}
 
 
 def open_when_up(settings: ZenohSettings) -> zenoh.Session:

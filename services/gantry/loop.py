@@ -75,6 +75,7 @@ class GantryLoop:
         self.reading: CraneReading | None = None
         self._error: CraneError | None = None  # of the last tick's setpoint
         self._requests: deque[Request] = deque()
+        self.last_reply: tuple[float, Reply] | None = None  # (when, the last command's answer)
         self._lock = threading.Lock()
 
     @property
@@ -114,7 +115,10 @@ class GantryLoop:
     def _carry_out_requests(self, now_s: float) -> tuple[Reply, ...]:
         with self._lock:
             requests, self._requests = list(self._requests), deque()
-        return tuple(Reply(r, self._carry_out(r, now_s)) for r in requests)
+        replies = tuple(Reply(r, self._carry_out(r, now_s)) for r in requests)
+        if replies:
+            self.last_reply = (now_s, replies[-1])  # the audit in the gantry's state
+        return replies
 
     def _carry_out(self, request: Request, now_s: float) -> Decision:
         age = 0.0 if request.sent_s is None else now_s - request.sent_s

@@ -185,7 +185,16 @@ class Control:
             measured_s=now, status="unreachable", x_mm=0.0, y_mm=0.0, target_x_mm=0.0,
             target_y_mm=0.0, enabled=False, moving=False, fault_bits=0,
             mode=modes.mode.value, mode_by=modes.by[:128], mode_reason=modes.reason[:500],
-            mode_since_s=modes.since_s))
+            mode_since_s=modes.since_s, **self._last_command()))
+
+    def _last_command(self) -> dict[str, object]:
+        """The audit of the last operator's command: who, when, what and the answer."""
+        if self.loop.last_reply is None:
+            return {}
+        at_s, reply = self.loop.last_reply
+        return {"command": reply.request.command.value, "command_by": reply.request.by[:128],
+                "command_s": at_s, "command_accepted": reply.decision.accepted,
+                "command_detail": reply.decision.detail[:500]}
 
     def _state(self, now: float, reading: CraneReading, *, hold: bool,
                reacquiring: bool = False) -> None:
@@ -200,4 +209,4 @@ class Control:
             target_x_mm=reading.target_x_mm, target_y_mm=reading.target_y_mm,
             enabled=reading.enabled, moving=reading.moving, fault_bits=reading.faults & 0xFFFF,
             safety_ok=reading.safety_ok, mode=modes.mode.value, mode_by=modes.by[:128],
-            mode_reason=modes.reason[:500], mode_since_s=modes.since_s))
+            mode_reason=modes.reason[:500], mode_since_s=modes.since_s, **self._last_command()))

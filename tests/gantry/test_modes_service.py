@@ -45,9 +45,17 @@ def test_it_starts_disarmed_and_moves_the_crane_only_once_armed(rig: dict) -> No
 
 
 def test_arming_needs_a_fresh_estimate(rig: dict) -> None:
-    reply = rig["operator"].send("arm")  # no frames at all
+    operator: Operator = rig["operator"]
+    before = time.time()
+    reply = operator.send("arm")  # no frames at all
     assert not reply.accepted and "no fresh estimate" in reply.detail
     assert reply.mode == "disarmed" and not rig["crane"].state()[2]
+    # the audit: the refused command, who sent it and the answer, in the gantry's own state
+    audited = wait_for(lambda: next((s for s in reversed(operator.states)
+                                     if s.command_s >= before), None), timeout=5)
+    assert (audited.command, audited.command_by, audited.command_accepted) == (
+        "arm", "test operator", False)
+    assert "no fresh estimate" in audited.command_detail and audited.mode_by == "gantry"
 
 
 def test_stop_acts_within_a_control_period_and_only_reset_and_arm_move_again(

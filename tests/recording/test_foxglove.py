@@ -144,6 +144,9 @@ def test_the_crater_mesh_follows_the_height_map() -> None:
     assert crater_at == [0.0, 60.0, 120.0]
 
 
+SERVER_INFO = "(server info)"
+
+
 async def _client(url: str, topics: set[str], until: Callable[[dict], bool],
                   timeout_s: float) -> tuple[dict[str, dict], dict[str, list[bytes]]]:
     """A Foxglove WebSocket client: reads the advertised channels, subscribes to ``topics``,
@@ -159,6 +162,8 @@ async def _client(url: str, topics: set[str], until: Callable[[dict], bool],
                                                                  - time.monotonic()))
             if isinstance(frame, str):
                 op = json.loads(frame)
+                if op.get("op") == "serverInfo":
+                    advertised[SERVER_INFO] = op
                 if op.get("op") == "advertise":
                     new = []
                     for channel in op["channels"]:
@@ -220,6 +225,9 @@ def test_stb_foxglove_serves_the_typed_scene_images_and_json_series(
     assert {SCENE, TF, CRATER, "json/stb/gantry/offload"} <= set(got), (sorted(advertised),
                                                                         counts)
     assert advertised[SCENE]["schemaName"] == "foxglove.SceneUpdate"
+    granted = set(advertised[SERVER_INFO].get("capabilities", []))
+    assert not granted & {"clientPublish", "services", "parameters", "connectionGraph"}, \
+        "nothing from Foxglove's clients reaches the bus"
     assert advertised[SCENE]["encoding"] == "protobuf"
     assert advertised[TF]["schemaName"] == "foxglove.FrameTransforms"
     series = advertised["json/stb/gantry/offload"]
