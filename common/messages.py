@@ -302,7 +302,8 @@ class GantryCommand(Message):
     it (deploy/zenoh/router.json5)."""
 
     command: GantryCommandName
-    operator: str = Field(max_length=128, description="who asks (a name; from the page: 'user (web address)')")
+    operator: str = Field(max_length=128, description="who asks (a name; from the page: "
+                          "'user (web address)')")
     reason: str = Field("", max_length=500)
     id: str = Field(max_length=64, description="chosen by the sender; the reply repeats it")
 
