@@ -68,6 +68,8 @@ TOOLS: dict[str, ServiceInfo] = {
     "deploy": ServiceInfo("the router's access control and the compose services from the lab "
                           "file: stb deploy render --lab FILE [--check]", "",
                           "services.deploy.cli"),
+    "crater": ServiceInfo("the crater's height map from a laser scan: stb crater import SCAN "
+                          "--out crater.npz", "", "services.crater.cli"),
     "detect": ServiceInfo("find markers in image files (paper §2.1): stb detect IMAGE --json",
                           "", "services.detect_cli"),
 }

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from common.crane_frame import CRANE_COUNTS_IN_THE_WORLD, CraneFrame
 from common.crane_registers import RegisterMap
 from services.gantry.crane import RegisterCrane
 from services.gantry.frames import Frame
@@ -24,10 +25,12 @@ class SimClock:
 
 
 class ModelCrane(RegisterCrane):
-    """The ``Crane`` Protocol over the sim's crane model, through the register map."""
+    """The ``Crane`` Protocol over the sim's crane model, through the register map and the
+    crane's frame as the gantry's settings give it."""
 
-    def __init__(self, lab: Lab, clock: SimClock, registers: RegisterMap) -> None:
-        super().__init__(registers)
+    def __init__(self, lab: Lab, clock: SimClock, registers: RegisterMap,
+                 frame: CraneFrame = CRANE_COUNTS_IN_THE_WORLD) -> None:
+        super().__init__(registers, frame)
         self.lab, self.clock = lab, clock
         self._holding = [0] * registers.holding_count
 

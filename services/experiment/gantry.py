@@ -20,7 +20,7 @@ import numpy as np
 
 from common.markers import warm_up
 from services.experiment.devices import ModelCrane, SimClock, SimFrames
-from services.gantry.control import Controller
+from services.gantry.control import Controller, Fix
 from services.gantry.loop import GantryLoop, Request
 from services.gantry.modes import Command
 from services.gantry.predict import AlgorithmName, Estimate
@@ -111,9 +111,10 @@ def run(lab: Lab, settings: GantrySettings, *, end_s: float | None = None,
     controller = Controller(settings, lab.crater)
     if oracle_ahead_s is not None:
         controller.predictor = Oracle(lab.robot, oracle_ahead_s)  # type: ignore[assignment]
-    loop = GantryLoop(settings, ModelCrane(lab, clock, settings.crane),
+    loop = GantryLoop(settings, ModelCrane(lab, clock, settings.crane, settings.crane.frame()),
                       SimFrames(lab, clock, np.random.default_rng((settings.seed, 2))),
-                      controller, START_S)
+                      controller, START_S,
+                      crane_marker=lambda: Fix(clock.now_s, lab.crane_marker(clock.now_s)[:2]))
     arm_asked = False
     end = lab.trajectory.duration_s if end_s is None else end_s
     name = settings.algorithm if oracle_ahead_s is None else f"oracle {oracle_ahead_s:.2f} s"
@@ -160,7 +161,7 @@ def run_scenario(scenario: str, algorithm: AlgorithmName, *, seed: int, crater_f
     height = MARKER_HEIGHT_MM.get(scenario, MARKER_HEIGHT_MM["locomotive"])
     if path is not None:
         lab.trajectory = on_crater(path, lab, height)
-        lab.crane.place(*lab.trajectory.position(0.0)[:2])
+        lab.place_crane(lab.trajectory.position(0.0))
     settings = gantry_for(gantry or GantrySettings(), algorithm, seed=seed,
                           marker_height_mm=height)
     return run(lab, settings, oracle_ahead_s=oracle_ahead_s, progress=progress)

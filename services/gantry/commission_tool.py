@@ -47,7 +47,7 @@ def identify(args: argparse.Namespace) -> int:
 
 def _identify(settings: GantrySettings, heights: HeightMap, args: object) -> int:
     crane = ModbusCrane(settings.crane_host, settings.crane_port, settings.crane_timeout_s,
-                        settings.crane)
+                        settings.crane, settings.crane.frame())
     session = bus = None
     try:
         if settings.frames == "bus":

@@ -25,7 +25,6 @@ from services.gantry.commission import (
 )
 from services.gantry.crane import CraneError, CraneReading, RegisterCrane
 from services.gantry.frames import FrameInbox, FrameSource, OpenCvFrames, decode
-from services.gantry.locate import TrackingOptics, offset_mm
 from services.gantry.settings import GantrySettings
 
 POLL_S = 0.01
@@ -56,8 +55,7 @@ class Recorder:
     def __init__(self, settings: GantrySettings, heights: HeightMap, crane: RegisterCrane,
                  bus: Bus | None) -> None:
         self.settings, self.heights, self.crane = settings, heights, crane
-        self.optics = TrackingOptics(settings.focal_mm, settings.pixel_mm, settings.ref_u,
-                                     settings.ref_v, settings.lens_height_mm)
+        self.camera, self.frame = settings.tracking_camera, settings.crane.frame()
         self.readings: list[tuple[float, CraneReading]] = []
         self.marks: list[tuple[float, float, float]] = []  # capture time, u, v
         self._stop = threading.Event()
@@ -96,7 +94,7 @@ class Recorder:
             if frame is None:
                 continue
             found = detect(frame[1], max_markers=20)
-            marker = closest(found.markers, *(last or (self.optics.ref_u, self.optics.ref_v)))
+            marker = closest(found.markers, *(last or self.camera.principal))
             if marker is not None:
                 last = (marker.u, marker.v)
                 self.marks.append((frame[0], marker.u, marker.v))
@@ -151,18 +149,23 @@ class Recorder:
         marks = np.array(self.marks)
         first = marks[0]
         z = self._marker_distance(start, first[1], first[2])
-        offsets = np.array([offset_mm(u, v, z, self.optics) for _, u, v in marks])
+        offsets = np.array([self._offset(u, v, z) for _, u, v in marks])
         at_rest = marks[:, 0] <= marks[0, 0] + 0.5
         marker = start + np.median(offsets[at_rest], axis=0)
         return Series(marks[:, 0], marker[axis] - offsets[:, axis])
 
+    def _offset(self, u: float, v: float, z: float) -> np.ndarray:
+        """The marker from the crane's reported point (world axes), z below the lens."""
+        return (self.camera.lens_xy(np.zeros(2), self.frame)
+                + self.camera.ground_offset(u, v, z, self.frame))
+
     def _marker_distance(self, crane: np.ndarray, u: float, v: float) -> float:
-        s = self.settings
-        z = s.lens_height_mm - s.marker_height_mm
+        s, height = self.settings, self.camera.height_mm
+        z = height - s.marker_height_mm
         for _ in range(4):
-            xy = crane + offset_mm(u, v, z, self.optics)
+            xy = crane + self._offset(u, v, z)
             ground = float(self.heights.height_at(xy[0], xy[1]))
-            z = s.lens_height_mm - (ground + s.marker_height_mm)
+            z = height - (ground + s.marker_height_mm)
         return z
 
     def reported(self, axis: int) -> Series:

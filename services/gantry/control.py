@@ -18,14 +18,15 @@ sees the marker again.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from common.heightmap import HeightMap
 from common.markers import Detection, Spot, closest, detect
+from services.gantry.crosscheck import CrossCheck
 from services.gantry.frames import Frame
-from services.gantry.locate import TrackingOptics, locate
+from services.gantry.locate import locate
 from services.gantry.predict import Estimate, make_predictor, prediction_horizon
 from services.gantry.safety import SetpointGuard, Workspace
 from services.gantry.settings import GantrySettings
@@ -35,10 +36,16 @@ MAX_MARKERS = 20
 
 @dataclass(frozen=True)
 class Fix:
-    """Where the motion capture saw the robot (``stb/tracker/robot``)."""
+    """Where the motion capture saw something (the robot, ``stb/tracker/robot``; the crane's
+    marker, ``stb/tracker/markers``), and how fast it went."""
 
     t_s: float
     xy_mm: np.ndarray
+    v_mm_s: np.ndarray = field(default_factory=lambda: np.zeros(2))
+
+    def at(self, t_s: float) -> np.ndarray:
+        """Where it was at ``t_s`` (moved on with its velocity; a short way only)."""
+        return self.xy_mm + self.v_mm_s * (t_s - self.t_s)
 
 
 @dataclass(frozen=True)
@@ -64,6 +71,7 @@ class Step:
     estimate_s: float | None = None  # capture time of the frame the estimate rests on
     reacquiring: bool = False  # going to the motion capture's fix: the marker is lost
     rejected_mm: float | None = None  # a spot refused: this far from where the robot should be
+    disagreement: str = ""  # the tracking camera's fix and the motion capture's disagree: why
 
 
 class Controller:
@@ -73,8 +81,7 @@ class Controller:
     def __init__(self, settings: GantrySettings, heights: HeightMap) -> None:
         s = settings
         self.settings, self.heights = s, heights
-        self.optics = TrackingOptics(s.focal_mm, s.pixel_mm, s.ref_u, s.ref_v,
-                                     s.lens_height_mm)
+        self.camera, self.frame = s.tracking_camera, s.crane.frame()
         self.predictor = make_predictor(s.algorithm, seed=s.seed, horizon_s=min(
             prediction_horizon(s.reaction_s, 1 / s.control_hz), s.max_horizon_s),
             particle=(s.pf_velocity if s.algorithm == "pf-velocity" else s.pf_position).options(),
@@ -87,6 +94,10 @@ class Controller:
         self.last_pixel: tuple[float, float] | None = None
         self._seen: list[tuple[float, np.ndarray]] = []  # the last two accepted positions
         self._fix: Fix | None = None
+        self.tracking_check = CrossCheck(
+            "the tracking camera's fix of the robot", s.fix_check_mm, s.check_window_s,
+            s.mocap_max_age_s, "is [gantry.tracking_camera] this camera's? run stb gantry "
+            "commission; or a reflection or a foreign frame")
 
     def restart(self) -> None:
         """The crane stopped on its own (watchdog, link loss, disabled): the next setpoint
@@ -110,6 +121,8 @@ class Controller:
         seen: dict = {}
         if frame is not None:
             seen = self._measure([frame, *older], crane_xy, self._horizon(timing))
+            failing = self.tracking_check.failing(seen["frame_s"])
+            seen["disagreement"] = "" if failing is None else failing.text(seen["frame_s"])
         if self._reacquire(now_s):
             assert self._fix is not None
             decision = self.guard.decide(now_s, self._fix.xy_mm, self._fix.t_s, crane_xy,
@@ -165,7 +178,7 @@ class Controller:
         """The robot's marker in the world, or None; and how far off a refused spot was."""
         if not found.markers:
             return None, None
-        ref = self.last_pixel or (self.optics.ref_u, self.optics.ref_v)
+        ref = self.last_pixel or self.camera.principal
         marker = closest(found.markers, *ref)  # the paper's choice (§3.1)
         assert marker is not None
         expected = self._expected(captured)
@@ -182,8 +195,19 @@ class Controller:
             _, marker, xyz = nearest
         if (off_mocap := self._off_mocap(xyz)) is not None:
             return None, off_mocap
+        if self._disagrees(xyz, captured):
+            return None, self.tracking_check.off_mm
         self.last_pixel = (marker.u, marker.v)
         return xyz, None
+
+    def _disagrees(self, xyz: np.ndarray, captured: float) -> bool:
+        """Compare the fix with the motion capture's robot at the frame's time; a fix that
+        has disagreed for the check's window is not used until the two agree again."""
+        if self._fix is None or not self.tracking_check.enabled:
+            return False
+        off = float(np.hypot(*(xyz[:2] - self._fix.at(captured))))
+        self.tracking_check.observe(captured, off)
+        return self.tracking_check.failing(captured) is not None
 
     def _off_mocap(self, xyz: np.ndarray) -> float | None:
         """How far the spot is from the motion capture's fresh fix, if farther than
@@ -196,7 +220,7 @@ class Controller:
         return off if off > gate else None
 
     def _world(self, marker: Spot, crane_xy: np.ndarray) -> np.ndarray:
-        return locate(marker.u, marker.v, crane_xy, self.optics, self.heights,
+        return locate(marker.u, marker.v, crane_xy, self.camera, self.frame, self.heights,
                       self.settings.marker_height_mm)
 
     def _expected(self, captured: float) -> np.ndarray | None:

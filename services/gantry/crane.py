@@ -1,5 +1,8 @@
 """The crane controller over Modbus/TCP (pymodbus), through the lab's register map
-(``common.crane_registers.RegisterMap``; docs/devices.md).
+(``common.crane_registers.RegisterMap``; docs/devices.md) and the crane's frame
+(``common.crane_frame.CraneFrame``): this is the one place where the crane's own coordinates
+become the world's and back — readings in, setpoints out. Everything above it (the control
+law, the guard, the workspace, reacquire, the offload figures, the page) is in the world's.
 
 One client, one lock: the control loop and the heartbeat share the connection. Every failure
 is a ``CraneUnreachable`` (transport) or ``CraneRejected`` (a Modbus exception reply).
@@ -18,6 +21,7 @@ from pymodbus.client import ModbusTcpClient
 from pymodbus.exceptions import ModbusException
 
 from common import crane_registers as r
+from common.crane_frame import CRANE_COUNTS_IN_THE_WORLD, CraneFrame
 from common.crane_registers import DEFAULT_MAP, RegisterMap
 
 
@@ -71,25 +75,30 @@ class CraneReading:
         return r.fault_names(self.faults)
 
 
-def reading_from(block: list[int], start: int, registers: RegisterMap = DEFAULT_MAP
-                 ) -> CraneReading:
-    """The controller's input registers (a block read from address ``start``) as a reading."""
+def reading_from(block: list[int], start: int, registers: RegisterMap = DEFAULT_MAP,
+                 frame: CraneFrame = CRANE_COUNTS_IN_THE_WORLD) -> CraneReading:
+    """The controller's input registers (a block read from address ``start``) as a reading in
+    the world's coordinates."""
     def value(name: str) -> float:
         return registers.read(name, block, start)
 
     def word(name: str) -> int:
         return block[getattr(registers, name) - start]
 
-    return CraneReading(value("actual_x"), value("actual_y"), value("velocity_x"),
-                        value("velocity_y"), word("status"), word("faults"), value("target_x"),
-                        value("target_y"), word("setpoints_taken"))
+    position = frame.to_world([value("actual_x"), value("actual_y")])
+    velocity = frame.vector_to_world([value("velocity_x"), value("velocity_y")])
+    target = frame.to_world([value("target_x"), value("target_y")])
+    return CraneReading(float(position[0]), float(position[1]), float(velocity[0]),
+                        float(velocity[1]), word("status"), word("faults"), float(target[0]),
+                        float(target[1]), word("setpoints_taken"))
 
 
-def setpoint_writes(registers: RegisterMap, x_mm: float, y_mm: float
-                    ) -> list[tuple[int, list[int]]]:
-    """(address, values) writes of a setpoint: one write when x and y are adjacent, so that
-    the controller never samples half of it."""
-    x, y = registers.encode("setpoint_x", x_mm), registers.encode("setpoint_y", y_mm)
+def setpoint_writes(registers: RegisterMap, x_mm: float, y_mm: float,
+                    frame: CraneFrame = CRANE_COUNTS_IN_THE_WORLD) -> list[tuple[int, list[int]]]:
+    """(address, values) writes of a setpoint given in the world: one write when x and y are
+    adjacent, so that the controller never samples half of it."""
+    x_c, y_c = frame.to_crane([x_mm, y_mm])
+    x, y = registers.encode("setpoint_x", x_c), registers.encode("setpoint_y", y_c)
     if registers.setpoint_y == registers.setpoint_x + len(x):
         return [(registers.setpoint_x, x + y)]
     return [(registers.setpoint_x, x), (registers.setpoint_y, y)]
@@ -113,11 +122,13 @@ class Crane(Protocol):
 
 
 class RegisterCrane:
-    """The ``Crane`` Protocol over a register map; a subclass moves the registers (Modbus/TCP
-    here, the sim's model in the experiments)."""
+    """The ``Crane`` Protocol over a register map and the crane's frame (positions in the
+    world's coordinates; ``frame=CraneFrame()``: the crane's own); a subclass moves the
+    registers (Modbus/TCP here, the sim's model in the experiments)."""
 
-    def __init__(self, registers: RegisterMap) -> None:
-        self.registers = registers
+    def __init__(self, registers: RegisterMap,
+                 frame: CraneFrame = CRANE_COUNTS_IN_THE_WORLD) -> None:
+        self.registers, self.frame = registers, frame
         self._beat = 0
 
     def enable(self) -> None:
@@ -132,7 +143,7 @@ class RegisterCrane:
         self._write(self.registers.control, [r.CONTROL_RESET])
 
     def write_setpoint(self, x_mm: float, y_mm: float) -> None:
-        for address, values in setpoint_writes(self.registers, x_mm, y_mm):
+        for address, values in setpoint_writes(self.registers, x_mm, y_mm, self.frame):
             self._write(address, values)
 
     def heartbeat(self) -> None:
@@ -140,7 +151,8 @@ class RegisterCrane:
         self._write(self.registers.heartbeat, [self._beat])
 
     def read(self) -> CraneReading:
-        return reading_from(self._read_input(), self.registers.input_start, self.registers)
+        return reading_from(self._read_input(), self.registers.input_start, self.registers,
+                            self.frame)
 
     def _write(self, address: int, values: list[int]) -> None:
         raise NotImplementedError
@@ -155,8 +167,9 @@ class ModbusCrane(RegisterCrane):
     one connection, reconnecting when it drops; errors are ``CraneError``."""
 
     def __init__(self, host: str, port: int, timeout_s: float = 0.5,
-                 registers: RegisterMap = DEFAULT_MAP) -> None:
-        super().__init__(registers)
+                 registers: RegisterMap = DEFAULT_MAP,
+                 frame: CraneFrame = CRANE_COUNTS_IN_THE_WORLD) -> None:
+        super().__init__(registers, frame)
         self.host, self.port = host, port
         self._client = ModbusTcpClient(host, port=port, timeout=timeout_s, retries=0)
         self._lock = threading.Lock()

@@ -20,6 +20,7 @@ import numpy as np
 
 from services.gantry.control import Controller, Fix, Step, Timing
 from services.gantry.crane import Crane, CraneError, CraneReading
+from services.gantry.crosscheck import CrossCheck
 from services.gantry.cycle import CycleSync
 from services.gantry.frames import FrameSource
 from services.gantry.modes import Action, Command, Decision, Facts, Mode, ModeKeeper
@@ -65,9 +66,16 @@ class Tick:
 class GantryLoop:
     def __init__(self, settings: GantrySettings, crane: Crane, frames: FrameSource,
                  controller: Controller, now_s: float,
-                 fix: Callable[[], Fix | None] = lambda: None) -> None:
+                 fix: Callable[[], Fix | None] = lambda: None,
+                 crane_marker: Callable[[], Fix | None] = lambda: None) -> None:
         self.settings = settings
         self.crane, self.frames, self.controller, self.fix = crane, frames, controller, fix
+        self.crane_marker = crane_marker
+        self.crane_check = CrossCheck(
+            "the crane's position through [gantry.crane]'s frame", settings.crane_check_mm,
+            settings.check_window_s, settings.mocap_max_age_s,
+            f"is the frame this crane's, and the motion capture's marker "
+            f"{settings.crane_marker!r} on its carriage? run stb gantry commission")
         self.sync = CycleSync(1 / settings.control_hz, settings.after_report_s)
         self.modes = ModeKeeper(now_s)
         self.targets = TargetCheck(settings.target_check_mm)
@@ -97,6 +105,7 @@ class GantryLoop:
             self.reading = self.crane.read()
         except CraneError as err:
             self.reading, error = None, err
+        self._compare_crane(now_s)
         replies = self._carry_out_requests(now_s)
         changes = self._observe(now_s)
         if self.reading is not None:
@@ -127,7 +136,8 @@ class GantryLoop:
                             f"sent {age:.1f} s ago: too old to act on, send it again")
         estimate_s, fix = self.controller.estimate_s, self.fix()
         facts = Facts(self.reading, None if estimate_s is None else now_s - estimate_s,
-                      self.settings.stale_after_s, None if fix is None else now_s - fix.t_s)
+                      self.settings.stale_after_s, None if fix is None else now_s - fix.t_s,
+                      geometry=self.geometry(now_s))
         before = (self.modes.mode, self.modes.by, self.modes.reason, self.modes.since_s)
         decision = self.modes.command(request.command, request.by, request.reason, now_s, facts)
         if not decision.accepted:
@@ -147,6 +157,25 @@ class GantryLoop:
                  decision.detail)
         return decision
 
+    def _compare_crane(self, now_s: float) -> None:
+        """The crane's reported position (through its frame) against the motion capture's
+        marker on its carriage, both taken to the marker's time."""
+        marker = self.crane_marker()
+        if self.reading is None or marker is None or now_s - marker.t_s > \
+                self.settings.mocap_max_age_s:
+            return
+        reported_s = now_s - self.settings.report_age_s
+        crane = np.array([self.reading.x_mm, self.reading.y_mm]) + np.array(
+            [self.reading.vx_mm_s, self.reading.vy_mm_s]) * (marker.t_s - reported_s)
+        self.crane_check.observe(now_s, float(np.hypot(*(crane - marker.xy_mm))))
+
+    def geometry(self, now_s: float) -> str | None:
+        """Why the crane's frame or the tracking camera's model may not be trusted to arm:
+        the crane's cross-check (it must have a recent comparison), the tracking camera's
+        (if the robot is in view)."""
+        return (self.crane_check.verdict(now_s)
+                or self.controller.tracking_check.verdict(now_s, needed=False))
+
     def _observe(self, now_s: float) -> tuple[Decision, ...]:
         if self.reading is None:
             return ()
@@ -154,6 +183,8 @@ class GantryLoop:
         if stop is None and self.armed:
             foreign = self.targets.observe(self.reading)
             stop = None if foreign is None else self.modes.halt(foreign, now_s)
+        if stop is None and self.armed and (off := self.crane_check.failing(now_s)):
+            stop = self.modes.halt(off.text(now_s), now_s)
         if stop is None:
             return ()
         log.warning("crane stopped: %s; the gantry is stopped until an operator resets it",

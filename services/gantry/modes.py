@@ -3,14 +3,18 @@
 * ``disarmed`` — at start, and after ``disarm`` or ``reset``. The gantry never enables the
   crane: it measures and estimates, and writes nothing to the controller.
 * ``armed`` — only after an operator's ``arm`` (which needs a fresh estimate of the robot:
-  its marker in view, or the motion capture's fix, from which the gantry finds it): tracking
-  when it has a fresh estimate, holding otherwise.
+  its marker in view, or the motion capture's fix, from which the gantry finds it; and the
+  geometry trusted: the crane's position through its frame agreeing with the motion
+  capture's marker on the carriage, the tracking camera's fix with the motion capture's robot
+  — ``crosscheck.py``): tracking when it has a fresh estimate, holding otherwise.
 * ``stopped`` — after ``stop`` (accepted in every mode), or by itself when the crane stops
   on its own: a watchdog trip or another latched fault, the safety circuit open (e-stop), or
   the crane disabled at the controller; or when the crane goes where the gantry did not send
-  it (another Modbus client's setpoints, ``TargetCheck``). The setpoint is frozen where the
-  crane is and the crane is disabled. Only ``reset`` (which clears the controller's latched
-  faults) leads out, to ``disarmed``; then ``arm``. The gantry never resets a fault on its own.
+  it (another Modbus client's setpoints, ``TargetCheck``), or its reported position
+  disagrees with the motion capture's marker on the carriage for ``check_window_s``. The
+  setpoint is frozen where the crane is and the crane is disabled. Only ``reset`` (which
+  clears the controller's latched faults) leads out, to ``disarmed``; then ``arm``. The
+  gantry never resets a fault on its own.
 
 Every change names who asked and why.
 """
@@ -62,6 +66,7 @@ class Facts:
     estimate_age_s: float | None  # None: no estimate of the robot from the tracking camera
     stale_after_s: float
     fix_age_s: float | None = None  # the motion capture's fix of the robot (None: none)
+    geometry: str | None = None  # why the crane's frame or the camera's model is not trusted
 
 
 class ModeKeeper:
@@ -120,6 +125,8 @@ class ModeKeeper:
                    for age in (facts.estimate_age_s, facts.fix_age_s)):
             return self._refuse("no fresh estimate of the robot: its marker is not in the "
                                 "tracking camera's view and the motion capture has no fix")
+        if facts.geometry is not None:
+            return self._refuse(facts.geometry)
         self._armed_at_s = now_s
         return self._change(Mode.ARMED, Action.ENABLE, by, reason or "arm", now_s)
 

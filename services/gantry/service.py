@@ -1,7 +1,10 @@
 """Gantry service: the crane keeps itself above the robot (paper §3).
 
 Reads:      tracking-camera frames (stb/gantry/camera/frame, or a camera via OpenCV),
-            the motion capture's robot (stb/tracker/robot: to find a lost marker again),
+            the motion capture's robot (stb/tracker/robot: to find a lost marker again, and
+            to cross-check the tracking camera's fix) and the marker on the crane's carriage
+            (stb/tracker/markers, label [gantry] crane_marker: to cross-check the crane's
+            frame),
             operators' commands (stb/gantry/command: arm, disarm, stop, reset),
             the crane controller over Modbus/TCP (position, status, faults, safety circuit)
 Publishes:  stb/gantry/detections, stb/gantry/estimate, stb/gantry/setpoint, stb/gantry/state
@@ -47,17 +50,20 @@ def run(node: Node[GantrySettings]) -> None:
     except ValueError as err:
         raise StartupError(f"gantry.height_map: {err}") from err
     log.info("detector ready (%.1f s)", warm_up())  # before the crane is driven, not mid-run
-    crane = ModbusCrane(s.crane_host, s.crane_port, s.crane_timeout_s, s.crane)
+    crane = ModbusCrane(s.crane_host, s.crane_port, s.crane_timeout_s, s.crane,
+                        s.crane.frame())
     frames: FrameSource
     if s.frames == "bus":
         inbox = frames = FrameInbox()
         node.bus.subscribe(keys.GANTRY_FRAME, lambda msg: _put(inbox, msg))
     else:
         frames = OpenCvFrames(s.frames.removeprefix("opencv:"), node.stop)
-    fix = LatestFix()
+    fix, crane_marker = LatestFix(), LatestMarker(s.crane_marker)
     node.bus.subscribe(keys.TRACKER_ROBOT, fix.put)
+    if s.crane_marker and s.crane_check_mm > 0:
+        node.bus.subscribe(keys.TRACKER_MARKERS, crane_marker.put)
     control = Control(node, s, GantryLoop(s, crane, frames, Controller(s, heights),
-                                          time.time(), fix))
+                                          time.time(), fix, crane_marker))
     node.bus.subscribe(keys.GANTRY_COMMAND, control.command, latest=False)
     threading.Thread(target=run_every, args=(1 / s.heartbeat_hz, node.stop, control.heartbeat,
                                              "heartbeat"), name="heartbeat", daemon=True).start()
@@ -75,7 +81,26 @@ class LatestFix:
         self._fix: Fix | None = None
 
     def put(self, msg: m.RobotPosition) -> None:
-        self._fix = Fix(msg.measured_s, np.array([msg.x_mm, msg.y_mm]))
+        self._fix = Fix(msg.measured_s, np.array([msg.x_mm, msg.y_mm]),
+                        np.array([msg.vx_mm_s, msg.vy_mm_s]))
+
+    def __call__(self) -> Fix | None:
+        return self._fix
+
+
+class LatestMarker:
+    """The motion capture's latest fix of one labelled marker (stb/tracker/markers): the one
+    on the crane's carriage."""
+
+    def __init__(self, label: str) -> None:
+        self.label = label
+        self._fix: Fix | None = None
+
+    def put(self, msg: m.MarkerFrame) -> None:
+        for marker in msg.markers:
+            if marker.label == self.label:
+                self._fix = Fix(msg.measured_s, np.array([marker.x_mm, marker.y_mm]))
+                return
 
     def __call__(self) -> Fix | None:
         return self._fix
@@ -152,7 +177,12 @@ class Control:
         if modes.mode is Mode.STOPPED:
             self.node.set_status("degraded", f"stopped by {modes.by}: {modes.reason}")
         elif modes.mode is Mode.DISARMED:
-            self.node.set_status("ok", "disarmed")
+            untrusted = self.loop.geometry(time.time())
+            self.node.set_status("degraded" if untrusted else "ok",
+                                 f"disarmed; would not arm: {untrusted}" if untrusted
+                                 else "disarmed")
+        elif step.disagreement:
+            self.node.set_status("degraded", step.disagreement)
         else:
             self.node.set_status("degraded" if step.hold else "ok", step.reason)
 

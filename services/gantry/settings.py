@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
-from common.crane_registers import RegisterMap
+from common.crane_frame import CraneConnection
 from common.settings import ServiceSettings, above_its_minimum
+from common.tracking_camera import TrackingCameraModel
 from services.gantry.cycle import AFTER_REPORT_S
 from services.gantry.predict import AlgorithmName, KalmanOptions, ParticleOptions
 
@@ -57,8 +58,12 @@ class GantrySettings(ServiceSettings):
     crane_host: str = "127.0.0.1"
     crane_port: int = Field(5020, ge=1, le=65535)
     crane_timeout_s: float = Field(0.3, gt=0, le=5)
-    crane: RegisterMap = Field(RegisterMap(), description="the controller's register map: "
-                               "[gantry.crane] (docs/devices.md)")
+    crane: CraneConnection = Field(CraneConnection(), description="the controller's register "
+                                   "map and frame: [gantry.crane] (docs/devices.md, "
+                                   "stb gantry commission)")
+    tracking_camera: TrackingCameraModel = Field(
+        TrackingCameraModel(), description="the tracking camera's lens and mount: "
+        "[gantry.tracking_camera] (stb gantry commission)")
     frames: str = Field("bus", description='"bus": stb/gantry/camera/frame; or '
                         '"opencv:0" / "opencv:rtsp://..." for a camera on this host')
     algorithm: AlgorithmName = "default"
@@ -80,11 +85,6 @@ class GantrySettings(ServiceSettings):
     max_horizon_s: float = Field(1.0, gt=0, le=3, description="never extrapolate further")
     height_map: Path = Field(Path("run/sim/crater.npz"), description="laser scan (.npz)")
     marker_height_mm: float = Field(80.0, ge=0, description="marker above the ground")
-    focal_mm: float = Field(8.0, gt=0, description="tracking camera, from its calibration")
-    pixel_mm: float = Field(0.0075, gt=0)
-    ref_u: float = Field(320.0, description="reference pixel: straight below the lens")
-    ref_v: float = 240.0
-    lens_height_mm: float = Field(3500.0, gt=0, description="lens above world z = 0")
     x_min_mm: float = -3000.0
     x_max_mm: float = 3000.0
     y_min_mm: float = -3000.0
@@ -101,6 +101,18 @@ class GantrySettings(ServiceSettings):
     mocap_max_age_s: float = Field(0.5, gt=0, le=5, description="an older fix is not used")
     mocap_gate_mm: float = Field(500.0, ge=0, description="a spot farther than this from the "
                                  "motion capture's fresh fix is not the robot (0: no check)")
+    crane_marker: str = Field("crane", max_length=64, description="the motion capture's label "
+                              "of the marker on the crane's carriage, at its reported point")
+    crane_check_mm: float = Field(50.0, ge=0, description="the crane's position through its "
+                                  "frame and the crane marker must agree within this, or the "
+                                  "gantry does not arm, and armed it stops (0: no check — only "
+                                  "where no motion capture sees the crane)")
+    fix_check_mm: float = Field(100.0, ge=0, description="the tracking camera's fix and the "
+                                "motion capture's robot must agree within this, or the gantry "
+                                "does not arm on it, and armed it does not use it (0: no "
+                                "check)")
+    check_window_s: float = Field(0.5, gt=0, le=10, description="a disagreement counts once "
+                                  "it has lasted this long")
     seed: int = 0
     pf_position: ParticleFilterSettings = Field(
         ParticleFilterSettings(), description="pf-position and pf-position-gauss")
@@ -113,6 +125,19 @@ class GantrySettings(ServiceSettings):
                                     "share of the cable's pull")
 
     _intervals = field_validator("x_max_mm", "y_max_mm")(above_its_minimum)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _moved_fields(cls, data: object) -> object:
+        moved = {"focal_mm": "focal_mm", "pixel_mm": "pixel_mm", "ref_u": "principal_px",
+                 "ref_v": "principal_px", "lens_height_mm": "height_mm"}
+        found = sorted(set(moved) & set(data)) if isinstance(data, dict) else []
+        if found:
+            raise ValueError(f"{', '.join(found)}: the tracking camera's settings are in "
+                             f"[gantry.tracking_camera] now ("
+                             f"{', '.join(sorted({moved[f] for f in found}))}; "
+                             "stb gantry commission measures them)")
+        return data
 
     @field_validator("workspace_margin_mm")
     @classmethod

@@ -1,5 +1,6 @@
 """``stb sim [--scenario locomotive|walker|calibration|parked] [--seed N]``: the simulated lab.
-``stb sim estop [--release]``: press or release the simulated crane's e-stop."""
+``stb sim estop [--release]``: press or release the simulated crane's e-stop.
+``stb sim scan --out FILE``: the crater as a laser scanner would deliver it (.ply, .xyz)."""
 
 from __future__ import annotations
 
@@ -27,6 +28,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         from services.sim.estop_cli import main as estop_main
 
         return estop_main(argv[1:])
+    if argv[:1] == ["scan"]:
+        from services.sim.scan_cli import main as scan_main
+
+        return scan_main(argv[1:])
     args = service_args("sim", __doc__ or "", argv, flags=_flags)
     from services.entry import run_service
     from services.sim.service import run

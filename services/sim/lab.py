@@ -10,11 +10,14 @@ import functools
 import logging
 import math
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from common.camera import Pose, rot_z
+from common.crane_frame import CraneFrame
+from common.tracking_camera import TrackingCameraModel
 from services.sim.bodies import (
     ROBOT_POINTS_MM,
     WAND_POINTS_MM,
@@ -31,7 +34,6 @@ from services.sim.render import (
     Blob,
     Glint,
     NoiseBank,
-    TrackingCamera,
     draw,
 )
 from services.sim.robots import Trajectory, calibration, make_trajectory, railway_keep_clear
@@ -82,12 +84,15 @@ class Lab:
     heads: dict[str, PtzHead]
     crane: CraneModel
     crane_lock: threading.Lock
-    tracking: TrackingCamera
+    tracking: TrackingCameraModel
     wand: Trajectory
     noise: NoiseBank
     robot_start_s: float | None = 0.0
     """Sim time the robot's scenario starts; None: the robot waits at its start while the
     calibration wand is carried through the cameras' view."""
+    crane_feed: Callable[[float], np.ndarray] | None = None
+    """Where the crane's reported point is in the world at a sim time, for a lab whose crane
+    model runs elsewhere (the QTM process's); None: this lab's own crane."""
 
     @classmethod
     def build(cls, settings: SimSettings, crater: CraterMap | None = None) -> Lab:
@@ -101,7 +106,7 @@ class Lab:
         waiting = settings.scenario == "calibration" or bool(settings.calibrate_first)
         c = settings.crane
         crane = CraneModel(c.params(), np.random.default_rng((settings.seed, 13)))
-        crane.place(*trajectory.position(0.0)[:2])
+        crane.place(*c.frame().to_crane(trajectory.position(0.0)[:2]))
         t = settings.tracking_camera
         area_m2 = (c.x_max_mm - c.x_min_mm) * (c.y_max_mm - c.y_min_mm) / 1e6
         return cls(
@@ -116,8 +121,7 @@ class Lab:
                                      tilt_speed_deg_s=cam.tilt_speed_deg_s)
                    for cam in settings.cameras},
             crane=crane, crane_lock=threading.Lock(),
-            tracking=TrackingCamera(t.focal_mm, t.pixel_mm, t.width_px, t.height_px,
-                                    t.height_mm),
+            tracking=t.lens(),
             wand=wand, noise=NoiseBank(t.noise, t.width_px, t.height_px,
                                        np.random.default_rng((settings.seed, 17))),
             robot_start_s=None if waiting else 0.0)
@@ -189,12 +193,20 @@ class Lab:
 
     @property
     def labels(self) -> list[str]:
-        """QTM's 3D labels: the robot's marker, the wand's, the static ones, then the bodies'
-        other markers."""
-        robot = [self.settings.mocap.robot_label] if self.settings.mocap.robot_label else []
+        """QTM's 3D labels: the robot's marker, the wand's, the static ones, the crane's,
+        then the bodies' other markers."""
+        m = self.settings.mocap
+        robot = [m.robot_label] if m.robot_label else []
+        crane = [m.crane_label] if m.crane_label else []
         extra = [label for body in self.bodies for label in body.marker_labels("")[1:]]
         return (robot + [WAND_LABEL] + [f"static_{i + 1}" for i in range(len(self.static_markers))]
-                + extra)
+                + crane + extra)
+
+    def crane_marker(self, t: float) -> np.ndarray:
+        """The motion capture's ``crane`` marker at ``t``: on the carriage, at the crane's
+        reported point and the tracking camera lens's height."""
+        xy = self.crane_feed(t) if self.crane_feed is not None else self.crane_world_at(t)
+        return np.array([xy[0], xy[1], self.tracking.height_mm])
 
     def mocap_frame(self, number: int) -> MocapFrame:
         """Frame ``number`` as QTM would measure it: noise, dropouts, occlusions, and the
@@ -207,7 +219,8 @@ class Lab:
         robot = np.full(3, np.nan) if occluded else true_robot
         wand = self.wand_position(t)
         wand = np.full(3, np.nan) if wand is None else wand
-        noisy = np.vstack([robot[None, :], wand[None, :], self.static_markers])
+        crane = [self.crane_marker(t)[None, :]] if m.crane_label else []
+        noisy = np.vstack([robot[None, :], wand[None, :], self.static_markers, *crane])
         noisy = noisy + rng.normal(0.0, m.noise_mm, size=noisy.shape)
         noisy[rng.random(len(noisy)) < m.dropout] = np.nan
         unlabelled = [(100 + i, xyz) for i, xyz in enumerate(self.ghost_markers)
@@ -257,12 +270,31 @@ class Lab:
         return start is not None and start <= t - window * OCCLUSION_WINDOW_S < start + 0.3
 
     # --- crane and its tracking camera ---------------------------------------------------------
+    # The crane model runs in the crane's own frame (its registers, its travel); what the lab
+    # shows of it (truth, the motion capture's crane marker, the camera's pictures) is in the
+    # world's.
+
+    @functools.cached_property
+    def crane_frame(self) -> CraneFrame:
+        return self.settings.crane.frame()
+
+    def place_crane(self, xy_world: np.ndarray) -> None:
+        """The crane at rest over a world point (at start, and in experiments)."""
+        with self.crane_lock:
+            self.crane.place(*self.crane_frame.to_crane(xy_world[:2]))
 
     def crane_state(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """(position, velocity) of the crane at ``t`` (mm, mm/s)."""
+        """(position, velocity) of the crane's reference point at ``t`` in the world (mm,
+        mm/s)."""
         with self.crane_lock:
             self.crane.advance_to(t)
-            return self.crane.position.copy(), self.crane.velocity.copy()
+            position, velocity = self.crane.position.copy(), self.crane.velocity.copy()
+        return self.crane_frame.to_world(position), self.crane_frame.vector_to_world(velocity)
+
+    def crane_world_at(self, t: float) -> np.ndarray:
+        """Where the crane's reference point was at ``t`` (recent), in the world."""
+        with self.crane_lock:
+            return self.crane_frame.to_world(self.crane.position_at(t))
 
     def newest_capture(self, now: float) -> tuple[int, float]:
         """The newest tracking frame that has arrived by ``now`` (frames are taken at the
@@ -274,22 +306,25 @@ class Lab:
 
     def tracking_frame(self, t: float, rng: np.random.Generator) -> np.ndarray:
         """The downward tracking camera's frame whose exposure ends at ``t`` (uint8, height ×
-        width): everything that moves relative to the crane smears over the exposure. The
-        crane must have been advanced to ``t`` or later (``crane_state``)."""
+        width), through the camera's own lens and mount (``[sim.tracking_camera]``): everything
+        that moves relative to the crane smears over the exposure. The crane must have been
+        advanced to ``t`` or later (``crane_state``)."""
         cam, exposure = self.tracking, self.settings.tracking_camera.exposure_s
-        with self.crane_lock:
-            crane, crane_before = (self.crane.position_at(t),
-                                   self.crane.position_at(t - exposure))
-        u, v, r = cam.pixel_of(self.robot(t), *crane)
-        u0, v0, _ = cam.pixel_of(self.robot(t - exposure), *crane_before)
-        blobs = [Blob(u, v, r, r, smear_u=u - u0, smear_v=v - v0)]
-        for g in self.ground_glints:
-            gu, gv, scale = cam.pixel_of(np.array([g.x_mm, g.y_mm, g.z_mm]), *crane)
-            if -50 < gu < cam.width_px + 50 and -50 < gv < cam.height_px + 50:
-                k = scale / MARKER_RADIUS_MM
-                blobs.append(Blob(gu, gv, max(g.long_mm * k, 1.5), max(g.short_mm * k, 0.6),
-                                  g.angle_rad, 230.0))
+        frame = self.crane_frame
+        crane, crane_before = self.crane_world_at(t), self.crane_world_at(t - exposure)
+        pixels, scale = cam.project(self.robot(t), crane, frame)
+        now, before = pixels[0], cam.project(self.robot(t - exposure), crane_before, frame)[0][0]
+        blobs = [Blob(now[0], now[1], MARKER_RADIUS_MM * scale[0], MARKER_RADIUS_MM * scale[0],
+                      smear_u=now[0] - before[0], smear_v=now[1] - before[1])]
+        if self.ground_glints:
+            spots = np.array([[g.x_mm, g.y_mm, g.z_mm] for g in self.ground_glints])
+            pixels, scales = cam.project(spots, crane, frame)
+            for g, (gu, gv), k in zip(self.ground_glints, pixels, scales, strict=True):
+                if -50 < gu < cam.width_px + 50 and -50 < gv < cam.height_px + 50:
+                    blobs.append(Blob(gu, gv, max(g.long_mm * k, 1.5), max(g.short_mm * k, 0.6),
+                                      g.angle_rad, 230.0))
         return draw(blobs, cam.width_px, cam.height_px, rng, noise=self.noise)
+
 
 def _on_ground(crater: CraterMap, rng: np.random.Generator, count: int, r_min: float,
                r_max: float) -> np.ndarray:

@@ -4,7 +4,10 @@ A real QTM is a machine of its own: the sim's camera rendering, HTTP servers and
 camera must not hold its frames back (at 1000 Hz, sharing the sim's one interpreter delayed
 frames by up to 10 ms). The process builds the same Lab from the same settings on the same sim
 time (a shared monotonic origin); the one thing decided at run time, when the robot starts,
-comes over a shared value. It ends with the sim: when told to, or when its parent is gone.
+comes over a shared value, and so does the crane, whose model the Modbus clients drive in the
+sim's own process: its position and velocity at a time (``feed_crane``, 100 a second), from
+which the process's motion capture places the crane's marker. It ends with the sim: when told
+to, or when its parent is gone.
 """
 
 from __future__ import annotations
@@ -15,7 +18,9 @@ import math
 import multiprocessing as mp
 import os
 from multiprocessing.connection import Connection
-from multiprocessing.sharedctypes import Synchronized
+from multiprocessing.sharedctypes import Synchronized, SynchronizedArray
+
+import numpy as np
 
 from common.node import StartupError
 from services.sim.clock import Clock
@@ -33,12 +38,13 @@ class QtmProcess:
     def __init__(self, settings: SimSettings, clock: Clock) -> None:
         context = mp.get_context("spawn")  # no copy of the sim's threads and sockets
         self._robot_start = context.Value("d", math.nan, lock=False)
+        self._crane = context.Array("d", [math.nan] * 5)  # t, x, y, vx, vy (world)
         self._stop = context.Event()
         ours, theirs = context.Pipe()
         self._process = context.Process(
             target=_serve, name="sim-qtm", daemon=True,
             args=(settings.model_dump_json(), clock.t0_monotonic, self._robot_start,
-                  self._stop, theirs, os.getpid()))
+                  self._crane, self._stop, theirs, os.getpid()))
         self._process.start()
         if not ours.poll(START_TIMEOUT_S):
             self.stop()
@@ -51,6 +57,11 @@ class QtmProcess:
     def start_robot(self, t: float) -> None:
         self._robot_start.value = t
 
+    def feed_crane(self, t: float, position: np.ndarray, velocity: np.ndarray) -> None:
+        """Where the crane is (world, mm) and how fast it goes at sim time ``t``."""
+        with self._crane.get_lock():
+            self._crane[:] = [t, *map(float, position[:2]), *map(float, velocity[:2])]
+
     def stop(self) -> None:
         self._stop.set()
         self._process.join(5)
@@ -60,10 +71,21 @@ class QtmProcess:
 
 
 def _serve(settings_json: str, t0_monotonic: float, robot_start: Synchronized,
-           stop: mp.synchronize.Event, conn: Connection, parent_pid: int) -> None:
+           crane: SynchronizedArray, stop: mp.synchronize.Event, conn: Connection,
+           parent_pid: int) -> None:
     settings = SimSettings.model_validate_json(settings_json)
     lab = Lab.build(settings)
     clock = Clock(t0_monotonic)
+    placed = lab.crane_world_at(0.0)
+
+    def crane_at(t: float) -> np.ndarray:
+        with crane.get_lock():
+            t0, x, y, vx, vy = crane[:]
+        if math.isnan(t0):
+            return placed  # not fed yet: where the crane was put at the start
+        return np.array([x, y]) + np.array([vx, vy]) * (t - t0)
+
+    lab.crane_feed = crane_at
 
     def frame_at(number: int):  # noqa: ANN202 - a MocapFrame
         if lab.robot_start_s is None and not math.isnan(robot_start.value):

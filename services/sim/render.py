@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from common.camera import Intrinsics, Pose, project, thin_lens_image_distance_mm
+from common.camera import Intrinsics, Pose, project
 
 MARKER_RADIUS_MM = 9.5
 
@@ -135,37 +135,3 @@ def glint_blobs(glints: list[Glint], pose: Pose, intr: Intrinsics) -> list[Blob]
             out.append(Blob(float(u), float(v), max(g.long_mm * scale, 1.5),
                             max(g.short_mm * scale, 0.5), g.angle_rad, 235.0))
     return out
-
-
-@dataclass(frozen=True)
-class TrackingCamera:
-    """The crane's downward IR camera (paper §3.1), with the paper's thin-lens model.
-
-    Mounted ``height_mm`` above the world's z = 0 at the crane's (x, y); image columns grow
-    with world +x, rows with world −y; the reference pixel (directly below the lens) is the
-    image centre. A point at distance z below the lens appears at an offset of
-    ``(b / z) · offset_mm / pixel_mm`` pixels, with b from eq. 5.
-    """
-
-    focal_mm: float = 8.0
-    pixel_mm: float = 0.0075
-    width_px: int = 640
-    height_px: int = 480
-    height_mm: float = 3500.0
-
-    @property
-    def ref_u(self) -> float:
-        return self.width_px / 2
-
-    @property
-    def ref_v(self) -> float:
-        return self.height_px / 2
-
-    def pixel_of(self, point_world: np.ndarray, crane_x_mm: float, crane_y_mm: float
-                 ) -> tuple[float, float, float]:
-        """(u, v, radius_px) of a marker at ``point_world`` seen from the crane."""
-        z = self.height_mm - float(point_world[2])
-        magnification = thin_lens_image_distance_mm(self.focal_mm, z) / z / self.pixel_mm
-        u = self.ref_u + (float(point_world[0]) - crane_x_mm) * magnification
-        v = self.ref_v - (float(point_world[1]) - crane_y_mm) * magnification
-        return u, v, MARKER_RADIUS_MM * magnification

@@ -32,6 +32,7 @@ from services.sim.scene import GroundView
 from services.sim.settings import SimSettings
 
 log = logging.getLogger(__name__)
+CRANE_FEED_S = 0.01  # the crane's position to the QTM process: its marker within 10 ms
 
 
 def run(node: Node[SimSettings]) -> None:
@@ -55,6 +56,7 @@ def run(node: Node[SimSettings]) -> None:
             _every(1 / (4 * settings.tracking_camera.rate_hz), node.stop,  # on time ± 10 ms
                    _frame_publisher(node, lab, settings, clock)),
             _every(1 / settings.truth_rate_hz, node.stop, _truth_publisher(node, lab, clock)),
+            _every(CRANE_FEED_S, node.stop, _crane_feeder(lab, qtm, clock)),
         ]
         node.stop.wait()
         for thread in threads:
@@ -214,6 +216,14 @@ def _frame_publisher(node: Node, lab: Lab, settings: SimSettings, clock: Clock
             data=image.tobytes()))
 
     return publish
+
+
+def _crane_feeder(lab: Lab, qtm: QtmProcess, clock: Clock) -> Callable[[], None]:
+    def feed() -> None:
+        t = clock()
+        qtm.feed_crane(t, *lab.crane_state(t))
+
+    return feed
 
 
 def _truth_publisher(node: Node, lab: Lab, clock: Clock) -> Callable[[], None]:

@@ -11,8 +11,10 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from common.crane_frame import CraneFrame
 from common.crane_registers import RegisterMap
 from common.settings import ServiceSettings, above_its_minimum
+from common.tracking_camera import TrackingCameraModel
 from services.sim.crane import CraneParams
 from services.sim.crane_server import ESTOP_REGISTER
 from services.sim.robots import Railway, Walk
@@ -35,6 +37,9 @@ class MocapSettings(_Section):
     robot_body: str = Field("robot", max_length=64, description="the robot's 6DOF body (its "
                             'marker and three more, streamed as 6d/6deuler); "" = none')
     wand_body: str = Field("wand", max_length=64, description='the wand\'s 6DOF body; "" = none')
+    crane_label: str = Field("crane", max_length=64, description="a marker on the crane's "
+                             "camera carriage, at the crane's reported point and the tracking "
+                             'camera lens\'s height, as a lab would stick one there; "" = none')
 
 
 class PtzCameraSettings(_Section):
@@ -70,9 +75,15 @@ def _default_cameras() -> list[PtzCameraSettings]:
 _CRANE = CraneParams()
 
 
-class CraneSettings(_Section):
+class CraneSettings(_Section, CraneFrame):
     """The simulated crane controller (``services/sim/crane.py``). The defaults are the crane
-    identified against the paper's Tables 3–4 (docs/experiments.md)."""
+    identified against the paper's Tables 3–4 (docs/experiments.md).
+
+    Its frame (``origin_mm``, ``yaw_deg``, ``flip_x``, ``flip_y``: ``common.crane_frame``) is
+    the sim's truth of where the crane counts from: the workspace limits and everything on
+    its Modbus registers are in the crane's own frame; what the sim shows of the world (the
+    motion capture's ``crane`` marker, the truth topics, the tracking camera's pictures) is
+    in the world's. The defaults are an ideal lab: the crane counts in the world's frame."""
 
     host: str = "127.0.0.1"
     port: int = Field(5020, ge=0, le=65535)
@@ -102,22 +113,30 @@ class CraneSettings(_Section):
 
     def params(self) -> CraneParams:
         return CraneParams(**self.model_dump(exclude={"host", "port", "registers",
-                                                      "estop_register"}))
+                                                      "estop_register",
+                                                      *CraneFrame.model_fields}))
 
 
-class TrackingCameraSettings(_Section):
+class TrackingCameraSettings(_Section, TrackingCameraModel):
+    """The crane's downward IR camera. Its lens and mount (``common.tracking_camera``: focal
+    length, pixel pitch, principal point, OpenCV's distortion, yaw against the crane's axes,
+    lens offset from the crane's reported point, height) are the sim's truth, which the gantry
+    does not know: commissioning measures them (``stb gantry commission``). The defaults are
+    an ideal camera: 8 mm lens, 7.5 µm pixels, 640 × 480, centred, no distortion, aligned,
+    the lens at the crane's reported point 3.5 m up."""
+
     name: str = "tracking"
     rate_hz: float = Field(25.0, gt=0, le=120)
     delay_s: float = Field(0.04, ge=0, le=1, description="from the end of a frame's exposure "
                            "to its arrival at the gantry: readout, transfer, the bus")
     exposure_s: float = Field(0.004, ge=0, le=0.1, description="a moving marker smears over it")
-    focal_mm: float = Field(8.0, gt=0)
-    pixel_mm: float = Field(0.0075, gt=0)
-    width_px: int = Field(640, ge=64, le=4096)
-    height_px: int = Field(480, ge=64, le=4096)
-    height_mm: float = Field(3500.0, gt=0, description="lens height above world z = 0")
     noise: float = Field(2.5, ge=0, description="gray-level noise sigma")
     reflections_per_m2: float = Field(0.5, ge=0, le=20, description="stray reflections")
+
+    def lens(self) -> TrackingCameraModel:
+        """Only the lens and mount."""
+        return TrackingCameraModel(**{name: getattr(self, name)
+                                      for name in TrackingCameraModel.model_fields})
 
 
 _WALK, _RAIL = Walk(), Railway()

@@ -72,8 +72,11 @@ def test_every_service_is_a_tls_client_with_its_own_identity_known_to_the_router
         assert json.loads(env["STB_BUS__ZENOH__CONNECT"]) == ["tls/router:7447"], name
         assert env["STB_BUS__ZENOH__USER"] in users, name
         assert service["image"] == "stb-supervisor:latest", name
+        page = ({env["STB_WEB__USERS_FILE"], env["STB_WEB__TLS_CERTIFICATE"],
+                 env["STB_WEB__TLS_KEY"]} if name == "web" else set())  # its users and HTTPS
         assert {s["target"] for s in service["secrets"]} == {
-            env["STB_BUS__ZENOH__PASSWORD_FILE"], env["STB_BUS__ZENOH__TLS__ROOT_CA_CERTIFICATE"]}
+            env["STB_BUS__ZENOH__PASSWORD_FILE"], env["STB_BUS__ZENOH__TLS__ROOT_CA_CERTIFICATE"],
+            *page}
         seen.add(env["STB_BUS__ZENOH__USER"])
     assert len(seen) == len(services) - 1, "one identity per service"
     assert any(v["target"] == "/data/calib" for v in services["calib"]["volumes"])

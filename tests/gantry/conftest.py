@@ -12,6 +12,7 @@ import pytest
 from common import keys
 from common import messages as m
 from common.bus import Bus
+from common.crane_frame import CraneConnection
 from common.heightmap import HeightMap
 from common.node import Node
 from services.gantry.service import run
@@ -32,6 +33,8 @@ def rig(request: pytest.FixtureRequest, flat_map: Path, make_bus: Callable[..., 
     """The gantry service against a CraneRig; ``indirect`` parameters: more settings (and
     ``registers``: the map both sides use)."""
     extra = dict(getattr(request, "param", {}))
+    if "crane" in extra:  # the lab's register map, in the world's frame
+        extra["crane"] = CraneConnection(**extra["crane"].model_dump())
     crane = CraneRig(extra["crane"]) if "crane" in extra else CraneRig()
     settings = GantrySettings(crane_port=crane.port, height_map=flat_map,
                               marker_height_mm=MARKER_MM, stale_after_s=0.6, **extra)

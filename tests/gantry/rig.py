@@ -21,10 +21,10 @@ from common.bus import Bus
 from common.crane_registers import DEFAULT_MAP, RegisterMap
 from services.sim.crane import CraneModel, CraneParams
 from services.sim.crane_server import ESTOP_REGISTER, CraneServer
-from services.sim.render import Blob, TrackingCamera, draw
+from services.sim.render import Blob, draw
 from tests.conftest import free_port, poll, wait_for
+from tests.gantry.camera import CAMERA, pixel_of
 
-CAMERA = TrackingCamera(focal_mm=8.0, pixel_mm=0.0075, height_mm=3500.0)
 GROUND_MM, MARKER_MM = 100.0, 80.0
 _ids = itertools.count()
 RIG_PARAMS = CraneParams(watchdog_s=0.5)
@@ -129,7 +129,7 @@ def frame(world: Bus, robot_xy: np.ndarray | None, crane_xy: np.ndarray, seq: in
     moment the crane was there; default now)."""
     blobs = []
     if robot_xy is not None:
-        u, v, r = CAMERA.pixel_of(np.array([*robot_xy, GROUND_MM + MARKER_MM]), *crane_xy)
+        u, v, r = pixel_of(np.array([*robot_xy, GROUND_MM + MARKER_MM]), crane_xy)
         blobs.append(Blob(u, v, r, r))
     image = draw(blobs, CAMERA.width_px, CAMERA.height_px, rng)
     world.publish(keys.GANTRY_FRAME, m.CameraFrame(
@@ -142,7 +142,9 @@ def feed(crane: CraneRig, world: Bus, robot: Callable[[float], np.ndarray | None
          seconds: float, stop: threading.Event | None = None, *, mocap: bool = False,
          paused: Callable[[float], bool] = lambda _t: False) -> None:
     """Frames at 25 Hz of the robot where ``robot(elapsed)`` says, seen from the crane (and
-    its motion-capture fix on stb/tracker/robot if ``mocap``); nothing while ``paused``."""
+    its motion-capture fix on stb/tracker/robot if ``mocap``); nothing while ``paused``. The
+    motion capture sees the marker on the crane's carriage all along (stb/tracker/markers:
+    the rig's crane counts in the world's frame)."""
     rng = np.random.default_rng(0)
     start = time.monotonic()
     seq = 0
@@ -150,6 +152,10 @@ def feed(crane: CraneRig, world: Bus, robot: Callable[[float], np.ndarray | None
         captured = time.time()
         crane_xy, _, _, _ = crane.state()
         xy = robot(elapsed)
+        world.publish(keys.TRACKER_MARKERS, m.MarkerFrame(
+            measured_s=captured, frame=seq, markers=[m.Marker(
+                label="crane", x_mm=float(crane_xy[0]), y_mm=float(crane_xy[1]),
+                z_mm=3500.0)]))
         if not paused(elapsed):
             frame(world, xy, crane_xy, seq, rng, captured)
             if mocap and xy is not None:

@@ -9,18 +9,18 @@ import pytest
 from common.heightmap import HeightMap
 from services.gantry.control import Controller, Fix
 from services.gantry.settings import GantrySettings
-from services.sim.render import Blob, TrackingCamera, draw
+from services.sim.render import Blob, draw
+from tests.gantry.camera import CAMERA, pixel_of
 
 GROUND_MM, MARKER_MM = 100.0, 80.0
 FLAT = HeightMap(np.full((3, 3), GROUND_MM, np.float32), -5000, -5000, 5000)
-CAMERA = TrackingCamera(focal_mm=8.0, pixel_mm=0.0075, height_mm=3500.0)
 SETTINGS = GantrySettings(marker_height_mm=MARKER_MM, algorithm="basic", stale_after_s=0.6)
 
 
 def _frame(markers_xy: list[tuple[float, float]], crane_xy: np.ndarray) -> np.ndarray:
     blobs = []
     for xy in markers_xy:
-        u, v, r = CAMERA.pixel_of(np.array([*xy, GROUND_MM + MARKER_MM]), *crane_xy)
+        u, v, r = pixel_of(np.array([*xy, GROUND_MM + MARKER_MM]), crane_xy)
         blobs.append(Blob(u, v, r, r))
     return draw(blobs, CAMERA.width_px, CAMERA.height_px, np.random.default_rng(0))
 
@@ -135,8 +135,9 @@ def test_a_lost_marker_is_looked_for_where_the_motion_capture_sees_the_robot() -
 def test_frames_that_disagree_with_the_motion_capture_do_not_steer_the_crane() -> None:
     """Spoofed frames (any client could publish them in an unsecured lab: 428 of them once
     pulled the crane 1.57 m off the robot) drag the marker away 40 mm a frame; the motion
-    capture keeps seeing the robot where it stands. The spot is refused once it is
-    ``mocap_gate_mm`` from the fix, so the crane stays within that of the robot."""
+    capture keeps seeing the robot where it stands. A spot that has disagreed with the fix by
+    more than ``fix_check_mm`` for ``check_window_s`` is not used, nor one ``mocap_gate_mm``
+    from it, so the crane stays near the robot."""
     control = Controller(SETTINGS, FLAT)
     robot = np.array([0.0, 0.0])
     crane = robot.copy()
@@ -151,8 +152,10 @@ def test_frames_that_disagree_with_the_motion_capture_do_not_steer_the_crane() -
         if k * 40.0 > SETTINGS.mocap_gate_mm + 40.0:  # refused (or out of view by now)
             assert step.measured_xyz is None
             assert step.rejected_mm is not None or not step.detection.markers  # type: ignore[union-attr]
-    assert farthest < SETTINGS.mocap_gate_mm + 100.0, farthest
-    unchecked = Controller(SETTINGS.model_copy(update={"mocap_gate_mm": 0.0}), FLAT)
+    drift_mm = 40.0 / 0.25 * SETTINGS.check_window_s  # the spot's drift within the window
+    assert farthest < SETTINGS.fix_check_mm + drift_mm + 50.0, farthest
+    unchecked = Controller(SETTINGS.model_copy(update={"mocap_gate_mm": 0.0,
+                                                       "fix_check_mm": 0.0}), FLAT)
     crane = robot.copy()
     for k in range(60):  # the same frames without the check: the crane follows the spoof
         t = 1.0 + 0.25 * k

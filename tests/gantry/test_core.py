@@ -11,40 +11,52 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from common.crane_frame import CraneFrame
 from common.crane_registers import FAULT_CLAMPED
 from common.heightmap import HeightMap
+from common.tracking_camera import TrackingCameraModel
 from services.gantry.crane import CraneReading
 from services.gantry.frames import FrameInbox
-from services.gantry.locate import TrackingOptics, locate, offset_mm
+from services.gantry.locate import locate
 from services.gantry.predict import ALGORITHMS, ParticleOptions, make_predictor
 from services.gantry.safety import SetpointGuard, TargetCheck, Workspace
-from services.sim.render import TrackingCamera
+from tests.gantry.camera import pixel_of
 
 FLAT = HeightMap(np.full((3, 3), 100.0, dtype=np.float32), -5000.0, -5000.0, 5000.0)
 
 
 def test_eq_5_to_8_by_hand() -> None:
-    optics = TrackingOptics(focal_mm=8.0, pixel_mm=0.01, ref_u=320, ref_v=240,
-                            lens_height_mm=3500.0)
+    camera = TrackingCameraModel(focal_mm=8.0, pixel_mm=0.01, principal_px=(320, 240),
+                                 height_mm=3500.0)
+    ideal = CraneFrame()
     # marker 200 mm above ground at 100 mm → z = 3500 − 300 = 3200 mm below the lens;
     # eq. 5: 1/b = 1/8 − 1/3200 → b = 8.02005 mm; eq. 6–7: 40 px · 0.01 mm · z/b = 159.6 mm
     b = 1 / (1 / 8.0 - 1 / 3200.0)
-    assert offset_mm(360, 240, 3200.0, optics) == pytest.approx([40 * 0.01 * 3200 / b, 0.0])
-    assert offset_mm(320, 250, 3200.0, optics)[1] == pytest.approx(-10 * 0.01 * 3200 / b)
-    xyz = locate(360, 250, np.array([1000.0, -500.0]), optics, FLAT, 200.0)  # eq. 8
+    assert camera.ground_offset(360, 240, 3200.0, ideal) == pytest.approx(
+        [40 * 0.01 * 3200 / b, 0.0])
+    assert camera.ground_offset(320, 250, 3200.0, ideal)[1] == pytest.approx(
+        -10 * 0.01 * 3200 / b)
+    xyz = locate(360, 250, np.array([1000.0, -500.0]), camera, ideal, FLAT, 200.0)  # eq. 8
     assert xyz == pytest.approx([1000 + 0.4 * 3200 / b, -500 - 0.1 * 3200 / b, 300.0])
 
 
-def test_locate_inverts_the_sims_camera_on_sloped_ground() -> None:
+@pytest.mark.parametrize(("camera", "frame"), [
+    (TrackingCameraModel(), CraneFrame()),
+    (TrackingCameraModel(principal_px=(331.0, 228.5), distortion=(-0.29, 0.11, 0.001, -0.0002,
+                                                                  0.04),
+                         yaw_deg=2.5, offset_mm=(42.0, -35.0), height_mm=3420.0),
+     CraneFrame(origin_mm=(-3600.0, 3300.0), yaw_deg=1.3, flip_y=True)),
+], ids=["ideal", "askew, distorted, offset, flipped"])
+def test_locate_inverts_the_sims_camera_on_sloped_ground(camera: TrackingCameraModel,
+                                                          frame: CraneFrame) -> None:
     rows, cols = np.mgrid[0:101, 0:101]
     slope = HeightMap((cols * 20.0 * 0.5).astype(np.float32), -1000.0, -1000.0, 20.0)
-    cam = TrackingCamera(focal_mm=8.0, pixel_mm=0.0075, height_mm=3500.0)
-    optics = TrackingOptics(8.0, 0.0075, cam.ref_u, cam.ref_v, 3500.0)
     crane = np.array([-100.0, 50.0])
-    for x, y in [(0.0, 0.0), (250.0, -180.0), (-300.0, 200.0)]:
+    for x, y in [(0.0, 0.0), (250.0, -180.0), (-300.0, 200.0), (600.0, 400.0)]:
         z = float(slope.height_at(x, y)) + 80.0
-        u, v, _ = cam.pixel_of(np.array([x, y, z]), *crane)
-        assert locate(u, v, crane, optics, slope, 80.0) == pytest.approx([x, y, z], abs=0.5)
+        u, v, _ = pixel_of(np.array([x, y, z]), crane, camera, frame)
+        assert locate(u, v, crane, camera, frame, slope, 80.0) == pytest.approx([x, y, z],
+                                                                                abs=0.5)
 
 
 def _path(kind: str, t: np.ndarray) -> np.ndarray:

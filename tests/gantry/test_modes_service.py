@@ -15,6 +15,7 @@ from common.crane_registers import FAULT_SAFETY, FAULT_WATCHDOG, RegisterMap
 from common.node import Node
 from services.gantry.service import run
 from tests.conftest import wait_for
+from tests.gantry.camera import pixel_of
 from tests.gantry.rig import CAMERA, GROUND_MM, MARKER_MM, CraneRig, Operator, feeding
 
 TARGET = np.array([600.0, -300.0])
@@ -247,7 +248,7 @@ def test_the_robot_is_found_again_from_the_motion_capture_after_it_left_the_view
         time.sleep(max(6.8 - (time.monotonic() - began), 0.0))
         held = crane.state()
         assert np.linalg.norm(held[1]) < 1.0, "it holds through the outage"
-        u, _v, _r = CAMERA.pixel_of(np.array([*robot(6.8), GROUND_MM + MARKER_MM]), *held[0])
+        u, _v, _r = pixel_of(np.array([*robot(6.8), GROUND_MM + MARKER_MM]), held[0])
         assert not 0 <= u < CAMERA.width_px, "the robot is out of view"
         wait_for(lambda: np.linalg.norm(crane.state()[1]) > 50.0, timeout=3)  # reacquiring
         assert np.linalg.norm(crane.state()[1]) <= rig["settings"].reacquire_speed_mm_s + 5

@@ -20,7 +20,8 @@ def test_the_short_campaign_holds_its_goals(tmp_path: Path) -> None:
     for expected in ("fuzz", "fuzz again", "key churn", "key churn again", "decode bombs",
                      "spoofed frames", "spoofed pose", "SIGSTOP gantry 0.3 s",
                      "SIGSTOP gantry 1 s", "SIGSTOP tracker 2 s", "foreign Modbus writer",
-                     "SIGKILL gantry", "SIGKILL tracker", "router SIGKILL", "whole campaign"):
+                     "SIGKILL gantry", "SIGKILL tracker", "router SIGKILL",
+                     "200 event streams at once", "whole campaign"):
         assert expected in faults, f"{expected} did not run"
     missed = [(r.fault, r.misses, r.measured) for r in rows if not r.held]
     assert not missed, missed

@@ -112,8 +112,10 @@ def test_sim_serves_every_device_and_publishes(sim: dict, make_bus: Callable[...
 
     packet = asyncio.run(mocap())
     _, markers = packet.get_3d_markers()
-    assert len(markers) == 10, ("robot, wand (absent: NaN), three static markers and the "
-                                "bodies' other markers (robot's three, wand's two)")
+    assert len(markers) == 11, ("robot, wand (absent: NaN), three static markers, the crane's "
+                                "and the bodies' other markers (robot's three, wand's two)")
+    crane_marker = markers[5]  # after the static ones: on the carriage, at the lens's height
+    assert abs(crane_marker.z - 3500.0) < 5.0
 
     proc = sim["proc"]
     proc.send_signal(signal.SIGINT)

@@ -1,0 +1,96 @@
+"""The crane's own frame against the world's (the motion capture's): where a crane PLC counts
+from and which way (pure; the gantry's ``[gantry.crane]`` and the sim's ``[sim.crane]``).
+
+A crane controller counts its axes from its own home corner, perhaps the other way round
+along one of them, and its axes are never exactly parallel to the motion capture's. With
+``F = diag(±1, ±1)`` (``flip_x``, ``flip_y``) and ``R`` the rotation by ``yaw_deg``::
+
+    world = origin + R · F · crane          crane = F · Rᵀ · (world − origin)
+
+``origin_mm`` is where the crane's zero is in the world, ``yaw_deg`` how far the crane's axes
+(before any flip) are turned counter-clockwise from the world's. A flip is a counting
+direction, not a rotation: a camera on the carriage is not mirrored by it. One flip with yaw
+θ is the same map as the other flip with yaw θ + 180°; ``canonical`` picks the one with
+|yaw| ≤ 90°.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from common.crane_registers import RegisterMap
+
+
+class CraneFrame(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    origin_mm: tuple[float, float] = Field((0.0, 0.0), description="where the crane's zero is "
+                                           "in the world (x, y, mm)")
+    yaw_deg: float = Field(0.0, ge=-180, le=180, description="the crane's axes turned "
+                           "counter-clockwise from the world's, degrees")
+    flip_x: bool = Field(False, description="the crane counts x against the world's x (after "
+                         "the yaw)")
+    flip_y: bool = Field(False, description="the crane counts y against the world's y")
+
+    def frame(self) -> CraneFrame:
+        """Only the frame (of a settings model that adds more fields to it)."""
+        return CraneFrame(**{name: getattr(self, name) for name in CraneFrame.model_fields})
+
+    @property
+    def rotation(self) -> np.ndarray:
+        a = math.radians(self.yaw_deg)
+        return np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+
+    @property
+    def linear(self) -> np.ndarray:
+        """R · F: a crane-frame vector (a velocity, an offset on the carriage) in the world."""
+        return self.rotation @ np.diag([-1.0 if self.flip_x else 1.0,
+                                        -1.0 if self.flip_y else 1.0])
+
+    @property
+    def is_identity(self) -> bool:
+        return self == CraneFrame()
+
+    def to_world(self, xy_crane: np.ndarray) -> np.ndarray:
+        """Crane coordinates (…, 2) in the world (mm)."""
+        return np.asarray(self.origin_mm) + np.asarray(xy_crane, dtype=float) @ self.linear.T
+
+    def to_crane(self, xy_world: np.ndarray) -> np.ndarray:
+        """World coordinates (…, 2) as the crane counts them (mm)."""
+        return (np.asarray(xy_world, dtype=float) - np.asarray(self.origin_mm)) @ self.linear
+
+    def vector_to_world(self, v_crane: np.ndarray) -> np.ndarray:
+        return np.asarray(v_crane, dtype=float) @ self.linear.T
+
+    def vector_to_crane(self, v_world: np.ndarray) -> np.ndarray:
+        return np.asarray(v_world, dtype=float) @ self.linear
+
+    @classmethod
+    def from_linear(cls, origin_mm: np.ndarray, linear: np.ndarray) -> CraneFrame:
+        """The frame of an orthogonal map ``linear`` (R · F), in its canonical form."""
+        flip = bool(np.linalg.det(linear) < 0)
+        rotation = linear @ np.diag([1.0, -1.0]) if flip else linear
+        yaw = math.degrees(math.atan2(rotation[1, 0], rotation[0, 0]))
+        return cls(origin_mm=(float(origin_mm[0]), float(origin_mm[1])), yaw_deg=yaw,
+                   flip_y=flip).canonical()
+
+    def canonical(self) -> CraneFrame:
+        """The same map with |yaw| ≤ 90°: a flip moved to the other axis, or both flips made a
+        half turn, as needed."""
+        yaw, fx, fy = self.yaw_deg, self.flip_x, self.flip_y
+        if abs(yaw) > 90.0:
+            yaw = yaw - 180.0 if yaw > 0 else yaw + 180.0
+            fx, fy = not fx, not fy  # R(θ+180) = −R(θ) = R(θ)·diag(−1, −1)
+        return CraneFrame(origin_mm=self.origin_mm, yaw_deg=yaw, flip_x=fx, flip_y=fy)
+
+
+CRANE_COUNTS_IN_THE_WORLD = CraneFrame()
+"""The ideal lab's frame: the crane counts in the world's coordinates."""
+
+
+class CraneConnection(RegisterMap, CraneFrame):
+    """``[gantry.crane]``: the controller's register map (``common.crane_registers``) and its
+    frame: how its registers map onto the world's coordinates."""

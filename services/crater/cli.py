@@ -1,0 +1,74 @@
+"""``stb crater import SCAN --out crater.npz [--cell-mm N] [--units auto|mm|m] [--plot PNG]``:
+the gantry's height map (paper §3.1's look-up table) from a laser scan of the crater.
+
+SCAN is a point cloud in the world's (the motion capture's) frame: PLY (ASCII or binary),
+LAS/LAZ, or XYZ/CSV text (three numbers a line, an optional header). Its points are binned to
+cells of --cell-mm (20), a plane fitted in each cell; cells the scanner did not see are filled
+by interpolation from their neighbours and reported (how many, and the largest hole), and
+--plot draws the map with the filled cells marked. --units: the file's length unit (auto:
+metres if the scan spans less than 50 units, else millimetres). Then point [gantry]
+height_map (and [web] height_map) at the output. Exit status: 0 written, 2 a bad file or
+argument.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+from services.args import EXIT_CONFIG, base_parser
+
+METRES_BELOW = 50.0  # a scan spanning less than this many units is in metres
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = base_parser("stb crater", __doc__ or "")
+    parser.add_argument("action", choices=["import"])
+    parser.add_argument("scan", type=Path, metavar="SCAN")
+    parser.add_argument("--out", type=Path, required=True, metavar="crater.npz")
+    parser.add_argument("--cell-mm", type=float, default=20.0, help="grid cell (20 mm)")
+    parser.add_argument("--units", choices=["auto", "mm", "m"], default="auto")
+    parser.add_argument("--plot", type=Path, metavar="PNG", help="a picture of the map")
+    args = parser.parse_args(sys.argv[1:] if argv is None else list(argv))
+    if not 1.0 <= args.cell_mm <= 1000.0:
+        print("stb crater import: --cell-mm must be 1–1000 mm", file=sys.stderr)
+        return EXIT_CONFIG
+    from services.entry import ToolError, tool_main
+
+    def run() -> int:
+        try:
+            return _import(args)
+        except ValueError as err:
+            raise ToolError(str(err), EXIT_CONFIG) from err
+
+    return tool_main("crater import", run)
+
+
+def _import(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from common.pointcloud import read_points
+    from services.crater.grid import grid_points
+
+    started = time.monotonic()
+    points = read_points(args.scan)
+    span = float(np.ptp(points[:, :2], axis=0).max())
+    units = args.units
+    if units == "auto":
+        units = "m" if span < METRES_BELOW else "mm"
+    if units == "m":
+        points *= 1000.0
+    gridded = grid_points(points, args.cell_mm)
+    gridded.heights.save(args.out)
+    print(f"{args.scan}: read in {units}; {gridded.report()}")
+    if args.plot:
+        from services.crater.plot import plot_map
+
+        plot_map(gridded, args.plot)
+        print(f"picture: {args.plot}")
+    print(f"wrote {args.out} in {time.monotonic() - started:.1f} s: set [gantry] height_map "
+          "to it")
+    return 0

@@ -1,0 +1,133 @@
+"""A laser scan's points binned into the height map the gantry reads (pure): paper §3.1's
+look-up table from a scan of the testbed.
+
+Each cell's height is a plane fitted to the points in it, taken at the cell's centre (a mean
+would lean downhill on a 45° wall wherever the points in a cell are not centred) — or their
+mean where they do not spread over the cell; a cell with fewer than ``MIN_POINTS`` points is
+a hole. Holes are filled by linear interpolation over the
+cells around them (the nearest cell outside their hull) and reported — how many, and the
+largest connected one — since an interpolated surface is a guess where the scanner saw nothing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+from scipy.interpolate import griddata
+
+from common.heightmap import HeightMap
+
+MIN_POINTS = 3
+
+
+@dataclass(frozen=True)
+class Gridded:
+    heights: HeightMap
+    filled: np.ndarray  # bool (rows, cols): cells interpolated (no scan points of their own)
+    points: int
+    cells: int
+    largest_hole_cells: int
+    largest_hole_at_mm: tuple[float, float] | None  # its centre
+
+    @property
+    def filled_cells(self) -> int:
+        return int(self.filled.sum())
+
+    def report(self) -> str:
+        cell = self.heights.resolution_mm
+        x0, x1, y0, y1 = self.heights.extent_mm
+        lines = [f"{self.points} points → {self.heights.heights_mm.shape[1]} × "
+                 f"{self.heights.heights_mm.shape[0]} cells of {cell:g} mm, x {x0:.0f}…{x1:.0f}"
+                 f" mm, y {y0:.0f}…{y1:.0f} mm; heights {self.heights.heights_mm.min():.0f}…"
+                 f"{self.heights.heights_mm.max():.0f} mm",
+                 f"holes filled by interpolation: {self.filled_cells} cells "
+                 f"({100 * self.filled_cells / self.cells:.1f} %)"]
+        if self.largest_hole_at_mm is not None:
+            x, y = self.largest_hole_at_mm
+            lines.append(f"largest hole: {self.largest_hole_cells} cells "
+                         f"({self.largest_hole_cells * cell * cell / 1e6:.3f} m²) around "
+                         f"({x:.0f}, {y:.0f}) mm")
+        return "\n".join(lines)
+
+
+def grid_points(points: np.ndarray, cell_mm: float) -> Gridded:
+    """The height map of ``points`` (N, 3, mm) at ``cell_mm``; holes filled and counted."""
+    if cell_mm <= 0:
+        raise ValueError("the cell size must be positive")
+    x0 = np.floor(points[:, 0].min() / cell_mm) * cell_mm
+    y0 = np.floor(points[:, 1].min() / cell_mm) * cell_mm
+    cols = int(np.rint((points[:, 0].max() - x0) / cell_mm)) + 1
+    rows = int(np.rint((points[:, 1].max() - y0) / cell_mm)) + 1
+    if rows < 2 or cols < 2:
+        raise ValueError(f"the points cover less than 2 × 2 cells of {cell_mm:g} mm")
+    heights, counts = _fit_planes(points, x0, y0, cell_mm, rows, cols)
+    hole = counts < MIN_POINTS
+    if hole.all():
+        raise ValueError(f"no cell of {cell_mm:g} mm has {MIN_POINTS} points: a larger cell?")
+    if hole.any():
+        heights = _fill(heights, hole)
+    labels, found = ndimage.label(hole)
+    largest, at = 0, None
+    if found:
+        sizes = np.bincount(labels.ravel())[1:]
+        biggest = int(np.argmax(sizes)) + 1
+        largest = int(sizes[biggest - 1])
+        r, c = np.argwhere(labels == biggest).mean(axis=0)
+        at = (float(x0 + c * cell_mm), float(y0 + r * cell_mm))
+    return Gridded(HeightMap(heights.astype(np.float32), x0, y0, cell_mm), hole, len(points),
+                   rows * cols, largest, at)
+
+
+def _fit_planes(points: np.ndarray, x0: float, y0: float, cell: float, rows: int, cols: int
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Per cell: z = a + b·dx + c·dy over its points (dx, dy from the cell's centre, the
+    grid's node), least squares from summed moments; ``a`` is the cell's height."""
+    col = np.clip(np.rint((points[:, 0] - x0) / cell).astype(np.int64), 0, cols - 1)
+    row = np.clip(np.rint((points[:, 1] - y0) / cell).astype(np.int64), 0, rows - 1)
+    index = row * cols + col
+    dx = points[:, 0] - (x0 + col * cell)
+    dy = points[:, 1] - (y0 + row * cell)
+    z = points[:, 2]
+    size = rows * cols
+
+    def total(weights: np.ndarray | None = None) -> np.ndarray:
+        return np.bincount(index, weights, minlength=size)
+
+    n = total()
+    sx, sy, sz = total(dx), total(dy), total(z)
+    sxx, sxy, syy = total(dx * dx), total(dx * dy), total(dy * dy)
+    sxz, syz = total(dx * z), total(dy * z)
+    matrix = np.stack([np.stack([n, sx, sy], -1), np.stack([sx, sxx, sxy], -1),
+                       np.stack([sy, sxy, syy], -1)], -2)
+    rhs = np.stack([sz, sxz, syz], -1)
+    safe = np.maximum(n, 1)
+    heights = np.where(n > 0, sz / safe, np.nan)
+    # a plane only where the cell's points spread over it in both directions (their spread's
+    # smaller axis at least a third of a uniform cell's): else its mean
+    vxx, vyy = sxx / safe - (sx / safe) ** 2, syy / safe - (sy / safe) ** 2
+    vxy = sxy / safe - sx * sy / safe ** 2
+    smaller = 0.5 * (vxx + vyy) - np.sqrt(0.25 * (vxx - vyy) ** 2 + vxy ** 2)
+    pick = np.flatnonzero((n >= MIN_POINTS) & (smaller >= cell * cell / 12 / 9))
+    if len(pick):
+        heights[pick] = np.linalg.solve(matrix[pick], rhs[pick][..., None])[:, 0, 0]
+    return heights.reshape(rows, cols), n.reshape(rows, cols)
+
+
+def _fill(heights: np.ndarray, hole: np.ndarray) -> np.ndarray:
+    """Holes by linear interpolation from the cells around them; beyond their hull, the
+    nearest cell."""
+    known = ~hole
+    ring = known & ndimage.binary_dilation(hole, iterations=3)  # only the holes' neighbours
+    source = np.argwhere(ring)
+    target = np.argwhere(hole)
+    values = heights[ring]
+    out = heights.copy()
+    filled = griddata(source, values, target, method="linear")
+    missing = ~np.isfinite(filled)
+    if missing.any():
+        filled[missing] = griddata(np.argwhere(known), heights[known], target[missing],
+                                   method="nearest")
+    out[hole] = filled
+    return out
