@@ -2,9 +2,9 @@
 look-up table from a scan of the testbed.
 
 Each cell's height is a plane fitted to the points in it, taken at the cell's centre (a mean
-would lean downhill on a 45° wall wherever the points in a cell are not centred) — or their
-mean where they do not spread over the cell; a cell with fewer than ``MIN_POINTS`` points is
-a hole. Holes are filled by linear interpolation over the
+would lean downhill on a 45° wall wherever the points in a cell are not centred); a cell with
+fewer than ``MIN_POINTS`` points, or whose plane would swing at its centre (its points all on
+one side, as at a hole's edge), is a hole. Holes are filled by linear interpolation over the
 cells around them (the nearest cell outside their hull) and reported — how many, and the
 largest connected one — since an interpolated surface is a guess where the scanner saw nothing.
 """
@@ -20,6 +20,7 @@ from scipy.interpolate import griddata
 from common.heightmap import HeightMap
 
 MIN_POINTS = 3
+PLANE_VARIANCE = 3.0
 
 
 @dataclass(frozen=True)
@@ -102,16 +103,17 @@ def _fit_planes(points: np.ndarray, x0: float, y0: float, cell: float, rows: int
     matrix = np.stack([np.stack([n, sx, sy], -1), np.stack([sx, sxx, sxy], -1),
                        np.stack([sy, sxy, syy], -1)], -2)
     rhs = np.stack([sz, sxz, syz], -1)
-    safe = np.maximum(n, 1)
-    heights = np.where(n > 0, sz / safe, np.nan)
-    # a plane only where the cell's points spread over it in both directions (their spread's
-    # smaller axis at least a third of a uniform cell's): else its mean
-    vxx, vyy = sxx / safe - (sx / safe) ** 2, syy / safe - (sy / safe) ** 2
-    vxy = sxy / safe - sx * sy / safe ** 2
-    smaller = 0.5 * (vxx + vyy) - np.sqrt(0.25 * (vxx - vyy) ** 2 + vxy ** 2)
-    pick = np.flatnonzero((n >= MIN_POINTS) & (smaller >= cell * cell / 12 / 9))
-    if len(pick):
-        heights[pick] = np.linalg.solve(matrix[pick], rhs[pick][..., None])[:, 0, 0]
+    heights = np.full(size, np.nan)
+    # A cell's plane counts only where it is well supported at the centre: its centre value's
+    # variance (noise² · (M⁻¹)₀₀) at most PLANE_VARIANCE times that of the points' mean
+    # (noise² / n). Else (few points, all on one side, as at a hole's edge) the cell is a
+    # hole: neither a swinging plane nor a mean that leans with the slope.
+    candidates = np.flatnonzero(n >= MIN_POINTS)
+    inverse = np.linalg.pinv(matrix[candidates])
+    steady = inverse[:, 0, 0] * n[candidates] <= PLANE_VARIANCE
+    pick = candidates[steady]
+    heights[pick] = (inverse[steady] @ rhs[pick][..., None])[:, 0, 0]
+    n = np.where(np.isfinite(heights), n, 0)
     return heights.reshape(rows, cols), n.reshape(rows, cols)
 
 

@@ -63,7 +63,8 @@ def test_a_plane_with_a_hole_is_gridded_and_the_hole_filled_and_reported(
     truth = 100.0 + 0.5 * x[None, :] - 0.2 * y[:, None]
     error = np.abs(h.heights_mm - truth)[1:-1, 1:-1]  # the edges: half and quarter cells
     assert error.max() < 1.5, "planes through the noise, the hole's cells too"
-    assert 40 <= gridded.filled_cells <= 60 and gridded.largest_hole_cells == gridded.filled_cells
+    assert 40 <= gridded.filled[1:-1, 1:-1].sum() <= 70, "the disc (50 cells) and its edge"
+    assert 40 <= gridded.largest_hole_cells <= 70
     assert gridded.largest_hole_at_mm == pytest.approx((200, -100), abs=15)
     assert "largest hole" in gridded.report()
 
