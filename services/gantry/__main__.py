@@ -2,6 +2,8 @@
 
 ``stb gantry arm|disarm|stop|reset [--reason TEXT]``: an operator's command (see its --help).
 ``stb gantry identify [--box MM]``: measure the crane that is there (commissioning).
+``stb gantry commission [--box MM] [--toml OUT]``: the crane's frame, the tracking camera's
+lens and mount, and the dynamics, measured on a crane's first day.
 The modes: disarmed at start (the crane is never enabled), armed (tracking; holding without a
 fresh estimate), stopped (by stop, a latched fault, the e-stop or the crane disabled at its
 controller: setpoint frozen, crane disabled; only reset, then arm, moves it again).
@@ -27,6 +29,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         from services.gantry.commission_cli import main as identify_main
 
         return identify_main(argv[1:])
+    if argv[:1] == ["commission"]:
+        from services.gantry.first_day_cli import main as commission_main
+
+        return commission_main(argv[1:])
     args = service_args("gantry", __doc__ or "", argv)
     from services.entry import run_service
     from services.gantry.service import run

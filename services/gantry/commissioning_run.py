@@ -55,7 +55,7 @@ class Recorder:
     def __init__(self, settings: GantrySettings, heights: HeightMap, crane: RegisterCrane,
                  bus: Bus | None) -> None:
         self.settings, self.heights, self.crane = settings, heights, crane
-        self.camera, self.frame = settings.tracking_camera, settings.crane.frame()
+        self.lens, self.frame = settings.tracking_camera, settings.crane.frame()
         self.readings: list[tuple[float, CraneReading]] = []
         self.marks: list[tuple[float, float, float]] = []  # capture time, u, v
         self._stop = threading.Event()
@@ -94,7 +94,7 @@ class Recorder:
             if frame is None:
                 continue
             found = detect(frame[1], max_markers=20)
-            marker = closest(found.markers, *(last or self.camera.principal))
+            marker = closest(found.markers, *(last or self.lens.principal))
             if marker is not None:
                 last = (marker.u, marker.v)
                 self.marks.append((frame[0], marker.u, marker.v))
@@ -156,11 +156,11 @@ class Recorder:
 
     def _offset(self, u: float, v: float, z: float) -> np.ndarray:
         """The marker from the crane's reported point (world axes), z below the lens."""
-        return (self.camera.lens_xy(np.zeros(2), self.frame)
-                + self.camera.ground_offset(u, v, z, self.frame))
+        return (self.lens.lens_xy(np.zeros(2), self.frame)
+                + self.lens.ground_offset(u, v, z, self.frame))
 
     def _marker_distance(self, crane: np.ndarray, u: float, v: float) -> float:
-        s, height = self.settings, self.camera.height_mm
+        s, height = self.settings, self.lens.height_mm
         z = height - s.marker_height_mm
         for _ in range(4):
             xy = crane + self._offset(u, v, z)

@@ -78,6 +78,7 @@ class Lab:
     crater: CraterMap
     trajectory: Trajectory
     static_markers: np.ndarray  # (S, 3)
+    targets: np.ndarray  # (T, 3): commissioning targets standing below the crane
     ghost_markers: np.ndarray  # (G, 3)
     ptz_glints: list[Glint]
     ground_glints: list[Glint]
@@ -113,6 +114,8 @@ class Lab:
             settings=settings, crater=crater, trajectory=trajectory,
             static_markers=_on_ground(crater, rng, settings.mocap.static_markers, 2600, 3400),
             ghost_markers=_on_ground(crater, rng, settings.mocap.ghost_markers, 500, 2500),
+            targets=np.array([[x, y, float(crater.height_at(x, y)) + h]
+                              for x, y, h in settings.targets]).reshape(-1, 3),
             ptz_glints=_glints(crater, rng, 8, 2500.0),
             ground_glints=_glints(crater, rng, int(round(t.reflections_per_m2 * area_m2)),
                                   max(c.x_max_mm, c.y_max_mm, -c.x_min_mm, -c.y_min_mm)),
@@ -200,7 +203,7 @@ class Lab:
         crane = [m.crane_label] if m.crane_label else []
         extra = [label for body in self.bodies for label in body.marker_labels("")[1:]]
         return (robot + [WAND_LABEL] + [f"static_{i + 1}" for i in range(len(self.static_markers))]
-                + crane + extra)
+                + crane + [f"target_{i + 1}" for i in range(len(self.targets))] + extra)
 
     def crane_marker(self, t: float) -> np.ndarray:
         """The motion capture's ``crane`` marker at ``t``: on the carriage, at the crane's
@@ -220,7 +223,8 @@ class Lab:
         wand = self.wand_position(t)
         wand = np.full(3, np.nan) if wand is None else wand
         crane = [self.crane_marker(t)[None, :]] if m.crane_label else []
-        noisy = np.vstack([robot[None, :], wand[None, :], self.static_markers, *crane])
+        noisy = np.vstack([robot[None, :], wand[None, :], self.static_markers, *crane,
+                           self.targets])
         noisy = noisy + rng.normal(0.0, m.noise_mm, size=noisy.shape)
         noisy[rng.random(len(noisy)) < m.dropout] = np.nan
         unlabelled = [(100 + i, xyz) for i, xyz in enumerate(self.ghost_markers)
@@ -316,6 +320,11 @@ class Lab:
         now, before = pixels[0], cam.project(self.robot(t - exposure), crane_before, frame)[0][0]
         blobs = [Blob(now[0], now[1], MARKER_RADIUS_MM * scale[0], MARKER_RADIUS_MM * scale[0],
                       smear_u=now[0] - before[0], smear_v=now[1] - before[1])]
+        if len(self.targets):
+            pixels, scales = cam.project(self.targets, crane, frame)
+            blobs += [Blob(u, v, MARKER_RADIUS_MM * k, MARKER_RADIUS_MM * k)
+                      for (u, v), k in zip(pixels, scales, strict=True)
+                      if -20 < u < cam.width_px + 20 and -20 < v < cam.height_px + 20]
         if self.ground_glints:
             spots = np.array([[g.x_mm, g.y_mm, g.z_mm] for g in self.ground_glints])
             pixels, scales = cam.project(spots, crane, frame)

@@ -189,6 +189,10 @@ class SimSettings(ServiceSettings):
     wand_dwell_s: float = Field(0.5, ge=0, description="calibration wand held still per point")
     bind: str | None = Field(None, description="if set, every device listens on this address "
                              "instead of its own host (e.g. 0.0.0.0 in a container)")
+    targets: list[tuple[float, float, float]] = Field(
+        default_factory=list, max_length=10, description="markers a lab stands below the crane "
+        "for commissioning (stb gantry commission): [x, y, height above the ground] mm each, "
+        "labelled target_1, target_2, … in the motion capture, seen by the tracking camera")
     mocap: MocapSettings = MocapSettings()
     cameras: list[PtzCameraSettings] = Field(default_factory=_default_cameras)
     crane: CraneSettings = CraneSettings()
