@@ -76,6 +76,9 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--ahead", type=float, nargs="+", default=[0.2, 0.3, 0.4, 0.5, 0.6, 0.8],
                    metavar="S", help="the oracle's look-ahead(s) (default: a sweep)")
     g.add_argument("--seed", type=int, default=1)
+    g.add_argument("--gantry-map", type=Path, metavar="FILE.npz",
+                   help="the gantry's height map where it is not the sim's crater (a laser "
+                   "scan imported with stb crater import)")
     g.add_argument("--plot", type=Path, metavar="DIR", help="error-over-time plots")
     g.add_argument("--json", action="store_true", help="one JSON document on stdout")
     i = commands.add_parser("identify", help="fit the sim to the paper's Tables 3 and 4",
@@ -121,6 +124,7 @@ def _gantry(args: argparse.Namespace, gantry: GantrySettings, sim: SimSettings) 
         runs.append(run_scenario(args.scenario, name, seed=args.seed, crater_file=args.crater,
                                  gantry=gantry, sim=sim, path=path,
                                  oracle_ahead_s=args.ahead[i] if oracle else None,
+                                 gantry_map=args.gantry_map,
                                  progress=progress.runner(label) if progress else None))
         if progress:
             progress.clear()

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from common.heightmap import HeightMap
 from common.markers import warm_up
 from services.experiment.devices import ModelCrane, SimClock, SimFrames
 from services.gantry.control import Controller, Fix
@@ -101,14 +102,16 @@ class Oracle:
 
 def run(lab: Lab, settings: GantrySettings, *, end_s: float | None = None,
         oracle_ahead_s: float | None = None,
-        progress: Callable[[float], None] | None = None) -> Run:
+        progress: Callable[[float], None] | None = None,
+        heights: HeightMap | None = None) -> Run:
     """One experiment; ``lab`` is used up (its crane moves). With ``oracle_ahead_s`` the
     predictor is the ``Oracle`` (the bound), not ``settings.algorithm``. ``progress`` is told
-    the share of the run done, fifty times a run."""
+    the share of the run done, fifty times a run. ``heights``: the gantry's height map (a lab's
+    imported laser scan); None: the sim's crater itself."""
     warm_up()  # load the compiled detector before the clock starts
     started = time.perf_counter()
     clock = SimClock(START_S)
-    controller = Controller(settings, lab.crater)
+    controller = Controller(settings, lab.crater if heights is None else heights)
     if oracle_ahead_s is not None:
         controller.predictor = Oracle(lab.robot, oracle_ahead_s)  # type: ignore[assignment]
     loop = GantryLoop(settings, ModelCrane(lab, clock, settings.crane, settings.crane.frame()),
@@ -154,7 +157,8 @@ def run(lab: Lab, settings: GantrySettings, *, end_s: float | None = None,
 def run_scenario(scenario: str, algorithm: AlgorithmName, *, seed: int, crater_file: Path,
                  gantry: GantrySettings | None = None, sim: SimSettings | None = None,
                  path: Trajectory | None = None, oracle_ahead_s: float | None = None,
-                 progress: Callable[[float], None] | None = None) -> Run:
+                 progress: Callable[[float], None] | None = None,
+                 gantry_map: Path | None = None) -> Run:
     """One algorithm (or the oracle) on one scenario, or on ``path`` (a recorded or CSV
     path: the walker's marker height if ``scenario`` is the walker, else the locomotive's)."""
     lab = make_lab("locomotive" if path is not None else scenario, seed, crater_file, sim)
@@ -164,7 +168,8 @@ def run_scenario(scenario: str, algorithm: AlgorithmName, *, seed: int, crater_f
         lab.place_crane(lab.trajectory.position(0.0))
     settings = gantry_for(gantry or GantrySettings(), algorithm, seed=seed,
                           marker_height_mm=height)
-    return run(lab, settings, oracle_ahead_s=oracle_ahead_s, progress=progress)
+    return run(lab, settings, oracle_ahead_s=oracle_ahead_s, progress=progress,
+               heights=None if gantry_map is None else HeightMap.load(gantry_map))
 
 
 def on_crater(path: Trajectory, lab: Lab, marker_height_mm: float) -> Trajectory:

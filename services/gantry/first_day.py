@@ -23,15 +23,16 @@ from common.tracking_camera import TrackingCameraModel
 from services.gantry.commissioning_run import CommissioningError
 from services.gantry.crane import CraneError, CraneReading, RegisterCrane
 from services.gantry.frames import FrameInbox, decode
-from services.gantry.geometry_fit import Sighting
+from services.gantry.geometry_fit import CameraFit, Sighting, fit_camera
 
 REST_MM, REST_MM_S, REST_FOR_S = 2.0, 2.0, 0.3  # standing still: near the target, not moving
 MOVE_TIMEOUT_S = 15.0
 MOCAP_S = 0.4  # the motion capture's positions averaged over this, at rest
 FRAMES = 3  # tracking frames per stop, their spots' median
 GATE_PX = 70.0  # a spot this far from where a target should appear is not it
-GRID = (6, 5)  # camera stops across the image (columns, rows)
-SPAN = 0.42  # of the image's footprint on the floor, each way from the targets' middle
+GRID = (5, 4)  # camera stops per target across the image (columns, rows)
+SPAN = 0.45  # of the image's width and height, each way from its middle
+CENTRAL = 0.6  # the first camera fit takes targets within this share of the image's middle
 
 
 @dataclass
@@ -133,16 +134,22 @@ def frame_pattern(start_raw: np.ndarray, half_mm: float) -> list[np.ndarray]:
             for dx in (-half_mm, 0.0, half_mm)]
 
 
-def camera_pattern(targets_xy: np.ndarray, nominal: TrackingCameraModel, depth_mm: float
-                   ) -> list[np.ndarray]:
-    """Where the crane's reported point goes (world) so that the targets cross the whole
-    image: a grid over ``SPAN`` of the image's footprint each way around their middle."""
-    scale = depth_mm * nominal.pixel_mm / nominal.focal_mm  # mm on the floor per pixel
-    half = np.array([nominal.width_px, nominal.height_px]) * scale * SPAN
-    middle = targets_xy.mean(axis=0)
+def camera_pattern(targets_xyz: np.ndarray, nominal: TrackingCameraModel) -> list[np.ndarray]:
+    """Where the crane's reported point goes (world) so that each target in turn crosses the
+    whole image, its corners too (where the lens bends most): for each, a grid of ``GRID``
+    positions that puts it within ``SPAN`` of the image's half-size each way (at its own depth,
+    so its own footprint), row by row in a snake."""
+    stops = []
     cols, rows = GRID
-    return [middle + [gx, gy] for gy in np.linspace(-half[1], half[1], rows)
-            for gx in np.linspace(-half[0], half[0], cols)]
+    for target in np.atleast_2d(targets_xyz):
+        depth = nominal.height_mm - target[2]
+        footprint = np.array([nominal.width_px, nominal.height_px]) * (
+            depth * nominal.pixel_mm / nominal.focal_mm)
+        for r, fy in enumerate(np.linspace(-SPAN, SPAN, rows)):
+            xs = np.linspace(-SPAN, SPAN, cols)
+            for fx in (xs if r % 2 == 0 else xs[::-1]):
+                stops.append(target[:2] - np.array([fx, fy]) * footprint)
+    return stops
 
 
 def sightings_at(stand_xy: np.ndarray, spots: list[list[Spot]], targets: dict[str, np.ndarray],
@@ -162,6 +169,28 @@ def sightings_at(stand_xy: np.ndarray, spots: list[list[Spot]], targets: dict[st
         if len(found) >= max(1, len(spots) - 1):
             out.append(Sighting(stand_xy, xyz, np.median(np.array(found), axis=0)))
     return out
+
+
+def camera_from_stands(stands: list[tuple[np.ndarray, list[list[Spot]]]],
+                       targets: dict[str, np.ndarray], nominal: TrackingCameraModel,
+                       frame: CraneFrame, height_mm: float, *, max_residual_px: float = 1.0
+                       ) -> CameraFit:
+    """The camera from what each stop saw (where the crane stood in the world, the frames'
+    spots): first without distortion from the targets near the image's middle, where the
+    nominal camera finds them, then everything from every stop, found through that first fit."""
+    def sightings(camera: TrackingCameraModel, central: bool) -> list[Sighting]:
+        out = [s for stand, spots in stands
+               for s in sightings_at(stand, spots, targets, camera, frame)]
+        if not central:
+            return out
+        middle = np.array(camera.principal)
+        size = np.array([camera.width_px, camera.height_px])
+        return [s for s in out if np.all(np.abs(s.pixel - middle) <= CENTRAL * size / 2)]
+
+    first = fit_camera(sightings(nominal, True), nominal, frame, height_mm, distortion=False,
+                       max_residual_px=10.0)
+    return fit_camera(sightings(first.camera, False), nominal, frame, height_mm,
+                      max_residual_px=max_residual_px)
 
 
 def confirm(yes: bool, question: str, ask: Callable[[str], str] = input) -> None:

@@ -28,24 +28,16 @@ from services.gantry.commissioning_run import (
 from services.gantry.crane import CraneError, ModbusCrane
 from services.gantry.first_day import (
     Watch,
+    camera_from_stands,
     camera_pattern,
     confirm,
     frame_pattern,
     heartbeat,
-    sightings_at,
 )
-from services.gantry.geometry_fit import (
-    CameraFit,
-    FitRefused,
-    FrameFit,
-    Sighting,
-    fit_camera,
-    fit_frame,
-)
+from services.gantry.geometry_fit import CameraFit, FitRefused, FrameFit, fit_frame
 from services.gantry.settings import GantrySettings
 
 EXIT_REFUSED, EXIT_NO_DEVICE = 1, 3
-CENTRAL = 0.6  # the first camera fit takes targets within this share of the image's middle
 
 
 @dataclass
@@ -166,8 +158,7 @@ def _camera(watch: Watch, settings: GantrySettings, frame: CraneFrame, height: f
         "height_mm": height, "principal_px": None, "distortion": (0.0,) * 5, "yaw_deg": 0.0,
         "offset_mm": (0.0, 0.0)})
     targets = watch.mocap(args.targets, seconds=1.0)
-    depth = height - min(t[2] for t in targets.values())
-    stops = camera_pattern(np.array([t[:2] for t in targets.values()]), nominal, depth)
+    stops = camera_pattern(np.array(list(targets.values())), nominal)
     inside = [s for s in stops if np.all(np.abs(frame.to_crane(s) - start) <= args.box / 2)]
     if len(inside) < len(stops):
         outcome.notes.append(f"camera: {len(stops) - len(inside)} of {len(stops)} stops lay "
@@ -182,22 +173,8 @@ def _camera(watch: Watch, settings: GantrySettings, frame: CraneFrame, height: f
         stands.append((stand, watch.spots()))
         _progress(f"camera stop {i + 1}/{len(inside)}: {sum(map(len, stands[-1][1]))} spots")
     outcome.motion_s += time.monotonic() - began
-    first = fit_camera(_sightings(stands, targets, nominal, frame, central=True), nominal,
-                       frame, height, distortion=False, max_residual_px=10.0)
-    return fit_camera(_sightings(stands, targets, first.camera, frame), nominal, frame, height,
-                      max_residual_px=args.max_camera_px)
-
-
-def _sightings(stands: list[tuple[np.ndarray, list]], targets: dict[str, np.ndarray],
-               camera: TrackingCameraModel, frame: CraneFrame, central: bool = False
-               ) -> list[Sighting]:
-    out = [s for stand, spots in stands for s in sightings_at(stand, spots, targets, camera,
-                                                                frame)]
-    if central:
-        middle = np.array(camera.principal)
-        size = np.array([camera.width_px, camera.height_px])
-        out = [s for s in out if np.all(np.abs(s.pixel - middle) <= CENTRAL * size / 2)]
-    return out
+    return camera_from_stands(stands, targets, nominal, frame, height,
+                              max_residual_px=args.max_camera_px)
 
 
 def _dynamics(settings: GantrySettings, heights: HeightMap, frame: CraneFrame,

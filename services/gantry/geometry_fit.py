@@ -80,13 +80,13 @@ def fit_frame(crane_xy: np.ndarray, marker_xy: np.ndarray, *, max_residual_mm: f
     residuals = np.hypot(*(frame.to_world(crane_xy) - marker_xy).T)
     fit = FrameFit(frame, (sd[0], sd[1]), sd[2], float(np.sqrt(np.mean(residuals ** 2))),
                    float(residuals.max()), scale, len(crane_xy))
+    if abs(scale - 1.0) > max_scale_error:
+        raise FitRefused(f"the crane counts {scale:.4f} mm per mm of the motion capture's: is "
+                         "[gantry.crane] units_per_mm the controller's?")
     if fit.residual_rms_mm > max_residual_mm:
         raise FitRefused(f"the crane's reports and its marker disagree by {fit.residual_rms_mm:.1f}"
                          f" mm rms after the fit (at most {max_residual_mm:g}): is the marker "
                          "fixed to the carriage, and did the crane stand still at each stop?")
-    if abs(scale - 1.0) > max_scale_error:
-        raise FitRefused(f"the crane counts {scale:.4f} mm per mm of the motion capture's: is "
-                         "[gantry.crane] units_per_mm the controller's?")
     return fit
 
 
