@@ -12,7 +12,11 @@ the lens 3.38–3.48 m up."""
 
 from __future__ import annotations
 
+import tomllib
+from pathlib import Path
+
 import numpy as np
+import tomli_w
 
 OPENCV_SAMPLE = np.array([-0.29, 0.11, 0.001, -0.0002, 0.04])
 TARGETS = [[350.0, 250.0, 0.0], [-300.0, -250.0, 700.0]]
@@ -37,13 +41,22 @@ def draw_truths(seed: int) -> tuple[dict, dict]:
     return crane, camera
 
 
-def toml_of(values: dict) -> str:
-    """Simple values as TOML lines (numbers, booleans, pairs)."""
-    def text(v: object) -> str:
-        if isinstance(v, bool):
-            return str(v).lower()
-        if isinstance(v, tuple | list):
-            return "[" + ", ".join(text(x) for x in v) + "]"
-        return repr(float(v)) if isinstance(v, float) else repr(v)
+def askew_lab_file(folder: Path, endpoint: str, truth_map: Path, gantry_map: Path, crane: dict,
+              camera: dict, extra: dict | None = None) -> Path:
+    """The lab: the sim's truths (parked robot, two targets) and the gantry's own view."""
+    folder.mkdir(parents=True, exist_ok=True)
+    from tests.sim.test_sim_service import write_lab
 
-    return "".join(f"{key} = {text(value)}\n" for key, value in values.items())
+    lab, _ = write_lab(folder, endpoint, truth_map)
+    doc = tomllib.loads(lab.read_text())
+    doc["sim"].update(scenario="parked", targets=TARGETS)
+    doc["sim"]["crane"].update(crane)
+    doc["sim"]["tracking_camera"] = dict(camera)
+    doc["gantry"]["height_map"] = str(gantry_map)
+    doc["router"] = {"listen": [endpoint]}
+    doc["up"] = {"log_dir": str(folder / "logs"),
+                 "services": ["router", "sim", "tracker", "gantry"]}
+    for section, values in (extra or {}).items():
+        doc.setdefault(section, {}).update(values)
+    lab.write_text(tomli_w.dumps(doc))
+    return lab

@@ -25,10 +25,9 @@ from services.sim.lab import load_or_make_crater
 from services.sim.settings import SimSettings
 from tests.conftest import ROOT, client_settings, open_when_up, poll, stb_process
 from tests.gantry.rig import Operator
-from tests.geometry_truths import TARGETS, draw_truths
+from tests.geometry_truths import askew_lab_file, draw_truths
 from tests.ports import free_port
 from tests.services.test_processes import _stop
-from tests.sim.test_sim_service import write_lab
 
 SEED = 7
 FOLLOW_FACTOR, FOLLOW_SLACK_MM = 1.10, 5.0  # the issue's goal: within 10 % (+5 mm) of ideal
@@ -37,25 +36,6 @@ FOLLOW_FACTOR, FOLLOW_SLACK_MM = 1.10, 5.0  # the issue's goal: within 10 % (+5 
 def _stb(*args: str, timeout: float = 600.0) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "services.cli", *args], capture_output=True,
                           text=True, timeout=timeout, cwd=ROOT)
-
-
-def _lab_file(folder: Path, endpoint: str, truth_map: Path, gantry_map: Path, crane: dict,
-              camera: dict, extra: dict | None = None) -> Path:
-    """The lab: the sim's truths (parked robot, two targets) and the gantry's own view."""
-    folder.mkdir(parents=True, exist_ok=True)
-    lab, _ = write_lab(folder, endpoint, truth_map)
-    doc = tomllib.loads(lab.read_text())
-    doc["sim"].update(scenario="parked", targets=TARGETS)
-    doc["sim"]["crane"].update(crane)
-    doc["sim"]["tracking_camera"] = dict(camera)
-    doc["gantry"]["height_map"] = str(gantry_map)
-    doc["router"] = {"listen": [endpoint]}
-    doc["up"] = {"log_dir": str(folder / "logs"),
-                 "services": ["router", "sim", "tracker", "gantry"]}
-    for section, values in (extra or {}).items():
-        doc.setdefault(section, {}).update(values)
-    lab.write_text(tomli_w.dumps(doc))
-    return lab
 
 
 def _arm_answer(endpoint: str, until: float) -> str:
@@ -102,7 +82,7 @@ def test_the_first_day_measures_the_lab_that_is_there(tmp_path: Path) -> None:
     assert np.percentile(error, 99) <= 5.0, "the imported crater (holes filled included)"
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    lab = _lab_file(tmp_path, endpoint, truth_map, imported, crane, camera)
+    lab = askew_lab_file(tmp_path, endpoint, truth_map, imported, crane, camera)
     up = stb_process("up", "--lab", str(lab), "--no-view")
     try:
         said = _arm_answer(endpoint, time.monotonic() + 60)
@@ -130,7 +110,7 @@ def test_the_first_day_measures_the_lab_that_is_there(tmp_path: Path) -> None:
 
     # the commissioned lab: the fragment merged into the lab file; the gantry arms now
     fragment = tomllib.loads((tmp_path / "commissioned.toml").read_text())
-    commissioned = _lab_file(tmp_path / "commissioned", f"tcp/127.0.0.1:{free_port()}",
+    commissioned = askew_lab_file(tmp_path / "commissioned", f"tcp/127.0.0.1:{free_port()}",
                              truth_map, imported, crane, camera,
                              extra={"gantry": fragment["gantry"]})
     doc = tomllib.loads(commissioned.read_text())
