@@ -103,7 +103,7 @@ class GantrySettings(ServiceSettings):
                                  "motion capture's fresh fix is not the robot (0: no check)")
     crane_marker: str = Field("crane", max_length=64, description="the motion capture's label "
                               "of the marker on the crane's carriage, at its reported point")
-    crane_check_mm: float = Field(50.0, ge=0, description="the crane's position through its "
+    crane_check_mm: float = Field(100.0, ge=0, description="the crane's position through its "
                                   "frame and the crane marker must agree within this, or the "
                                   "gantry does not arm, and armed it stops (0: no check — only "
                                   "where no motion capture sees the crane)")

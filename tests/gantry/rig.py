@@ -140,11 +140,12 @@ def frame(world: Bus, robot_xy: np.ndarray | None, crane_xy: np.ndarray, seq: in
 
 def feed(crane: CraneRig, world: Bus, robot: Callable[[float], np.ndarray | None],
          seconds: float, stop: threading.Event | None = None, *, mocap: bool = False,
-         paused: Callable[[float], bool] = lambda _t: False) -> None:
+         paused: Callable[[float], bool] = lambda _t: False,
+         crane_marker: Callable[[float], np.ndarray] = lambda _t: np.zeros(2)) -> None:
     """Frames at 25 Hz of the robot where ``robot(elapsed)`` says, seen from the crane (and
     its motion-capture fix on stb/tracker/robot if ``mocap``); nothing while ``paused``. The
     motion capture sees the marker on the crane's carriage all along (stb/tracker/markers:
-    the rig's crane counts in the world's frame)."""
+    the rig's crane counts in the world's frame), ``crane_marker(elapsed)`` off the crane."""
     rng = np.random.default_rng(0)
     start = time.monotonic()
     seq = 0
@@ -152,10 +153,10 @@ def feed(crane: CraneRig, world: Bus, robot: Callable[[float], np.ndarray | None
         captured = time.time()
         crane_xy, _, _, _ = crane.state()
         xy = robot(elapsed)
+        marker = crane_xy + crane_marker(elapsed)
         world.publish(keys.TRACKER_MARKERS, m.MarkerFrame(
             measured_s=captured, frame=seq, markers=[m.Marker(
-                label="crane", x_mm=float(crane_xy[0]), y_mm=float(crane_xy[1]),
-                z_mm=3500.0)]))
+                label="crane", x_mm=float(marker[0]), y_mm=float(marker[1]), z_mm=3500.0)]))
         if not paused(elapsed):
             frame(world, xy, crane_xy, seq, rng, captured)
             if mocap and xy is not None:

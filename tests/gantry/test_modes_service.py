@@ -4,6 +4,7 @@ latched fault by itself, and stops when the crane stops on its own (tests/gantry
 
 from __future__ import annotations
 
+import re
 import threading
 import time
 
@@ -111,6 +112,38 @@ def test_a_restarted_gantry_leaves_a_watchdog_stopped_crane_alone_until_reset_an
         finally:
             node.stop.set()
             thread.join(5)
+
+
+def test_a_crane_that_disagrees_with_its_marker_stops_the_gantry_and_will_not_arm(
+        rig: dict) -> None:
+    """The crane's reported position (through its frame) against the motion capture's marker
+    on its carriage: 200 mm apart for longer than the check's window while armed → stopped,
+    the crane disabled, nothing written after; then no arming until they agree."""
+    crane: CraneRig = rig["crane"]
+    operator: Operator = rig["operator"]
+    slipped = threading.Event()
+
+    def marker_off(_t: float) -> np.ndarray:
+        return np.array([200.0, 0.0]) if slipped.is_set() else np.zeros(2)
+
+    with feeding(crane, rig["world"], lambda t: TARGET + [40.0 * t, 0.0],
+                 crane_marker=marker_off):
+        _moving(rig)
+        slipped.set()
+        wait_for(lambda: operator.mode() == "stopped", timeout=3)
+        state = operator.states[-1]
+        off = re.search(r"disagrees with the motion capture by (\d+) mm", state.mode_reason)
+        assert off and 150 <= int(off.group(1)) <= 300, state.mode_reason  # 200 mm, and motion
+        assert "stb gantry commission" in state.mode_reason
+        wait_for(lambda: not crane.state()[2], timeout=1)
+        written = len(rig["setpoints"])
+        time.sleep(1.0)  # a window in which nothing may be written
+        assert len(rig["setpoints"]) == written, "no setpoint once stopped"
+        assert operator.send("reset").accepted
+        refused = operator.send("arm")
+        assert not refused.accepted and "disagrees" in refused.detail
+        slipped.clear()
+        wait_for(lambda: operator.send("arm").accepted, timeout=5, period=0.3)
 
 
 def test_a_crane_disabled_at_the_controller_stops_the_gantry(rig: dict) -> None:
