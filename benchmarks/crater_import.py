@@ -42,10 +42,26 @@ def timed(command: list[str]) -> tuple[float, float]:
     return wall, usage.ru_maxrss / 1024
 
 
+def accuracy(truth: Path, imported: Path) -> str:
+    """The imported map against the sim's own surface, at every cell outside the holes."""
+    heights, surface = HeightMap.load(imported), HeightMap.load(truth)
+    with np.load(imported) as data:
+        filled = np.asarray(data["filled"], dtype=bool)
+    rows, cols = heights.heights_mm.shape
+    xs = heights.origin_x_mm + np.arange(cols) * heights.resolution_mm
+    ys = heights.origin_y_mm + np.arange(rows) * heights.resolution_mm
+    error = np.abs(heights.heights_mm - surface.height_at(*np.meshgrid(xs, ys)))[~filled]
+    median, p999, worst = np.percentile(error, [50, 99.9, 100])
+    return (f"against the sim's surface outside the holes ({heights.resolution_mm:g} mm cells): "
+            f"median {median:.2f} mm, 99.9 % {p999:.2f} mm, worst {worst:.2f} mm; "
+            f"{100 * filled.mean():.1f} % of the cells filled")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = Parser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--points", type=int, default=10_000_000)
     parser.add_argument("--runs", type=int, default=3)
+    parser.add_argument("--cell-mm", type=float, default=15.0)
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="stb-crater-") as folder:
         truth, path = Path(folder) / "truth.npz", Path(folder) / "scan.ply"
@@ -63,10 +79,11 @@ def main(argv: list[str] | None = None) -> int:
         for run in range(args.runs):
             out = Path(folder) / f"map{run}.npz"
             wall, peak = timed([sys.executable, "-m", "services.cli", "crater", "import",
-                                str(path), "--out", str(out)])
+                                str(path), "--out", str(out), "--cell-mm", str(args.cell_mm)])
             floor, floor_peak = timed([sys.executable, "-c", FLOOR, str(path)])
             print(f"| {run + 1} | {wall:.1f} | {peak:.0f} | {floor:.1f} | {floor_peak:.0f} |",
                   flush=True)
+        print(accuracy(truth, out))
     return 0
 
 

@@ -70,12 +70,13 @@ class HeightMap:
         n = np.linalg.norm(g)
         return g / n if n > 1e-9 else np.zeros(2)
 
-    def save(self, path: Path) -> None:
-        """Write the map whole or not at all: other processes read it as it is written."""
+    def save(self, path: Path, **extra: np.ndarray) -> None:
+        """Write the map whole or not at all: other processes read it as it is written.
+        ``extra``: more arrays beside it (an imported scan's ``filled`` cells)."""
         buffer = io.BytesIO()
         np.savez_compressed(buffer, heights_mm=self.heights_mm.astype(np.float32),
                             origin_mm=np.array([self.origin_x_mm, self.origin_y_mm]),
-                            resolution_mm=np.array(self.resolution_mm))
+                            resolution_mm=np.array(self.resolution_mm), **extra)
         write_atomically(path, buffer.getvalue())
 
     @classmethod

@@ -3,10 +3,11 @@ the gantry's height map (paper §3.1's look-up table) from a laser scan of the c
 
 SCAN is a point cloud in the world's (the motion capture's) frame: PLY (ASCII or binary),
 LAS/LAZ, or XYZ/CSV text (three numbers a line, an optional header). Its points are binned to
-cells of --cell-mm (20), a plane fitted in each cell; cells the scanner did not see are filled
+cells of --cell-mm (15), a plane fitted in each cell; cells the scanner did not see are filled
 by interpolation from their neighbours and reported (how many, and the largest hole), and
 --plot draws the map with the filled cells marked. --units: the file's length unit (auto:
-metres if the scan spans less than 50 units, else millimetres). Then point [gantry]
+metres if the scan spans less than 50 units, else millimetres). The map is written with the
+filled cells marked (``filled``, beside the heights). Then point [gantry]
 height_map (and [web] height_map) at the output. Exit status: 0 written, 2 a bad file or
 argument.
 """
@@ -29,7 +30,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("action", choices=["import"])
     parser.add_argument("scan", type=Path, metavar="SCAN")
     parser.add_argument("--out", type=Path, required=True, metavar="crater.npz")
-    parser.add_argument("--cell-mm", type=float, default=20.0, help="grid cell (20 mm)")
+    parser.add_argument("--cell-mm", type=float, default=15.0, help="grid cell (15 mm)")
     parser.add_argument("--units", choices=["auto", "mm", "m"], default="auto")
     parser.add_argument("--plot", type=Path, metavar="PNG", help="a picture of the map")
     args = parser.parse_args(sys.argv[1:] if argv is None else list(argv))
@@ -62,7 +63,7 @@ def _import(args: argparse.Namespace) -> int:
     if units == "m":
         points *= 1000.0
     gridded = grid_points(points, args.cell_mm)
-    gridded.heights.save(args.out)
+    gridded.heights.save(args.out, filled=gridded.filled)
     print(f"{args.scan}: read in {units}; {gridded.report()}")
     if args.plot:
         from services.crater.plot import plot_map

@@ -59,8 +59,11 @@ class CrossCheck:
             self._beyond_since = now_s
 
     def failing(self, now_s: float) -> Disagreement | None:
-        """The disagreement, once it has lasted ``window_s``; None otherwise."""
+        """The disagreement, once it has lasted ``window_s`` and the last comparison is
+        recent; None otherwise (no recent comparison is no verdict, not a fault)."""
         if not self.enabled or self._beyond_since is None or self.off_mm is None:
+            return None
+        if self.compared_s is None or now_s - self.compared_s > self.fresh_s:
             return None
         if now_s - self._beyond_since < self.window_s:
             return None

@@ -29,6 +29,8 @@ from services.gantry.settings import GantrySettings
 
 log = logging.getLogger(__name__)
 
+MARKER_FRESH_S = 0.15
+"""A motion-capture sample of the crane's marker older than this is not compared."""
 COMMAND_MAX_AGE_S = 2.0
 """An arm, disarm or reset older than this is refused (it was meant for another moment);
 a stop never is."""
@@ -71,6 +73,7 @@ class GantryLoop:
         self.settings = settings
         self.crane, self.frames, self.controller, self.fix = crane, frames, controller, fix
         self.crane_marker = crane_marker
+        self._marker_compared_s = -float("inf")
         self.crane_check = CrossCheck(
             "the crane's position through [gantry.crane]'s frame", settings.crane_check_mm,
             settings.check_window_s, settings.mocap_max_age_s,
@@ -159,11 +162,13 @@ class GantryLoop:
 
     def _compare_crane(self, now_s: float) -> None:
         """The crane's reported position (through its frame) against the motion capture's
-        marker on its carriage, both taken to the marker's time."""
+        marker on its carriage, both taken to the marker's time: each new marker sample once,
+        and only a fresh one (the report's velocity carries it a short way only)."""
         marker = self.crane_marker()
-        if self.reading is None or marker is None or now_s - marker.t_s > \
-                self.settings.mocap_max_age_s:
+        if self.reading is None or marker is None or now_s - marker.t_s > MARKER_FRESH_S \
+                or marker.t_s <= self._marker_compared_s:
             return
+        self._marker_compared_s = marker.t_s
         reported_s = now_s - self.settings.report_age_s
         crane = np.array([self.reading.x_mm, self.reading.y_mm]) + np.array(
             [self.reading.vx_mm_s, self.reading.vy_mm_s]) * (marker.t_s - reported_s)

@@ -23,7 +23,7 @@ VISIBILITY_MM = 10.0
 
 @dataclass(frozen=True)
 class ScanOptions:
-    spacing_mm: float = 4.0  # one point per spacing² of ground, on average
+    spacing_mm: float = 3.0  # one point per spacing² of ground, on average
     noise_mm: float = 2.0  # each coordinate's scatter (1σ)
     stations: tuple[tuple[float, float, float], ...] = ((-3700.0, -600.0, 1200.0),
                                                       (3700.0, 600.0, 1200.0))

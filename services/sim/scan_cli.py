@@ -20,8 +20,8 @@ from services.args import base_parser
 def main(argv: Sequence[str]) -> int:
     parser = base_parser("stb sim scan", __doc__ or "")
     parser.add_argument("--out", type=Path, required=True, metavar="FILE")
-    parser.add_argument("--spacing-mm", type=float, default=4.0,
-                        help="one point per spacing² of ground, on average (4)")
+    parser.add_argument("--spacing-mm", type=float, default=3.0,
+                        help="one point per spacing² of ground, on average (3)")
     parser.add_argument("--noise-mm", type=float, default=2.0, help="scatter, 1σ (2)")
     parser.add_argument("--ascii", action="store_true", help="PLY as text")
     parser.add_argument("--seed", type=int, default=0, help="the scanner's own randomness")

@@ -71,8 +71,8 @@ def test_a_plane_with_a_hole_is_gridded_and_the_hole_filled_and_reported(
 
 def test_the_sims_scan_imports_within_5_mm_of_its_truth_outside_the_holes(
         crater: CraterMap) -> None:
-    points = scan(crater, np.random.default_rng(3), ScanOptions())
-    gridded = grid_points(points, 20.0)
+    points = scan(crater, np.random.default_rng(3), ScanOptions(spacing_mm=4.0))
+    gridded = grid_points(points, 15.0)
     h = gridded.heights
     rows, cols = h.heights_mm.shape
     x = h.origin_x_mm + np.arange(cols) * h.resolution_mm
