@@ -18,7 +18,7 @@ import numpy as np
 from common.heightmap import HeightMap
 
 CHUNK = 100_000  # points checked for visibility at once (memory: CHUNK × steps lookups)
-VISIBILITY_MM = 10.0
+VISIBILITY_MM = 20.0
 
 
 @dataclass(frozen=True)
