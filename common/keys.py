@@ -96,6 +96,8 @@ PTZ_DETECTIONS = Topic("ptz/{camera}/detections", m.MarkerDetections,
 PTZ_CALIBRATION = Topic("ptz/{camera}/calibration", m.CalibrationMode,
                         "puts a camera into calibration mode (with a lease) or out of it",
                         stream=False)
+PTZ_HAND = Topic("ptz/{camera}/hand", m.PtzHand,
+                 "an operator holds, moves or releases a camera (the page)", stream=False)
 PTZ_SNAPSHOT = Topic("ptz/{camera}/snapshot", m.CameraFrame,
                      "JPEG snapshots of a camera in calibration mode", max_payload_bytes=2 * MIB)
 PTZ_PREVIEW = Topic("ptz/{camera}/preview", m.PtzPreview,
@@ -133,7 +135,7 @@ HEALTH = Topic("health/{service}/{instance}", m.ServiceHealth,
 
 ALL_TOPICS: tuple[Topic, ...] = (
     TRACKER_MARKERS, TRACKER_ROBOT, PTZ_STATE, PTZ_DETECTIONS, PTZ_CALIBRATION, PTZ_SNAPSHOT,
-    PTZ_PREVIEW,
+    PTZ_PREVIEW, PTZ_HAND,
     CALIB_COLLECT, CALIB_PROGRESS, CALIB_POSE, GANTRY_FRAME, GANTRY_DETECTIONS, GANTRY_ESTIMATE,
     GANTRY_SETPOINT, GANTRY_STATE, GANTRY_OFFLOAD, GANTRY_COMMAND, GANTRY_COMMAND_REPLY,
     VIDEO, TRUTH_ROBOT, TRUTH_CRANE, TRUTH_PTZ, HEALTH,

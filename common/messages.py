@@ -120,7 +120,7 @@ class MarkerDetections(Message):
 # --- PTZ ----------------------------------------------------------------------------------------
 
 PtzStatus = Literal["waiting_for_pose", "tracking", "idle", "calibrating", "camera_unreachable",
-                    "manual"]
+                    "manual", "held"]
 
 
 class PtzState(Message):
@@ -140,6 +140,25 @@ class PtzState(Message):
         "robot marker to the nearest marker found; None: not judged or no marker seen")
     pointing_problem: str = Field("", max_length=300, description="why the pointing is not to "
                                   "be trusted (previews disagreeing in a row); empty: fine")
+    held_by: str = Field("", max_length=128, description="the operator who holds the camera "
+                         "(status held: it does not follow until released); empty: nobody")
+    presets: list[str] = Field(default_factory=list, max_length=64,
+                               description="the camera's own preset positions, by name")
+
+
+class PtzHand(Message):
+    """An operator's hand on a PTZ camera: hold it (it stops following), move it, send it to
+    one of its presets, or let it follow the robot again. Only operator and web identities
+    may send it (deploy/zenoh/router.json5)."""
+
+    camera: Name
+    action: Literal["hold", "move", "preset", "follow"]
+    pan_deg: float | None = Field(None, ge=-180, le=180, description="move: where to")
+    tilt_deg: float | None = Field(None, ge=-90, le=90)
+    zoom: int | None = Field(None, ge=1, le=19999, description="move: VAPIX zoom step")
+    preset: str = Field("", max_length=64, description="preset: its name")
+    operator: str = Field(max_length=128, description="who (from the page: 'user (web "
+                          "address)')")
 
 
 # --- calibration --------------------------------------------------------------------------------
@@ -179,19 +198,24 @@ class CalibrationMode(Message):
 
 
 class CollectRequest(Message):
-    """Asks the calib service to collect passpoints for a camera, then solve and publish."""
+    """Asks the calib service to collect passpoints for a camera, then solve and publish; or
+    cancels a collection, or accepts or discards a solved pose held for review."""
 
     camera: Name
-    action: Literal["start", "cancel"] = "start"
+    action: Literal["start", "cancel", "accept", "discard"] = "start"
     count: int = Field(100, ge=6, le=10_000, description="passpoints to collect")
     timeout_s: float = Field(600.0, gt=0, description="give up after this long")
+    review: bool = Field(False, description="hold the solved pose (state review) until an "
+                         "operator accepts or discards it; else it is taken at once")
 
 
-CollectState = Literal["collecting", "solving", "done", "failed", "cancelled"]
+CollectState = Literal["collecting", "solving", "review", "done", "failed", "cancelled",
+                       "discarded"]
 
 
 class CollectProgress(Message):
-    """How a passpoint collection goes; the last one of a run is done, failed or cancelled."""
+    """How a passpoint collection goes; the last one of a run is done, failed, cancelled or
+    discarded (``review``: solved, waiting for an operator's accept or discard)."""
 
     camera: Name
     state: CollectState
@@ -200,7 +224,8 @@ class CollectProgress(Message):
     snapshots: int = Field(ge=0, description="snapshots seen so far")
     skipped: dict[str, int] = Field(description="snapshots not used, by reason")
     message: str = Field("", max_length=500)
-    mean_error_px: float | None = Field(None, ge=0, description="of the solved pose (done)")
+    mean_error_px: float | None = Field(None, ge=0, description="of the solved pose (review, "
+                                        "done)")
 
 
 class PtzPreview(Message):

@@ -204,6 +204,26 @@ def describe_errors(err: ValidationError, section: str, config_file: Path | None
     return "\n".join(lines)
 
 
+def bus_environment(bus: BusSettings) -> dict[str, str]:
+    """The environment (``STB_BUS__*``) that gives a child process this bus: the same prefix,
+    router, identity and TLS (a password as itself, from the settings or its file)."""
+    values = bus.model_dump(mode="json", exclude_none=True, exclude={"zenoh": {"password"}})
+    secret = bus.zenoh.secret() if bus.zenoh.password is not None else None
+    if secret is not None:
+        values["zenoh"]["password"] = secret
+    out: dict[str, str] = {}
+
+    def flatten(prefix: str, value: Any) -> None:
+        if isinstance(value, dict):
+            for key, inner in value.items():
+                flatten(f"{prefix}__{key.upper()}", inner)
+        else:
+            out[prefix] = value if isinstance(value, str) else json.dumps(value)
+
+    flatten("STB_BUS", values)
+    return out
+
+
 def _env(prefix: str, environ: Mapping[str, str]) -> dict[str, Any]:
     """Nested dict from variables ``<prefix>A__B=value``; values starting with [ { " are JSON."""
     out: dict[str, Any] = {}

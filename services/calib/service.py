@@ -6,7 +6,8 @@ Publishes:  stb/calib/{camera}/pose (CameraPose) at start for every stored pose 
             A pose on its key that it did not send (a stale or poisoned one) is out-versioned:
             its own pose goes out again with a higher ``version`` (PTZ services take the highest)
             and its health says so for a minute
-Subscribes: stb/calib/{camera}/collect (CollectRequest: start or cancel a collection)
+Subscribes: stb/calib/{camera}/collect (CollectRequest: start or cancel a collection, accept
+            or discard a solved pose held for review)
             stb/calib/{camera}/pose (to hear poses it did not send)
             while collecting: stb/tracker/markers, stb/ptz/{camera}/detections, .../snapshot,
             .../state; puts stb/ptz/{camera}/calibration (the camera's calibration mode)
@@ -87,11 +88,16 @@ class Calib:
             if session is not None:
                 session.cancel()
             return
+        if msg.action in ("accept", "discard"):
+            if session is None or not session.decide(accept=msg.action == "accept"):
+                log.warning("%s: %s, but no solved pose waits for review", msg.camera,
+                            msg.action)
+            return
         if session is not None and session.running:
             log.info("%s: a collection is already running", msg.camera)
             session.publish_progress()
             return
-        self._start(msg.camera, msg.count, msg.timeout_s)
+        self._start(msg.camera, msg.count, msg.timeout_s, msg.review)
 
     def solved(self, pose: m.CameraPose, report: dict) -> None:
         with self.lock:
@@ -146,9 +152,9 @@ class Calib:
         held = self.poses.get(camera)
         return max(held.version if held else 0, self.seen_version.get(camera, 0)) + 1
 
-    def _start(self, camera: str, count: int, timeout_s: float) -> None:
+    def _start(self, camera: str, count: int, timeout_s: float, review: bool = False) -> None:
         session = Session(self.node, self.settings, self.store, camera, count, timeout_s,
-                          on_pose=self.solved)
+                          on_pose=self.solved, review=review)
         with self.lock:
             self.sessions[camera] = session
         threading.Thread(target=session.run, name=f"collect-{camera}", daemon=True).start()

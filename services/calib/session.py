@@ -44,9 +44,11 @@ STALL_HINTS = {  # why snapshots gave no passpoint → what to check
 class Session:
     def __init__(self, node: Node, settings: CalibSettings, store: PoseStore, camera: str,
                  count: int, timeout_s: float,
-                 on_pose: Callable[[m.CameraPose, dict], None]) -> None:
+                 on_pose: Callable[[m.CameraPose, dict], None], review: bool = False) -> None:
         self.node, self.settings, self.store, self.camera = node, settings, store, camera
-        self.timeout_s, self.on_pose = timeout_s, on_pose
+        self.timeout_s, self.on_pose, self.review = timeout_s, on_pose, review
+        self._decided = threading.Event()
+        self._accepted = False
         self.collector = Collector(count, settings.marker_label, settings.min_spacing_mm)
         self.lock = threading.Lock()
         self.running = True
@@ -95,6 +97,15 @@ class Session:
 
     def cancel(self) -> None:
         self._cancel.set()
+        self.decide(accept=False)
+
+    def decide(self, *, accept: bool) -> bool:
+        """An operator's word on a pose held for review; False when none is held."""
+        if self.state != "review":
+            return False
+        self._accepted = accept
+        self._decided.set()
+        return True
 
     # --- the run -----------------------------------------------------------------------------
 
@@ -203,16 +214,34 @@ class Session:
             passpoints=len(solution.inliers), time_offset_s=solution.time_offset_s or 0.0)
         report = solution.report() | {"pan_deg": state.pan_deg, "tilt_deg": state.tilt_deg,
                                       "zoom": state.zoom}
-        self.on_pose(pose, report)  # versioned, stored and published by the service
         self.mean_error_px = solution.mean_error_px
         rejected = report["rejected"]
         spread = float(np.max(solution.position_std_mm))
-        self._finish("done", f"{len(solution.inliers)} passpoints, {len(rejected)} rejected, "
-                     f"position ±{spread:.1f} mm (1σ), "
-                     f"clock offset {1e3 * (solution.time_offset_s or 0.0):.1f} ms")
+        summary = (f"{len(solution.inliers)} passpoints, {len(rejected)} rejected, position "
+                   f"±{spread:.1f} mm (1σ), clock offset "
+                   f"{1e3 * (solution.time_offset_s or 0.0):.1f} ms")
+        if self.review and not self._reviewed(summary):
+            return
+        self.on_pose(pose, report)  # versioned, stored and published by the service
+        self._finish("done", summary)
         log.info("%s: pose (%.0f, %.0f, %.0f) mm, (%.2f, %.2f, %.2f)°, %.2f px", self.camera,
                  mount.x_mm, mount.y_mm, mount.z_mm, mount.rx_deg, mount.ry_deg, mount.rz_deg,
                  solution.mean_error_px)
+
+    def _reviewed(self, summary: str) -> bool:
+        """Hold the solved pose for an operator's accept (True) or discard, at most
+        ``review_s``; the old pose stays meanwhile and after a discard."""
+        self._finish("review", f"{summary}: accept or discard")
+        deadline = time.monotonic() + self.settings.review_s
+        while not self._decided.wait(PROGRESS_S):
+            if self.node.stop.is_set() or time.monotonic() > deadline:
+                self._finish("discarded", f"not accepted within {self.settings.review_s:g} s: "
+                             "the camera keeps its pose")
+                return False
+            self.publish_progress()
+        if not self._accepted:
+            self._finish("discarded", "discarded: the camera keeps its pose")
+        return self._accepted
 
     # --- the bus side ------------------------------------------------------------------------
 

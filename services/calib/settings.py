@@ -43,3 +43,5 @@ class CalibSettings(ServiceSettings):
     max_time_offset_s: float = Field(0.5, ge=0, le=5)
     max_mean_error_px: float = Field(20.0, gt=0)
     lease_s: float = Field(3.0, gt=0, le=60, description="calibration mode lease on a camera")
+    review_s: float = Field(600.0, gt=0, le=86_400, description="a solved pose held for an "
+                            "operator's review (from the page) is discarded after this long")

@@ -42,6 +42,10 @@ class PtzCamera(Protocol):
 
     def home(self) -> None: ...
 
+    def presets(self) -> list[str]: ...
+
+    def goto_preset(self, name: str) -> None: ...
+
     def position(self) -> vapix.Position: ...
 
     def limits(self) -> PtzLimits: ...
@@ -72,6 +76,14 @@ class AxisPtzCamera:
     def home(self) -> None:
         """To the camera's home position (its home preset)."""
         self._request(vapix.PTZ_PATH, {"move": "home"})
+
+    def presets(self) -> list[str]:
+        """The camera's own preset positions, by name."""
+        return vapix.parse_presets(self._request(vapix.PTZ_PATH,
+                                                 {"query": "presetposcam"}).text)
+
+    def goto_preset(self, name: str) -> None:
+        self._request(vapix.PTZ_PATH, {"gotoserverpresetname": name})
 
     def position(self) -> vapix.Position:
         return vapix.parse_position(self._request(vapix.PTZ_PATH, {"query": "position"}).text)

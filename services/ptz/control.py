@@ -32,7 +32,7 @@ RETRY_MAX_S = 5.0
 class Status:
     """The camera's state as published: status, aim error and the pointing check."""
 
-    status: str  # waiting_for_pose, idle, tracking, calibrating, manual
+    status: str  # waiting_for_pose, idle, tracking, calibrating, manual, held
     aim_error_deg: float
     pointing_error_deg: float | None
     problem: str  # "" when the pointing check is content
@@ -54,6 +54,7 @@ class PtzControl:
     retry_at: float = 0.0
     retry_s: float = RETRY_FIRST_S
     manual: bool = False  # following paused for someone else's move
+    held_by: str = ""  # an operator holds the camera (the page): it does not follow
 
     # --- what comes in ----------------------------------------------------------------------
 
@@ -73,7 +74,7 @@ class PtzControl:
         """The move this robot sample asks for, or None."""
         self.robot = msg
         if (self.pose is None or self.limits is None or now < self.retry_at or calibrating
-                or self.override.paused(now)):
+                or self.held_by or self.override.paused(now)):
             return None
         return self.follower.command(now, _xyz(msg), _velocity(msg), msg.measured_s, self.pose)
 
@@ -102,16 +103,31 @@ class PtzControl:
         """Calibration mode moved the camera: the next sample sends a fresh command."""
         self.follower.forget()
 
+    def hold(self, by: str) -> None:
+        """An operator holds the camera: it follows no more, and their moves are not someone
+        else's hand (``moved_by_hand``)."""
+        self.held_by = by or "an operator"
+        self.override.forget()
+
+    def moved_by_hand(self) -> None:
+        """The holding operator moved it: no reference for the override detector."""
+        self.override.forget()
+
+    def release(self) -> None:
+        """Following again: the next sample sends a fresh command."""
+        self.held_by = ""
+        self.override.forget()
+        self.follower.forget()
     # --- what goes out --------------------------------------------------------------------
 
     def status(self, now: float, pan_deg: float, tilt_deg: float, calibrating: bool) -> Status:
         """The status from where the camera is now (this also watches for someone else's
         hand on it)."""
-        manual = self._watch_hands(now, pan_deg, tilt_deg, calibrating)
+        manual = not self.held_by and self._watch_hands(now, pan_deg, tilt_deg, calibrating)
         problem = self.pointing.problem() or ""
         pointing = self.pointing.error_deg
-        status = ("calibrating" if calibrating else "manual" if manual
-                  else "waiting_for_pose" if self.pose is None
+        status = ("calibrating" if calibrating else "held" if self.held_by
+                  else "manual" if manual else "waiting_for_pose" if self.pose is None
                   else "tracking" if self.robot else "idle")
         if self.pose is None:
             health, why = "degraded", "waiting for a camera pose from calib"

@@ -3,6 +3,7 @@
 Subscribes: stb/tracker/robot (RobotPosition), stb/calib/{camera}/pose (CameraPose; also
             queried at start for a pose published before this service ran)
             stb/ptz/{camera}/calibration (CalibrationMode: hold still and detect, with a lease)
+            stb/ptz/{camera}/hand (PtzHand: an operator holds, moves or releases the camera)
 Publishes:  stb/ptz/{camera}/state (PtzState: pan, tilt, zoom, status, aim error, and the
             pointing check's measured error from the previews), state_hz
             in calibration mode: stb/ptz/{camera}/detections and .../snapshot per snapshot
@@ -32,6 +33,8 @@ from services.ptz.preview import PreviewLoop
 from services.ptz.settings import PtzSettings
 
 log = logging.getLogger(__name__)
+HAND_MAX_AGE_S = 5.0  # an operator's hand older than this was meant for another moment
+PRESETS_EVERY_S = 30.0  # the camera's presets asked for again (someone may add one)
 
 
 def make_camera(settings: PtzSettings) -> AxisPtzCamera:
@@ -55,6 +58,7 @@ def run(node: Node[PtzSettings], camera: PtzCamera | None = None) -> None:
     node.bus.subscribe(keys.TRACKER_ROBOT, loop.on_robot)
     # latest wins: a burst of requests is not queued up to move the camera for seconds after
     node.bus.subscribe(keys.PTZ_CALIBRATION, loop.on_calibration, latest=True, camera=name)
+    node.bus.subscribe(keys.PTZ_HAND, loop.on_hand, latest=False, camera=name)
     preview = None
     if settings.preview_hz > 0:
         preview = PreviewLoop(
@@ -99,6 +103,8 @@ class _Loop:
             lambda msg: node.bus.publish(keys.PTZ_SNAPSHOT, msg, camera=name),
             max_markers=settings.calibration_max_markers)
         self.state_due = 0.0
+        self.presets: list[str] = []
+        self.presets_due = 0.0
 
     def on_preview(self, preview: m.PtzPreview, focal_mm: float, infrared: bool) -> None:
         """Publish it, and judge from it how well the camera points (services/ptz/pointing)."""
@@ -126,6 +132,32 @@ class _Loop:
                 self._unreachable(now, err)
             if not self.calibration.active(now):
                 self.control.calibration_left()
+
+    def on_hand(self, msg: m.PtzHand) -> None:
+        """An operator's hand (the page): hold, move, a preset, or follow again."""
+        now = time.time()
+        if abs(now - msg.measured_s) > HAND_MAX_AGE_S:
+            log.warning("%s from %s ignored: sent %.1f s ago", msg.action, msg.operator,
+                        now - msg.measured_s)
+            return
+        with self.lock:
+            try:
+                if msg.action == "follow":
+                    self.control.release()
+                else:
+                    self.control.hold(msg.operator)
+                if msg.action == "move":
+                    self.camera.move_to(msg.pan_deg, msg.tilt_deg, msg.zoom, self.settings.speed)
+                    self.control.moved_by_hand()
+                elif msg.action == "preset":
+                    self.camera.goto_preset(msg.preset)
+                    self.control.moved_by_hand()
+            except PtzError as err:
+                log.warning("%s from %s: %s", msg.action, msg.operator, err)
+                return
+        self.state_due = 0.0  # the new state at once
+        log.info("%s by %s%s", msg.action, msg.operator,
+                 f" ({msg.preset})" if msg.action == "preset" else "")
 
     def on_robot(self, msg: m.RobotPosition) -> None:
         with self.lock:
@@ -182,6 +214,8 @@ class _Loop:
             with self.lock:
                 self.control.camera_limits(limits)
             log.info("camera %s limits: %s", self.camera.name, limits)
+        if now >= self.presets_due:
+            self.presets, self.presets_due = self.queries.presets()[:64], now + PRESETS_EVERY_S
         position = self.queries.position()
         with self.lock:
             state = self.control.status(now, position.pan_deg, position.tilt_deg,
@@ -192,11 +226,13 @@ class _Loop:
 
     def _publish(self, status: str, pan: float, tilt: float, zoom: int, error: float,
                  now: float, pointing_error: float | None = None, problem: str = "") -> None:
+        held_by = self.control.held_by[:128]
         self.node.bus.publish(keys.PTZ_STATE, m.PtzState(
             measured_s=now, camera=self.settings.instance, status=status,
             pan_deg=min(max(pan, -180.0), 180.0), tilt_deg=min(max(tilt, -90.0), 90.0),
             zoom=min(max(zoom, 1), 19999), focal_mm=focal_mm_for_zoom(zoom),
-            aim_error_deg=error, pointing_error_deg=pointing_error, pointing_problem=problem),
+            aim_error_deg=error, pointing_error_deg=pointing_error, pointing_problem=problem,
+            held_by=held_by, presets=[p[:64] for p in self.presets]),
             camera=self.settings.instance)
 
     def _unreachable(self, now: float, err: PtzError) -> None:

@@ -77,3 +77,13 @@ def parse_limits(body: str) -> PtzLimits:
                       int(float(values.get("MaxZoom", "9999"))))
     except (KeyError, ValueError) as err:
         raise VapixReplyError(f"not a limits reply: {body[:80]!r}") from err
+
+
+def parse_presets(body: str) -> list[str]:
+    """Preset names from ``query=presetposcam`` (``presetposnoN=NAME`` lines)."""
+    names = []
+    for line in body.splitlines():
+        key, sep, value = line.partition("=")
+        if sep and key.strip().startswith("presetposno") and value.strip():
+            names.append(value.strip())
+    return names

@@ -14,7 +14,10 @@ Subscribes: stb/tracker/robot, stb/gantry/{state,estimate,offload}, stb/ptz/*/{s
             stb/calib/*/pose (also queried at start), stb/health/**, stb/sim/truth/robot/*,
             stb/gantry/command/reply, liveliness stb/alive/**.
 Publishes:  its own health and liveliness; stb/gantry/command when an operator presses one
-            of the page's gantry buttons (arm, disarm, stop, reset).
+            of the page's gantry buttons (arm, disarm, stop, reset); stb/calib/{camera}/collect
+            (a calibration from the page: start, cancel, accept, discard); stb/ptz/{camera}/hand
+            (an operator holds, moves or releases a camera). Runs stb record and stb report
+            for the page's recordings ([web] recordings_dir).
 """
 
 from __future__ import annotations

@@ -29,6 +29,7 @@ from starlette.requests import Request
 from starlette.responses import JSONResponse, Response, StreamingResponse
 from starlette.routing import Route
 
+from services.web.console import Console, console_routes
 from services.web.crater_image import CraterImage
 from services.web.gate import COOKIE, Caller, Gate, command_refusal
 
@@ -81,8 +82,10 @@ class LiveView:
 def build_app(gate: Gate, view: Callable[[], dict[str, Any]],
               preview: Callable[[str], bytes | None], crater: CraterImage, *,
               push_period_s: float, max_streams: int,
-              command: Callable[[str, str], dict] | None = None) -> Starlette:
-    """The page's application; ``command(name, caller_label)`` sends a gantry command."""
+              command: Callable[[str, str], dict] | None = None,
+              console: Console | None = None) -> Starlette:
+    """The page's application; ``command(name, caller_label)`` sends a gantry command;
+    ``console``: the calibration, camera and recording controls (``console.py``)."""
     live = LiveView(view, push_period_s, max_streams)
 
     def who(request: Request) -> Caller | None:
@@ -168,18 +171,25 @@ def build_app(gate: Gate, view: Callable[[], dict[str, Any]],
             return Response("no such preview", 404)
         return Response(jpeg, media_type="image/jpeg", headers=NO_STORE)
 
+    async def authorize(request: Request) -> Caller | Response:
+        """The operator behind a command, or the refusal (401, 403) to answer with."""
+        caller = await anyio.to_thread.run_sync(who, request)
+        refusal = command_refusal(caller, request.headers.get("x-csrf-token"),
+                                  request.headers.get("origin"), request.headers.get("host"))
+        if refusal is None:
+            assert caller is not None
+            return caller
+        if caller is not None:
+            log.warning("%s from %s refused: %s", request.url.path, caller.label, refusal[1])
+        return JSONResponse({"accepted": False, "detail": refusal[1]}, refusal[0])
+
     async def gantry_command(request: Request) -> Response:
         name = request.path_params["command"]
         if name not in COMMANDS or command is None:
             return Response("no such command", 404)
-        caller = await anyio.to_thread.run_sync(who, request)
-        refusal = command_refusal(caller, request.headers.get("x-csrf-token"),
-                                  request.headers.get("origin"), request.headers.get("host"))
-        if refusal is not None:
-            if caller is not None:
-                log.warning("command %s from %s refused: %s", name, caller.label, refusal[1])
-            return JSONResponse({"accepted": False, "detail": refusal[1]}, refusal[0])
-        assert caller is not None
+        caller = await authorize(request)
+        if isinstance(caller, Response):
+            return caller
         answer = await anyio.to_thread.run_sync(command, name, caller.label)
         log.info("command %s by %s: %s (%s)", name, caller.label,
                  "accepted" if answer.get("accepted") else "refused", answer.get("detail"))
@@ -196,4 +206,6 @@ def build_app(gate: Gate, view: Callable[[], dict[str, Any]],
         Route("/preview/{camera}.jpg", signed_in(preview_jpeg)),
         Route("/gantry/{command}", gantry_command, methods=["POST"]),
     ]
+    if console is not None:
+        routes += console_routes(console, authorize, signed_in)
     return Starlette(routes=routes)

@@ -10,10 +10,13 @@ import zenoh
 
 from common import keys
 from common.node import Node, StartupError
+from common.settings import bus_environment
 from services.web.app import build_app
 from services.web.commands import GantryCommander
+from services.web.console import Console
 from services.web.crater_image import CraterImage
 from services.web.gate import Gate
+from services.web.recordings import RecordingDesk
 from services.web.server import WebServer
 from services.web.settings import WebSettings
 from services.web.state import LiveState
@@ -81,9 +84,12 @@ def run(node: Node[WebSettings]) -> None:
         on_message(pose)
     tokens = node.bus.session.liveliness().declare_subscriber(
         keys.alive_pattern(node.bus.prefix), on_alive, history=True)
+    desk = RecordingDesk(settings.recordings_dir, bus_environment(settings.bus),
+                         settings.height_map)
     app = build_app(gate, view, preview, CraterImage(settings.height_map),
                     push_period_s=1 / settings.push_hz, max_streams=settings.max_streams,
-                    command=GantryCommander(node.bus).send)
+                    command=GantryCommander(node.bus).send,
+                    console=Console(node.bus, desk, settings.calibration_count))
     try:
         server = WebServer(app, settings.host, settings.port, settings.tls)
     except OSError as err:

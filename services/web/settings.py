@@ -26,6 +26,10 @@ class WebSettings(ServiceSettings):
                              "hours")
     max_streams: int = Field(50, ge=1, le=10_000, description="open live views (event "
                              "streams) at once; more are refused until one closes")
+    recordings_dir: Path = Field(Path("run/recordings"), description="where the page's "
+                                 "recordings (stb record) and their reports go")
+    calibration_count: int = Field(100, ge=6, le=10_000, description="passpoints a calibration "
+                                   "started from the page collects")
     height_map: Path | None = Field(Path("run/sim/crater.npz"),
                                     description="crater height map (.npz) drawn under the "
                                     "tracks; missing file: a plain grid")

@@ -221,6 +221,9 @@ class LiveState:
             entry: dict[str, Any] = {"status": state.status if state else "",
                                      "pan_deg": state.pan_deg if state else None,
                                      "tilt_deg": state.tilt_deg if state else None,
+                                     "zoom": state.zoom if state else None,
+                                     "held_by": state.held_by if state else "",
+                                     "presets": list(state.presets) if state else [],
                                      "aim_error_deg": state.aim_error_deg if state else None,
                                      "pointing_error_deg":
                                          state.pointing_error_deg if state else None,

@@ -17,6 +17,7 @@ from common.passpoints import Passpoints, format_passpoints, write_passpoints
 from services.calib.solve_cli import main
 from services.calib.synthetic import PAPER_GUESS, PAPER_POSE, moving_marker, passpoints
 from tests.calib.test_solve import errors
+from tests.conftest import wait_for
 
 
 def _write_track(path: Path, times: np.ndarray, xyz: np.ndarray) -> None:
@@ -227,3 +228,36 @@ def test_the_stall_clock_starts_again_when_the_camera_is_held(tmp_path: Path) ->
     assert session._collect() is False
     assert time.monotonic() - started >= held_after_s + 0.3
     assert "sends no detections" in session.message
+
+
+@pytest.mark.parametrize(("accept", "state"), [(True, "review"), (False, "discarded")])
+def test_a_pose_held_for_review_waits_for_the_operators_word(tmp_path: Path, accept: bool,
+                                                             state: str) -> None:
+    """A calibration from the page: the solved pose is held (state review) until an
+    operator accepts it (then it is taken) or discards it (the camera keeps its pose)."""
+    from services.calib.session import Session
+    from services.calib.settings import CalibSettings
+    from services.calib.store import PoseStore
+
+    session = Session(_quiet_node(), CalibSettings(), PoseStore(tmp_path), "ptz1", 100,  # type: ignore[arg-type]
+                      60.0, lambda pose, report: None, review=True)
+    assert not session.decide(accept=True), "nothing held yet"
+    outcome: list[bool] = []
+    waiting = threading.Thread(target=lambda: outcome.append(session._reviewed("12 passpoints")))
+    waiting.start()
+    wait_for(lambda: session.state == "review", timeout=5)
+    assert "accept or discard" in session.message
+    assert session.decide(accept=accept)
+    waiting.join(5)
+    assert outcome == [accept] and session.state == state
+
+
+def test_a_pose_not_reviewed_in_time_is_discarded(tmp_path: Path) -> None:
+    from services.calib.session import Session
+    from services.calib.settings import CalibSettings
+    from services.calib.store import PoseStore
+
+    session = Session(_quiet_node(), CalibSettings(review_s=0.3), PoseStore(tmp_path), "ptz1",  # type: ignore[arg-type]
+                      100, 60.0, lambda pose, report: None, review=True)
+    assert session._reviewed("12 passpoints") is False
+    assert session.state == "discarded" and "not accepted within 0.3 s" in session.message

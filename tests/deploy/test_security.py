@@ -86,6 +86,19 @@ def test_only_operators_and_the_web_page_command_the_gantry(lab: dict) -> None:
     ], allowed={b"operator arms", b"web page stops", b"gantry replies", b"camera frame"})
 
 
+def test_only_operators_and_the_web_page_calibrate_or_take_a_camera_in_hand(lab: dict) -> None:
+    only_allowed_arrive(lab["session"], [
+        ("operator", "stb/ptz/ptz1/hand", b"operator holds"),
+        ("web", "stb/ptz/ptz2/hand", b"web page holds"),
+        ("web", "stb/calib/ptz1/collect", b"web page calibrates"),
+        ("monitor", "stb/ptz/ptz1/hand", b"monitor holds"),
+        ("ptz2", "stb/ptz/ptz1/hand", b"ptz2 holds ptz1"),
+        ("monitor", "stb/calib/ptz1/collect", b"monitor calibrates"),
+        ("web", "stb/ptz/ptz1/calibration", b"web page commands a camera"),
+        ("web", "stb/calib/ptz1/pose", b"web page poses"),
+    ], allowed={b"operator holds", b"web page holds", b"web page calibrates"})
+
+
 def test_liveliness_and_queries_work_under_default_deny(lab: dict) -> None:
     gantry, monitor, calib, ptz1 = (lab["session"](u) for u in ("gantry", "monitor", "calib",
                                                                 "ptz1"))

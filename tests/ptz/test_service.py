@@ -325,3 +325,42 @@ def test_a_move_by_someone_else_pauses_following_then_it_follows_again(service: 
     assert all(s.aim_error_deg > 10 for s in during[-10:]), "left where it was put"
     wait_for(following, timeout=5, period=0.05)
     assert time.monotonic() - moved_at >= 2.0, "the pause lasted"
+
+
+def test_an_operators_hand_holds_moves_and_releases_the_camera(service: dict) -> None:
+    """From the page (stb/ptz/{camera}/hand): held, the camera follows no more and its own
+    moves are not someone else's; moved by hand and to a preset; released, it follows."""
+    server = _camera_server(service["port"])
+    service["servers"].append(server)
+    service["thread"].start()
+    world, states = service["world"], service["states"]
+    wait_for(lambda: states)
+    _publish_pose(world)
+
+    def following() -> bool:
+        _publish_robot(world, TARGET)
+        return states[-1].status == "tracking" and states[-1].aim_error_deg < 0.5
+
+    def hand(action: str, **values: object) -> None:
+        world.publish(keys.PTZ_HAND, m.PtzHand(measured_s=time.time(), camera="ptz1",
+                                               action=action, operator="olga (web h)",
+                                               **values), camera="ptz1")
+
+    wait_for(following, timeout=5, period=0.05)
+    assert "Home" in states[-1].presets, "the camera's own presets"
+    hand("hold")
+    wait_for(lambda: states[-1].status == "held" and states[-1].held_by == "olga (web h)",
+             timeout=3)
+    hand("move", pan_deg=-150.0, tilt_deg=-20.0, zoom=2000)
+
+    def at(pan: float, tilt: float) -> bool:
+        _publish_robot(world, TARGET)  # the robot's samples keep coming: it stays held
+        return abs(states[-1].pan_deg - pan) < 0.5 and abs(states[-1].tilt_deg - tilt) < 0.5
+
+    wait_for(lambda: at(-150.0, -20.0), timeout=5, period=0.05)
+    assert states[-1].status == "held", "its own move is no one else's hand"
+    hand("preset", preset="Home")
+    wait_for(lambda: at(0.0, 0.0), timeout=5, period=0.05)
+    hand("follow")
+    wait_for(following, timeout=5, period=0.05)
+    assert states[-1].held_by == ""

@@ -344,13 +344,104 @@ function cameraBox(box, name) {
     div.id = `camera-${name}`;
     div.className = "preview";
     div.innerHTML = `<div class="caption"></div><div class="progress-text"></div>` +
-      `<div class="bar"><div></div></div><canvas width="704" height="576"></canvas>`;
+      `<div class="bar"><div></div></div>` + cameraControls(name) +
+      `<canvas width="704" height="576"></canvas>`;
     box.appendChild(div);
+    wireCameraControls(div, name);
+    applyRole(div);
     const canvas = div.querySelector("canvas"), c = canvas.getContext("2d");
     c.fillStyle = "#000"; c.fillRect(0, 0, canvas.width, canvas.height);
     waitingText(c, canvas, `waiting for ${name}'s first preview…`);
   }
   return div;
+}
+
+// An operator's hands on a camera: calibrate it (start, cancel; accept or discard the solved
+// pose), hold it and steer it (arrows, zoom, its presets), let it follow again.
+function cameraControls(name) {
+  const b = (action, label, extra = "") =>
+    `<button data-command="${action}" data-camera="${esc(name)}" ${extra}>${label}</button>`;
+  return `<div class="camera-controls">` +
+    b("calib-start", "Calibrate") + b("calib-cancel", "Cancel") +
+    b("calib-accept", "Accept pose", 'hidden') + b("calib-discard", "Discard", 'hidden') +
+    `<span class="sep"></span>` + b("ptz-hold", "Hold") +
+    b("ptz-left", "◀", 'title="pan left 5°"') + b("ptz-right", "▶", 'title="pan right 5°"') +
+    b("ptz-up", "▲", 'title="tilt up 5°"') + b("ptz-down", "▼", 'title="tilt down 5°"') +
+    b("ptz-in", "＋", 'title="zoom in"') + b("ptz-out", "－", 'title="zoom out"') +
+    `<select class="presets" data-command="ptz-preset-name"></select>` +
+    b("ptz-preset", "Go") + b("ptz-follow", "Follow") +
+    `<span class="answer"></span></div>`;
+}
+
+const STEP_DEG = 5, ZOOM_FACTOR = 1.5;
+
+function wireCameraControls(div, name) {
+  for (const button of div.querySelectorAll("button[data-command]")) {
+    button.addEventListener("click", () => cameraAction(div, name, button.dataset.command));
+  }
+}
+
+async function cameraAction(div, name, action) {
+  const cam = latest && latest.cameras[name];
+  const answer = div.querySelector(".answer");
+  let path, body = null;
+  if (action.startsWith("calib-")) {
+    path = `calib/${encodeURIComponent(name)}/${action.slice(6)}`;
+  } else if (["ptz-hold", "ptz-follow"].includes(action)) {
+    path = `ptz/${encodeURIComponent(name)}/${action.slice(4)}`;
+  } else if (action === "ptz-preset") {
+    path = `ptz/${encodeURIComponent(name)}/preset`;
+    body = {preset: div.querySelector("select.presets").value};
+  } else {
+    if (!cam || cam.pan_deg === null) { answer.textContent = "no position yet"; return; }
+    const pan = cam.pan_deg + (action === "ptz-left" ? -STEP_DEG : action === "ptz-right" ? STEP_DEG : 0);
+    const tilt = cam.tilt_deg + (action === "ptz-up" ? STEP_DEG : action === "ptz-down" ? -STEP_DEG : 0);
+    const zoom = action === "ptz-in" ? cam.zoom * ZOOM_FACTOR : action === "ptz-out" ? cam.zoom / ZOOM_FACTOR : cam.zoom;
+    path = `ptz/${encodeURIComponent(name)}/move`;
+    body = {pan_deg: Math.max(-180, Math.min(180, ((pan + 540) % 360) - 180)),
+            tilt_deg: Math.max(-90, Math.min(90, tilt)),
+            zoom: Math.round(Math.max(1, Math.min(9999, zoom)))};
+  }
+  const reply = await post(path, body);
+  answer.textContent = `${action.replace("-", " ")}: ${reply.accepted ? "sent" : "refused — " + reply.detail}`;
+  answer.className = reply.accepted ? "answer" : "answer warn";
+}
+
+async function post(path, body) {
+  try {
+    const reply = await fetch(path, {method: "POST", headers: {
+      "X-CSRF-Token": me ? me.csrf : "", "Content-Type": "application/json"},
+      body: body === null ? null : JSON.stringify(body)});
+    if (reply.status === 401) { signedOut(); return {accepted: false, detail: "signed out"}; }
+    return await reply.json();
+  } catch (err) {
+    return {accepted: false, detail: `no answer (${err})`};
+  }
+}
+
+function drawCameraControls(div, cam) {
+  const cal = cam.calibration;
+  const review = cal && cal.state === "review";
+  const collecting = cal && ["collecting", "solving", "review"].includes(cal.state);
+  div.querySelector("[data-command='calib-accept']").hidden = !review;
+  div.querySelector("[data-command='calib-discard']").hidden = !review;
+  div.querySelector("[data-command='calib-cancel']").hidden = !collecting || review;
+  div.querySelector("[data-command='calib-start']").hidden = collecting;
+  div.dataset.held = cam.held_by || "";
+  const select = div.querySelector("select.presets");
+  const names = (cam.presets || []).join("|");
+  if (select.dataset.names !== names) {
+    select.dataset.names = names;
+    select.innerHTML = (cam.presets || []).map((p) => `<option>${esc(p)}</option>`).join("");
+  }
+}
+
+function applyRole(root) {
+  if (!me) return;
+  for (const control of root.querySelectorAll("[data-command]")) {
+    control.disabled = !me.may_command;
+    control.title = me.may_command ? control.title : "viewers do not command: sign in as an operator";
+  }
 }
 
 function drawCameras(state) {
@@ -368,6 +459,9 @@ function drawCameras(state) {
                          `seen ${fmt(cam.pointing_error_deg, 1, "°")} off`);
     const progress = div.querySelector(".progress-text"), bar = div.querySelector(".bar");
     progress.textContent = collecting ? calibrationText(cal)
+      : cal && cal.state === "review" ? `calibrated: ${fmt(cal.mean_error_px, 2, " px")} — ${cal.message}`
+      : cal && cal.state === "discarded" ? cal.message
+      : cam.held_by ? `held by ${cam.held_by}: it does not follow until released (Follow)`
       : calFailed ? `uncalibrated: ${cal.message}`
       : cam.pointing_problem ? cam.pointing_problem : "";
     progress.title = progress.textContent;
@@ -376,6 +470,7 @@ function drawCameras(state) {
       bar.firstChild.style.width = `${Math.min(100, 100 * cal.passpoints / Math.max(1, cal.target))}%`;
     }
     div.classList.toggle("alarm", Boolean(cam.pointing_problem) || Boolean(calFailed));
+    drawCameraControls(div, cam);
     const p = cam.preview;
     // a snapshot's markers may arrive after the snapshot itself: redraw when they do
     const drawn = p && `${p.seq}|${JSON.stringify(p.markers)}`;
@@ -447,10 +542,7 @@ async function loadSession() {
     : `${me.user} (${me.role})`;
   document.getElementById("who").className = me.open ? "warn" : "";
   document.getElementById("signout").hidden = me.open;
-  for (const control of document.querySelectorAll("[data-command]")) {
-    control.disabled = !me.may_command;
-    control.title = me.may_command ? "" : "viewers do not command: sign in as an operator";
-  }
+  applyRole(document);
 }
 
 function drawCommands(state) {
@@ -485,9 +577,39 @@ async function command(name) {
   }
 }
 
-for (const button of document.querySelectorAll("button[data-command]")) {
+for (const button of document.querySelectorAll("#gantry-buttons button[data-command]")) {
   button.addEventListener("click", () => command(button.dataset.command));
 }
+
+// Recording: one at a time, on the page's host; past ones with their reports.
+async function recordAction(action) {
+  const seconds = Number(document.getElementById("record-seconds").value) || null;
+  const reply = await post(`record/${action}`, action === "start" ? {seconds} : null);
+  document.getElementById("record-answer").textContent =
+    `${action}: ${reply.accepted ? "done" : "refused — " + reply.detail}`;
+  loadRecordings();
+}
+
+async function loadRecordings() {
+  try {
+    const reply = await fetch("recordings.json");
+    if (reply.status === 401) return signedOut();
+    const view = await reply.json();
+    const now = document.getElementById("record-now");
+    now.textContent = view.current
+      ? `recording ${view.current.name}: ${fmt(view.current.elapsed_s, 0, " s")}, ${fmt(view.current.size_mb, 1, " MB")} (${view.current.by})`
+      : "not recording";
+    now.dataset.recording = view.current ? view.current.name : "";
+    document.getElementById("recordings").innerHTML = view.past.length ? view.past.map((r) =>
+      `<tr data-recording="${esc(r.name)}"><td>${esc(r.name)}</td><td>${fmt(r.size_mb, 1, " MB")}</td>` +
+      `<td>${r.report ? `<a href="${esc(r.report)}" target="_blank">report</a>` : esc(r.state || "")}</td></tr>`
+    ).join("") : "<tr><td>none yet</td></tr>";
+  } catch (err) { /* the next poll tries again */ }
+}
+document.getElementById("record-start").addEventListener("click", () => recordAction("start"));
+document.getElementById("record-stop").addEventListener("click", () => recordAction("stop"));
+setInterval(loadRecordings, 2000);
+loadRecordings();
 // Stop from the keyboard at any moment: Escape.
 document.addEventListener("keydown", (event) => {
   if (event.key === "Escape") {

@@ -1,0 +1,124 @@
+"""The page as a console: what an operator does from it beside the gantry's buttons —
+calibrate a camera (start, cancel, accept or discard the solved pose), hold a PTZ camera and
+steer it by hand (move, presets, follow again), record the bus and open past reports.
+
+Every action is a message on the bus as the signed-in operator (``Caller.label``), except
+recordings, which run on the page's host (``recordings.py``). ``console_routes`` gives the
+HTTP side; ``app.py`` guards each route (operators only, with the session's CSRF token).
+
+    POST /calib/CAMERA/start|cancel|accept|discard
+    POST /ptz/CAMERA/hold|follow|move|preset     {"pan_deg", "tilt_deg", "zoom"} | {"preset"}
+    POST /record/start|stop                      {"seconds"} (start, optional)
+    GET  /recordings.json                        the recording under way and the past ones
+    GET  /recordings/NAME/FILE                   a past recording's report (index.html, …)
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Awaitable, Callable
+from typing import Any
+
+import anyio
+from pydantic import ValidationError
+from starlette.requests import Request
+from starlette.responses import FileResponse, JSONResponse, Response
+from starlette.routing import Route
+
+from common import keys
+from common import messages as m
+from common.bus import Bus
+from services.web.gate import Caller
+from services.web.recordings import DeskError, RecordingDesk
+
+log = logging.getLogger(__name__)
+CALIB_ACTIONS = ("start", "cancel", "accept", "discard")
+HAND_ACTIONS = ("hold", "follow", "move", "preset")
+Guard = Callable[[Request], Awaitable[Caller | Response]]
+
+
+class Console:
+    def __init__(self, bus: Bus, desk: RecordingDesk, calibration_count: int = 100) -> None:
+        self.bus, self.desk, self.calibration_count = bus, desk, calibration_count
+
+    def calibrate(self, camera: str, action: str, by: str) -> dict[str, Any]:
+        """A passpoint collection for ``camera``: started for an operator's review, or
+        cancelled, accepted, discarded (the calib service answers on its progress key)."""
+        self.bus.publish(keys.CALIB_COLLECT, m.CollectRequest(
+            measured_s=time.time(), camera=camera, action=action,  # type: ignore[arg-type]
+            count=self.calibration_count, review=True), camera=camera)
+        log.info("calibration of %s: %s by %s", camera, action, by)
+        return {"accepted": True, "detail": f"{action} sent to calib for {camera} as {by}"}
+
+    def hand(self, camera: str, action: str, body: dict[str, Any], by: str) -> dict[str, Any]:
+        """An operator's hand on a PTZ camera (its state says what it made of it)."""
+        hand = m.PtzHand(measured_s=time.time(), camera=camera, action=action,  # type: ignore[arg-type]
+                         operator=by, **{k: body[k] for k in ("pan_deg", "tilt_deg", "zoom",
+                                                                 "preset") if k in body})
+        self.bus.publish(keys.PTZ_HAND, hand, camera=camera)
+        log.info("%s: %s by %s", camera, action, by)
+        return {"accepted": True, "detail": f"{action} sent to {camera}"}
+
+
+def console_routes(console: Console, authorize: Guard,
+                   signed_in: Callable[[Callable], Callable]) -> list[Route]:
+    async def calib(request: Request) -> Response:
+        action, camera = request.path_params["action"], request.path_params["camera"]
+        if action not in CALIB_ACTIONS:
+            return JSONResponse({"accepted": False, "detail": "no such action"}, 404)
+        caller = await authorize(request)
+        if isinstance(caller, Response):
+            return caller
+        return JSONResponse(console.calibrate(camera, action, caller.label))
+
+    async def hand(request: Request) -> Response:
+        action, camera = request.path_params["action"], request.path_params["camera"]
+        if action not in HAND_ACTIONS:
+            return JSONResponse({"accepted": False, "detail": "no such action"}, 404)
+        caller = await authorize(request)
+        if isinstance(caller, Response):
+            return caller
+        try:
+            body = await request.json() if action in ("move", "preset") else {}
+            return JSONResponse(console.hand(camera, action, dict(body), caller.label))
+        except (ValueError, TypeError, ValidationError) as err:
+            return JSONResponse({"accepted": False, "detail": f"not a {action}: {err}"}, 400)
+
+    async def record(request: Request) -> Response:
+        action = request.path_params["action"]
+        if action not in ("start", "stop"):
+            return JSONResponse({"accepted": False, "detail": "no such action"}, 404)
+        caller = await authorize(request)
+        if isinstance(caller, Response):
+            return caller
+        try:
+            if action == "start":
+                body = await request.json() if await request.body() else {}
+                seconds = float(body.get("seconds") or 0) or None
+                answer = await anyio.to_thread.run_sync(console.desk.start, caller.label,
+                                                        seconds)
+            else:
+                answer = await anyio.to_thread.run_sync(console.desk.stop, caller.label)
+        except DeskError as err:
+            return JSONResponse({"accepted": False, "detail": str(err)}, 409)
+        except (ValueError, TypeError, AttributeError) as err:
+            return JSONResponse({"accepted": False, "detail": f"bad request: {err}"}, 400)
+        return JSONResponse({"accepted": True, **answer})
+
+    async def recordings(request: Request) -> Response:
+        return JSONResponse(await anyio.to_thread.run_sync(console.desk.view),
+                            headers={"Cache-Control": "no-store"})
+
+    async def report_file(request: Request) -> Response:
+        path = console.desk.report_file(request.path_params["name"],
+                                        request.path_params["file"])
+        return Response("no such report", 404) if path is None else FileResponse(path)
+
+    return [
+        Route("/calib/{camera:str}/{action:str}", calib, methods=["POST"]),
+        Route("/ptz/{camera:str}/{action:str}", hand, methods=["POST"]),
+        Route("/record/{action:str}", record, methods=["POST"]),
+        Route("/recordings.json", signed_in(recordings)),
+        Route("/recordings/{name:str}/{file:str}", signed_in(report_file)),
+    ]
