@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 Name = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")]
 
@@ -147,18 +147,29 @@ class PtzState(Message):
 
 
 class PtzHand(Message):
-    """An operator's hand on a PTZ camera: hold it (it stops following), move it, send it to
-    one of its presets, or let it follow the robot again. Only operator and web identities
-    may send it (deploy/zenoh/router.json5)."""
+    """An operator's hand on a PTZ camera: hold it (it stops following), move it (to a pan,
+    tilt and zoom, or by them from where it is: nudge), send it to one of its presets, or let
+    it follow the robot again. Only operator and web identities may send it
+    (deploy/zenoh/router.json5)."""
 
     camera: Name
-    action: Literal["hold", "move", "preset", "follow"]
-    pan_deg: float | None = Field(None, ge=-180, le=180, description="move: where to")
-    tilt_deg: float | None = Field(None, ge=-90, le=90)
-    zoom: int | None = Field(None, ge=1, le=19999, description="move: VAPIX zoom step")
+    action: Literal["hold", "move", "nudge", "preset", "follow"]
+    pan_deg: float | None = Field(None, ge=-180, le=180, description="move: where to; nudge: "
+                                  "by how much")
+    tilt_deg: float | None = Field(None, ge=-180, le=180, description="move (−90…90): where "
+                                   "to; nudge: by how much")
+    zoom: int | None = Field(None, ge=-19999, le=19999, description="move (1…19999): the "
+                             "VAPIX zoom step; nudge: by how many steps")
     preset: str = Field("", max_length=64, description="preset: its name")
     operator: str = Field(max_length=128, description="who (from the page: 'user (web "
                           "address)')")
+
+    @model_validator(mode="after")
+    def _a_move_is_a_position(self) -> PtzHand:
+        if self.action == "move" and ((self.tilt_deg is not None and abs(self.tilt_deg) > 90)
+                                      or (self.zoom is not None and self.zoom < 1)):
+            raise ValueError("move: tilt_deg within ±90 and zoom at least 1")
+        return self
 
 
 # --- calibration --------------------------------------------------------------------------------

@@ -42,6 +42,8 @@ EXAMPLES: dict[type[m.Message], m.Message] = {
     m.CalibrationMode: m.CalibrationMode(measured_s=_T, camera="ptz1", active=True, pan_deg=0.0,
                                          tilt_deg=0.0, zoom=1, lease_s=3.0),
     m.CollectRequest: m.CollectRequest(measured_s=_T, camera="ptz1", action="start", count=100),
+    m.PtzHand: m.PtzHand(measured_s=_T, camera="ptz2", action="nudge", pan_deg=-5.0,
+                         tilt_deg=0.0, zoom=0, operator="olga (web 10.0.0.5)"),
     m.CollectProgress: m.CollectProgress(
         measured_s=_T, camera="ptz1", state="collecting", passpoints=42, target=100,
         snapshots=97, skipped={"no marker": 30, "too many": 5, "not moved": 20}),

@@ -38,11 +38,14 @@ def poll(predicate: Callable[[], object], timeout: float = 5.0, period: float = 
     return None
 
 
-def wait_for(predicate: Callable[[], object], timeout: float = 5.0, period: float = 0.02) -> object:
-    """Poll ``predicate`` until it returns something truthy; fail the test on timeout."""
+def wait_for(predicate: Callable[[], object], timeout: float = 5.0, period: float = 0.02,
+             why: Callable[[], str] | None = None) -> object:
+    """Poll ``predicate`` until it returns something truthy; fail the test on timeout (saying
+    ``why()``, what was seen, if given)."""
     value = poll(predicate, timeout, period)
     if not value:
-        pytest.fail(f"condition not met within {timeout} s: {predicate}")
+        pytest.fail(f"condition not met within {timeout} s: {predicate}"
+                    + (f": {why()}" if why else ""))
     return value
 
 

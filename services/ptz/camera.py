@@ -42,6 +42,8 @@ class PtzCamera(Protocol):
 
     def home(self) -> None: ...
 
+    def nudge(self, pan_deg: float = 0.0, tilt_deg: float = 0.0, zoom: int = 0) -> None: ...
+
     def presets(self) -> list[str]: ...
 
     def goto_preset(self, name: str) -> None: ...
@@ -76,6 +78,10 @@ class AxisPtzCamera:
     def home(self) -> None:
         """To the camera's home position (its home preset)."""
         self._request(vapix.PTZ_PATH, {"move": "home"})
+
+    def nudge(self, pan_deg: float = 0.0, tilt_deg: float = 0.0, zoom: int = 0) -> None:
+        """Relative to where the camera is now (an operator's ◀ ▶ ▲ ▼ ＋ －)."""
+        self._request(vapix.PTZ_PATH, vapix.nudge_params(pan_deg, tilt_deg, zoom))
 
     def presets(self) -> list[str]:
         """The camera's own preset positions, by name."""

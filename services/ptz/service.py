@@ -149,6 +149,9 @@ class _Loop:
                 if msg.action == "move":
                     self.camera.move_to(msg.pan_deg, msg.tilt_deg, msg.zoom, self.settings.speed)
                     self.control.moved_by_hand()
+                elif msg.action == "nudge":
+                    self.camera.nudge(msg.pan_deg or 0.0, msg.tilt_deg or 0.0, msg.zoom or 0)
+                    self.control.moved_by_hand()
                 elif msg.action == "preset":
                     self.camera.goto_preset(msg.preset)
                     self.control.moved_by_hand()

@@ -24,6 +24,19 @@ class Position:
     ir_cut_filter: str | None = None
 
 
+def nudge_params(pan_deg: float = 0.0, tilt_deg: float = 0.0, zoom: int = 0
+                 ) -> dict[str, str]:
+    """Query parameters of a move relative to where the camera is (``rpan``, ``rtilt``,
+    ``rzoom``): the camera adds them to its own position, whatever anyone last saw of it."""
+    out: dict[str, str] = {}
+    for name, value in (("rpan", pan_deg), ("rtilt", tilt_deg)):
+        if value:
+            out[name] = f"{min(max(float(value), -360.0), 360.0):.4f}"
+    if zoom:
+        out["rzoom"] = str(int(min(max(int(zoom), -9999), 9999)))
+    return out
+
+
 class VapixReplyError(ValueError):
     """A reply that is not what VAPIX specifies (the camera or something else answered)."""
 

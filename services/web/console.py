@@ -7,7 +7,7 @@ recordings, which run on the page's host (``recordings.py``). ``console_routes``
 HTTP side; ``app.py`` guards each route (operators only, with the session's CSRF token).
 
     POST /calib/CAMERA/start|cancel|accept|discard
-    POST /ptz/CAMERA/hold|follow|move|preset     {"pan_deg", "tilt_deg", "zoom"} | {"preset"}
+    POST /ptz/CAMERA/hold|follow|move|nudge|preset  {"pan_deg", "tilt_deg", "zoom"} | {"preset"}
     POST /record/start|stop                      {"seconds"} (start, optional)
     GET  /recordings.json                        the recording under way and the past ones
     GET  /recordings/NAME/FILE                   a past recording's report (index.html, …)
@@ -34,7 +34,7 @@ from services.web.recordings import DeskError, RecordingDesk
 
 log = logging.getLogger(__name__)
 CALIB_ACTIONS = ("start", "cancel", "accept", "discard")
-HAND_ACTIONS = ("hold", "follow", "move", "preset")
+HAND_ACTIONS = ("hold", "follow", "move", "nudge", "preset")
 Guard = Callable[[Request], Awaitable[Caller | Response]]
 
 
@@ -80,7 +80,7 @@ def console_routes(console: Console, authorize: Guard,
         if isinstance(caller, Response):
             return caller
         try:
-            body = await request.json() if action in ("move", "preset") else {}
+            body = await request.json() if action in ("move", "nudge", "preset") else {}
             return JSONResponse(console.hand(camera, action, dict(body), caller.label))
         except (ValueError, TypeError, ValidationError) as err:
             return JSONResponse({"accepted": False, "detail": f"not a {action}: {err}"}, 400)

@@ -100,6 +100,7 @@ def test_an_operators_hand_on_a_camera(console_page: tuple) -> None:
     _subscribed(bus, got, keys.PTZ_HAND, probe, camera="ptz2")
     for action, body in (("hold", None), ("move", {"pan_deg": -20.0, "tilt_deg": -35.0,
                                                    "zoom": 3000}),
+                         ("nudge", {"pan_deg": -5.0, "tilt_deg": 0.0, "zoom": -1000}),
                          ("preset", {"preset": "Home"}), ("follow", None)):
         status, answer = _post(page, f"/ptz/ptz2/{action}", OPERATOR, body)
         assert status == 200 and answer["accepted"], answer
@@ -108,6 +109,8 @@ def test_an_operators_hand_on_a_camera(console_page: tuple) -> None:
     assert (hand.pan_deg, hand.preset) == (None, "")
     status, answer = _post(page, "/ptz/ptz2/move", OPERATOR, {"pan_deg": 400.0})
     assert status == 400 and "pan_deg" in answer["detail"], "out of range: refused, said why"
+    status, answer = _post(page, "/ptz/ptz2/move", OPERATOR, {"tilt_deg": 120.0})
+    assert status == 400 and "within ±90" in answer["detail"]
     assert _post(page, "/ptz/ptz2/hold", VIEWER)[0] == 403
     assert _empty_but_probes(got, probe)
 

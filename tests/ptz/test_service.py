@@ -359,6 +359,8 @@ def test_an_operators_hand_holds_moves_and_releases_the_camera(service: dict) ->
 
     wait_for(lambda: at(-150.0, -20.0), timeout=5, period=0.05)
     assert states[-1].status == "held", "its own move is no one else's hand"
+    hand("nudge", pan_deg=-5.0, tilt_deg=5.0)
+    wait_for(lambda: at(-155.0, -15.0), timeout=5, period=0.05)
     hand("preset", preset="Home")
     wait_for(lambda: at(0.0, 0.0), timeout=5, period=0.05)
     hand("follow")

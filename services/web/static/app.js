@@ -373,7 +373,7 @@ function cameraControls(name) {
     `<span class="answer"></span></div>`;
 }
 
-const STEP_DEG = 5, ZOOM_FACTOR = 1.5;
+const STEP_DEG = 5, ZOOM_STEP = 1000;  // VAPIX zoom steps of 1–9999
 
 function wireCameraControls(div, name) {
   for (const button of div.querySelectorAll("button[data-command]")) {
@@ -382,7 +382,6 @@ function wireCameraControls(div, name) {
 }
 
 async function cameraAction(div, name, action) {
-  const cam = latest && latest.cameras[name];
   const answer = div.querySelector(".answer");
   let path, body = null;
   if (action.startsWith("calib-")) {
@@ -392,15 +391,12 @@ async function cameraAction(div, name, action) {
   } else if (action === "ptz-preset") {
     path = `ptz/${encodeURIComponent(name)}/preset`;
     body = {preset: div.querySelector("select.presets").value};
-  } else {
-    if (!cam || cam.pan_deg === null) { answer.textContent = "no position yet"; return; }
-    const pan = cam.pan_deg + (action === "ptz-left" ? -STEP_DEG : action === "ptz-right" ? STEP_DEG : 0);
-    const tilt = cam.tilt_deg + (action === "ptz-up" ? STEP_DEG : action === "ptz-down" ? -STEP_DEG : 0);
-    const zoom = action === "ptz-in" ? cam.zoom * ZOOM_FACTOR : action === "ptz-out" ? cam.zoom / ZOOM_FACTOR : cam.zoom;
-    path = `ptz/${encodeURIComponent(name)}/move`;
-    body = {pan_deg: Math.max(-180, Math.min(180, ((pan + 540) % 360) - 180)),
-            tilt_deg: Math.max(-90, Math.min(90, tilt)),
-            zoom: Math.round(Math.max(1, Math.min(9999, zoom)))};
+  } else {  // ◀ ▶ ▲ ▼ ＋ －: by a step from wherever the camera is (it adds them itself)
+    const step = {"ptz-left": [-STEP_DEG, 0, 0], "ptz-right": [STEP_DEG, 0, 0],
+                  "ptz-up": [0, STEP_DEG, 0], "ptz-down": [0, -STEP_DEG, 0],
+                  "ptz-in": [0, 0, ZOOM_STEP], "ptz-out": [0, 0, -ZOOM_STEP]}[action];
+    path = `ptz/${encodeURIComponent(name)}/nudge`;
+    body = {pan_deg: step[0], tilt_deg: step[1], zoom: step[2]};
   }
   const reply = await post(path, body);
   answer.textContent = `${action.replace("-", " ")}: ${reply.accepted ? "sent" : "refused — " + reply.detail}`;
@@ -600,6 +596,7 @@ async function loadRecordings() {
       ? `recording ${view.current.name}: ${fmt(view.current.elapsed_s, 0, " s")}, ${fmt(view.current.size_mb, 1, " MB")} (${view.current.by})`
       : "not recording";
     now.dataset.recording = view.current ? view.current.name : "";
+    now.dataset.elapsed = view.current ? String(view.current.elapsed_s) : "";
     document.getElementById("recordings").innerHTML = view.past.length ? view.past.map((r) =>
       `<tr data-recording="${esc(r.name)}"><td>${esc(r.name)}</td><td>${fmt(r.size_mb, 1, " MB")}</td>` +
       `<td>${r.report ? `<a href="${esc(r.report)}" target="_blank">report</a>` : esc(r.state || "")}</td></tr>`
