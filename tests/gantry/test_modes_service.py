@@ -258,6 +258,7 @@ def test_stb_sim_estop_presses_and_releases_the_sims_e_stop(rig: dict) -> None:
     assert estop(["--set", "crane.port=1"]) == 3, "nothing listens there"
 
 
+@pytest.mark.system  # a real-time run of 10 s and more (make test-system)
 def test_the_robot_is_found_again_from_the_motion_capture_after_it_left_the_view(
         rig: dict) -> None:
     """Frames and mocap stop for 4.5 s (as in a bus outage) half a second after the robot set

@@ -38,6 +38,7 @@ def _armed(rig: dict, robot: Callable[[float], np.ndarray | None], seconds: floa
     return feeder
 
 
+@pytest.mark.system  # a real-time run of 10 s and more (make test-system)
 def test_follows_then_holds_when_frames_stop_or_the_marker_is_lost(rig: dict) -> None:
     target = np.array([350.0, -250.0])
     feeder = _armed(rig, lambda _t: target, 8.0)
