@@ -13,14 +13,11 @@ import time
 
 from common.bus import Bus, BusUnreachable, open_session
 from common.heightmap import HeightMap
-from common.markers import warm_up
-from common.node import configure_logging
-from common.settings import ConfigError, load_settings
-from services.args import EXIT_CONFIG, overrides_from
 from services.gantry.commissioning_run import (
     CommissioningError,
     Measurements,
     Recorder,
+    lab_of,
     run_moves,
 )
 from services.gantry.crane import CraneError, ModbusCrane
@@ -31,15 +28,7 @@ EXIT_NOT_SAFE, EXIT_NO_DEVICE = 1, 3
 
 def identify(args: argparse.Namespace) -> int:
     try:
-        settings = load_settings(GantrySettings, args.lab, overrides_from(args))
-        heights = HeightMap.load(settings.height_map)
-    except (ConfigError, ValueError) as err:
-        print(f"stb gantry identify: {err}", file=sys.stderr)
-        return EXIT_CONFIG
-    configure_logging(settings.log_level)
-    warm_up()
-    try:
-        return _identify(settings, heights, args)
+        return _identify(*lab_of(args), args)
     except CommissioningError as err:
         print(f"stb gantry identify: {err}", file=sys.stderr)
         return err.code

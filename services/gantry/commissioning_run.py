@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import argparse
 import threading
 import time
 from collections.abc import Callable
@@ -14,7 +15,10 @@ import numpy as np
 from common import keys
 from common.bus import Bus
 from common.heightmap import HeightMap
-from common.markers import closest, detect
+from common.markers import closest, detect, warm_up
+from common.node import configure_logging
+from common.settings import ConfigError, load_settings
+from services.args import EXIT_CONFIG, overrides_from
 from services.gantry.commission import (
     Figure,
     Series,
@@ -36,6 +40,19 @@ class CommissioningError(Exception):
     def __init__(self, message: str, code: int = 1) -> None:
         super().__init__(message)
         self.code = code
+
+
+def lab_of(args: argparse.Namespace) -> tuple[GantrySettings, HeightMap]:
+    """The gantry's settings (from --lab and the common flags) and its height map, logging
+    configured and the detector loaded; a bad one is a ``CommissioningError`` (exit 2)."""
+    try:
+        settings = load_settings(GantrySettings, args.lab, overrides_from(args))
+        heights = HeightMap.load(settings.height_map)
+    except (ConfigError, ValueError) as err:
+        raise CommissioningError(str(err), EXIT_CONFIG) from err
+    configure_logging(settings.log_level)
+    warm_up()
+    return settings, heights
 
 
 @dataclass

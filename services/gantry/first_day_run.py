@@ -15,14 +15,12 @@ import numpy as np
 from common.bus import Bus, BusUnreachable, open_session
 from common.crane_frame import CraneFrame
 from common.heightmap import HeightMap
-from common.markers import warm_up
-from common.settings import ConfigError, load_settings
 from common.tracking_camera import TrackingCameraModel
-from services.args import EXIT_CONFIG, overrides_from
 from services.gantry.commissioning_run import (
     CommissioningError,
     Measurements,
     Recorder,
+    lab_of,
     run_moves,
 )
 from services.gantry.crane import CraneError, ModbusCrane
@@ -52,12 +50,10 @@ class Outcome:
 
 def commission(args: argparse.Namespace) -> int:
     try:
-        settings = load_settings(GantrySettings, args.lab, overrides_from(args))
-        heights = HeightMap.load(settings.height_map)
-    except (ConfigError, ValueError) as err:
+        settings, heights = lab_of(args)
+    except CommissioningError as err:
         print(f"stb gantry commission: {err}", file=sys.stderr)
-        return EXIT_CONFIG
-    warm_up()
+        return err.code
     raw = ModbusCrane(settings.crane_host, settings.crane_port, settings.crane_timeout_s,
                       settings.crane)  # its own frame: the frame is what is measured
     session = None

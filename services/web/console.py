@@ -63,20 +63,22 @@ class Console:
 
 def console_routes(console: Console, authorize: Guard,
                    signed_in: Callable[[Callable], Callable]) -> list[Route]:
+    async def operator_of(request: Request, actions: tuple[str, ...]) -> Caller | Response:
+        """The operator asking for one of ``actions``, or the answer to give (404, 401, 403)."""
+        if request.path_params["action"] not in actions:
+            return JSONResponse({"accepted": False, "detail": "no such action"}, 404)
+        return await authorize(request)
+
     async def calib(request: Request) -> Response:
         action, camera = request.path_params["action"], request.path_params["camera"]
-        if action not in CALIB_ACTIONS:
-            return JSONResponse({"accepted": False, "detail": "no such action"}, 404)
-        caller = await authorize(request)
+        caller = await operator_of(request, CALIB_ACTIONS)
         if isinstance(caller, Response):
             return caller
         return JSONResponse(console.calibrate(camera, action, caller.label))
 
     async def hand(request: Request) -> Response:
         action, camera = request.path_params["action"], request.path_params["camera"]
-        if action not in HAND_ACTIONS:
-            return JSONResponse({"accepted": False, "detail": "no such action"}, 404)
-        caller = await authorize(request)
+        caller = await operator_of(request, HAND_ACTIONS)
         if isinstance(caller, Response):
             return caller
         try:
@@ -87,9 +89,7 @@ def console_routes(console: Console, authorize: Guard,
 
     async def record(request: Request) -> Response:
         action = request.path_params["action"]
-        if action not in ("start", "stop"):
-            return JSONResponse({"accepted": False, "detail": "no such action"}, 404)
-        caller = await authorize(request)
+        caller = await operator_of(request, ("start", "stop"))
         if isinstance(caller, Response):
             return caller
         try:

@@ -82,6 +82,13 @@ class RecordingDesk:
         log.info("recording %s stopped by %s", run.name, by)
         return {"name": run.name, "recording": False}
 
+    def close(self) -> None:
+        """The page stops: a recording under way ends with it (its file closed whole)."""
+        with self._lock:
+            run = self._run
+        if run is not None and run.process.poll() is None:
+            self.stop("the page stopping")
+
     def view(self) -> dict[str, Any]:
         """What the page shows: the recording under way (or none) and the past ones."""
         with self._lock:

@@ -103,4 +103,5 @@ def run(node: Node[WebSettings]) -> None:
                 state.judge(time.time())
     finally:
         server.close()
+        desk.close()
         tokens.undeclare()
