@@ -358,10 +358,15 @@ class Bus:
 
         self._declared.append(self.session.declare_queryable(key, reply))
 
-    def query_latest(self, topic: Topic[M], timeout_s: float = 2.0, **params: str) -> list[M]:
-        """Ask every queryable of the topic for its latest value; invalid replies are dropped."""
+    def query_latest(self, topic: Topic[M], timeout_s: float = 2.0, *, every_answer: bool = False,
+                     **params: str) -> list[M]:
+        """Ask every queryable of the topic for its latest value; invalid replies are dropped.
+        ``every_answer``: all replies, also several on one key (Zenoh keeps the latest of them
+        by default), to see whether two queryables answer one key."""
+        consolidation = zenoh.ConsolidationMode.NONE if every_answer else None
         out: list[M] = []
-        for reply in self.session.get(topic.pattern(self.prefix, **params), timeout=timeout_s):
+        for reply in self.session.get(topic.pattern(self.prefix, **params), timeout=timeout_s,
+                                      consolidation=consolidation):
             if reply.ok is not None:
                 key = str(reply.ok.key_expr)
                 self.count_received(key)

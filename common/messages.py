@@ -192,7 +192,8 @@ class CameraPose(Message):
                                  "snapshot's time to get the mocap time), if fitted")
     version: int = Field(0, ge=0, le=2**53, description="the calibration service's count for "
                          "this camera: a newer pose has a higher version (or the same version, "
-                         "measured later); it out-versions any pose on its key it did not send")
+                         "measured later); a PTZ service takes a pose only from the calibration "
+                         "service's answer, a message on the key is only news to ask again")
 
 
 class CalibrationMode(Message):

@@ -13,7 +13,7 @@ crane and both cameras follow the robot. Then, one after the other:
 * key churn: 8 garbage bytes on each of ``--churn`` distinct keys under subscribed wildcards;
 * decode bombs: tracking frames whose JPEG header declares 24000×24000 pixels;
 * spoofed frames: a bright spot far from the robot, 30 frames a second for a few seconds;
-* a spoofed camera pose (ptz1 turned 40°, at the version PTZ services hold, measured now);
+* a spoofed camera pose (ptz1 turned 40°, at version 2⁵³ and 2⁵³−1, measured now);
 * SIGKILL of each service (the router last);
 * SIGSTOP of the gantry for 0.3, 1 and 3 s and of the tracker for 2 s;
 * a foreign Modbus client writing setpoints beside the gantry's.

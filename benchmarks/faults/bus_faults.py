@@ -13,6 +13,7 @@ from benchmarks.faults.payloads import fuzz_payloads, jpeg_declaring, valid
 from benchmarks.faults.rows import GOAL_MEMORY_MB, GOAL_POSE_REPORTED_S, Row, duration_text
 from common import keys
 from common import messages as m
+from services.ptz.aim import aim_error_deg
 from tests.calib.test_demo_calibration import MOUNTS
 
 # Keys our meters read and that a single service writes (the secured lab lets only it):
@@ -132,36 +133,58 @@ class BusFaults:
             {"max_gap_mm": worst}, [] if worst <= bound else ["gap"]))
 
     def spoofed_pose(self) -> None:
-        # the version PTZ services hold: the calibration service's own (asked for: it may
-        # not have been published since the meters subscribed) or a higher one heard; a
-        # fuzzed pose heard at a lower version is not held (a CI run spoofed at that one)
-        served = self.bus.query_latest(keys.CALIB_POSE, camera="ptz1")
-        held_version = max([p.version for p in served if p.camera == "ptz1"]
-                           + [p.version for _, p in self.meters.poses if p.camera == "ptz1"],
-                           default=1)
-        mount = MOUNTS["ptz1"]
+        """ptz1's pose turned 40°, put on its key at the top version and one below (a pose
+        at 2⁵³ once mis-aimed a camera for good): ptz1's true aim (sim truth: its head, the
+        robot, its mount) must not move, calib's stored pose must not change, and calib must
+        report the foreign poses."""
+        mount, camera = MOUNTS["ptz1"], "ptz1"
+        before = self._stored_pose(camera)
         start = time.monotonic()
-        self.bus.publish(keys.CALIB_POSE, m.CameraPose(
-            measured_s=time.time(), camera="ptz1",
-            **(mount.fields() | {"rz_deg": mount.rz_deg + 40.0}), focal_mm=3.8,
-            mean_error_px=0.5, passpoints=100, version=held_version), camera="ptz1")
-
-        def answered() -> float | None:
-            return next((t - start for t, p in list(self.meters.poses)
-                         if t > start and p.version > held_version
-                         and abs(p.rz_deg - mount.rz_deg) < 1e-6), None)
+        time.sleep(3)  # the aim's baseline
+        spoofed_at = time.monotonic()
+        for version in (2**53, 2**53 - 1):
+            self.bus.publish(keys.CALIB_POSE, m.CameraPose(
+                measured_s=time.time(), camera=camera,
+                **(mount.fields() | {"rz_deg": mount.rz_deg + 40.0}), focal_mm=3.8,
+                mean_error_px=0.5, passpoints=100, version=version), camera=camera)
 
         def reported() -> float | None:
             with self.meters.lock:
                 entry = self.meters.health.get("calib/main")
-            ok = entry and entry[0] > start and "did not send" in entry[1].detail
-            return entry[0] - start if ok else None
+            ok = entry and entry[0] > spoofed_at and "did not send" in entry[1].detail
+            return entry[0] - spoofed_at if ok else None
 
-        wait_until(lambda: answered() is not None and reported() is not None, timeout=8)
-        a, r = answered(), reported()
-        held = a is not None and r is not None and max(a, r) <= GOAL_POSE_REPORTED_S
+        wait_until(lambda: reported() is not None, timeout=8)
+        r = reported()  # the first health that says so (a later one replaces it)
+        time.sleep(max(0.0, spoofed_at + 5 - time.monotonic()))  # the PTZ service asked again
+        after = self._stored_pose(camera)
+        aim_before = self._worst_aim_deg(camera, start, spoofed_at)
+        aim_after = self._worst_aim_deg(camera, spoofed_at)
+        kept = before is not None and after is not None and _same_solve(before, after)
+        bound = aim_before + 2.0
+        held = (r is not None and r <= GOAL_POSE_REPORTED_S and kept
+                and aim_after <= bound)
         self.rows.append(Row(
-            "spoofed pose", "detected and reported ≤ 5 s",
-            f"ptz1 turned 40° at the held version: true pose out-versioned after "
-            f"{duration_text(a)}, calib health degraded after {duration_text(r)}", held,
-            {"answered_s": a, "reported_s": r}))
+            "spoofed pose", "not aimed with (true aim ≤ baseline + 2°), calib's pose kept, "
+            "reported ≤ 5 s",
+            f"ptz1 turned 40° at version 2⁵³ and 2⁵³−1: ptz1's true aim error at most "
+            f"{aim_after:.1f}° over the next 5 s ({aim_before:.1f}° before); calib's pose "
+            f"{'unchanged' if kept else 'CHANGED'}; calib health degraded after "
+            f"{duration_text(r)}", held,
+            {"aim_before_deg": aim_before, "aim_after_deg": aim_after, "reported_s": r}))
+
+    def _stored_pose(self, camera: str) -> m.CameraPose | None:
+        answers = [p for p in self.bus.query_latest(keys.CALIB_POSE, camera=camera)
+                   if p.camera == camera]
+        return answers[0] if answers else None
+
+    def _worst_aim_deg(self, camera: str, start: float, end: float | None = None) -> float:
+        """The largest angle between where ``camera`` truly looks and the true robot."""
+        seen = self.meters.ptz_window(camera, start, end)
+        return max((aim_error_deg(np.array([robot.x_mm, robot.y_mm, robot.z_mm]),
+                                  MOUNTS[camera], head.pan_deg, head.tilt_deg)
+                    for head, robot in seen), default=float("nan"))
+
+
+def _same_solve(a: m.CameraPose, b: m.CameraPose) -> bool:
+    return a.model_dump(exclude={"sent_s"}) == b.model_dump(exclude={"sent_s"})

@@ -42,6 +42,8 @@ class Meters:
         bus.subscribe_any(f"{bus.prefix}/gantry/*", self._on_gantry, latest=False)
         bus.subscribe(keys.TRACKER_ROBOT, self._on_tracked, latest=False, max_age_s=1e9)
         bus.subscribe(keys.CALIB_POSE, lambda p: self._add(self.poses, p), latest=False)
+        self.ptz: list[tuple[float, m.PtzTruth, m.RobotTruth]] = []  # t, camera, robot then
+        bus.subscribe(keys.TRUTH_PTZ, self._on_ptz, latest=False)
         self.stops: list[tuple[float, str]] = []  # when the gantry said it stopped, and why
         bus.subscribe(keys.GANTRY_STATE, self._on_state, latest=False)
         bus.subscribe(keys.GANTRY_COMMAND_REPLY, self.replies.append, latest=False)
@@ -70,6 +72,18 @@ class Meters:
 
     def _on_robot(self, msg: m.RobotTruth) -> None:
         self.robot = msg
+
+    def _on_ptz(self, msg: m.PtzTruth) -> None:
+        if self.robot is not None:
+            with self.lock:
+                self.ptz.append((time.monotonic(), msg, self.robot))
+
+    def ptz_window(self, camera: str, start: float,
+                   end: float | None = None) -> list[tuple[m.PtzTruth, m.RobotTruth]]:
+        end = end if end is not None else time.monotonic()
+        with self.lock:
+            return [(head, robot) for t, head, robot in self.ptz
+                    if start <= t <= end and head.camera == camera]
 
     def _on_crane(self, msg: m.CraneTruth) -> None:
         robot = self.robot

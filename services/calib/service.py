@@ -1,11 +1,11 @@
 """Calib service: keeps every camera's pose, and collects passpoints to find it (paper §2.2).
 
 Publishes:  stb/calib/{camera}/pose (CameraPose) at start for every stored pose and after each
-            solve; answers queries on it for late joiners
+            solve, as news; and answers queries on it with its stored pose — the only pose a
+            PTZ service takes (it asks this queryable whenever a pose is heard, not the message)
             stb/calib/{camera}/progress (CollectProgress) while collecting
-            A pose on its key that it did not send (a stale or poisoned one) is out-versioned:
-            its own pose goes out again with a higher ``version`` (PTZ services take the highest)
-            and its health says so for a minute
+            A pose on its key that it did not send (a stale or poisoned one) changes nothing
+            here: it is counted, and its health says so for a minute
 Subscribes: stb/calib/{camera}/collect (CollectRequest: start or cancel a collection, accept
             or discard a solved pose held for review)
             stb/calib/{camera}/pose (to hear poses it did not send)
@@ -30,9 +30,7 @@ from services.calib.store import PoseStore
 
 log = logging.getLogger(__name__)
 
-REASSERT_EVERY_S = 0.2  # at most five re-assertions a second, however many foreign poses come
 FOREIGN_REPORTED_S = 60.0  # health is degraded this long after the last foreign pose
-MAX_VERSION = 2**53  # CameraPose.version's bound
 
 
 def _same_solve(a: m.CameraPose, b: m.CameraPose) -> bool:
@@ -47,10 +45,7 @@ class Calib:
         self.lock = threading.Lock()
         self.poses: dict[str, m.CameraPose] = {}
         self.sessions: dict[str, Session] = {}
-        self.seen_version: dict[str, int] = {}  # the highest version heard on each pose key
         self.foreign: dict[str, deque[float]] = {}  # when poses it did not send were heard
-        self.reassert_due: dict[str, threading.Timer] = {}
-        self.last_reassert: dict[str, float] = {}
         self.status_due: threading.Timer | None = None  # the status once the minute is over
 
     def start(self) -> None:
@@ -101,56 +96,30 @@ class Calib:
 
     def solved(self, pose: m.CameraPose, report: dict) -> None:
         with self.lock:
-            pose = pose.model_copy(update={"version": self._next_version(pose.camera)})
+            held = self.poses.get(pose.camera)
+            pose = pose.model_copy(update={"version": (held.version if held else 0) + 1})
             self.poses[pose.camera] = pose
         self.store.save(pose, report)
         self.node.bus.publish(keys.CALIB_POSE, pose, camera=pose.camera)
         self._report_status()
 
     def on_pose_heard(self, msg: m.CameraPose) -> None:
-        """Its own echo, or a pose it did not send: out-version the latter if it could win."""
+        """Its own echo, or a pose it did not send: counted and reported, nothing else — the
+        stored pose is the truth, and PTZ services ask for it."""
         camera = msg.camera
         with self.lock:
-            self.seen_version[camera] = max(self.seen_version.get(camera, 0), msg.version)
             own = self.poses.get(camera)
-            if own is None or _same_solve(msg, own):
+            if own is not None and _same_solve(msg, own):
                 return
-            now = time.monotonic()
-            heard = self.foreign.setdefault(camera, deque())
-            heard.append(now)
-            # a PTZ service takes no lower version; and one answer at a time is enough
-            answer = msg.version >= own.version and camera not in self.reassert_due
-            if answer:
-                delay = max(self.last_reassert.get(camera, -1e9) + REASSERT_EVERY_S - now, 0.0)
-                timer = threading.Timer(delay, self._reassert, args=(camera,))
-                timer.daemon = True
-                self.reassert_due[camera] = timer
-        if answer:
-            log.warning("%s: a pose it did not send (version %d, up to %.1f° from its own) on "
-                        "the bus; sending its own again, out-versioned", camera, msg.version,
-                        _rotation_gap_deg(msg, own))
-            timer.start()
+            heard = self.foreign.setdefault(camera, deque(maxlen=10_000))
+            heard.append(time.monotonic())
+            first = len(heard) == 1
+        if first:
+            log.warning("%s: a pose it did not send (version %d%s) on the bus; PTZ services "
+                        "take only the stored one, asked of this service", camera, msg.version,
+                        "" if own is None else
+                        f", up to {_rotation_gap_deg(msg, own):.1f}° from its own")
         self._report_status()
-
-    def _reassert(self, camera: str) -> None:
-        with self.lock:
-            self.reassert_due.pop(camera, None)
-            self.last_reassert[camera] = time.monotonic()
-            own = self.poses.get(camera)
-            if own is None:
-                return
-            version = self._next_version(camera)
-            if version > MAX_VERSION:
-                log.error("%s: cannot out-version a pose at version %d", camera, version - 1)
-                return
-            own = own.model_copy(update={"version": version})
-            self.poses[camera] = own
-        self.store.save_version(own)
-        self.node.bus.publish(keys.CALIB_POSE, own, camera=camera)
-
-    def _next_version(self, camera: str) -> int:
-        held = self.poses.get(camera)
-        return max(held.version if held else 0, self.seen_version.get(camera, 0)) + 1
 
     def _start(self, camera: str, count: int, timeout_s: float, review: bool = False) -> None:
         session = Session(self.node, self.settings, self.store, camera, count, timeout_s,
@@ -184,8 +153,9 @@ class Calib:
                     heard.popleft()
             foreign = {c: len(heard) for c, heard in self.foreign.items()}
         problems = [f"no pose yet: {', '.join(missing)}"] if missing else []
-        problems += [f"{c}: a pose it did not send was on the bus in the last minute "
-                     "(out-versioned)" for c, n in sorted(foreign.items()) if n]
+        problems += [f"{c}: {n} poses it did not send were on the bus in the last minute "
+                     "(not taken: PTZ services ask this service)"
+                     for c, n in sorted(foreign.items()) if n]
         self.node.set_status("degraded" if problems else "ok", "; ".join(problems))
         with self.lock:  # and again when the minute is over
             due = self.status_due

@@ -47,15 +47,6 @@ class PoseStore:
         write_atomically(path, text.encode())  # a crash never leaves half a pose behind
         return path
 
-    def save_version(self, pose: m.CameraPose) -> None:
-        """Store a re-asserted pose (a new version of the same solve), keeping its report."""
-        path = self.camera_dir(pose.camera) / "pose.json"
-        try:
-            report = json.loads(path.read_text()).get("report", {})
-        except (OSError, ValueError, AttributeError):
-            report = {}
-        self.save(pose, report)
-
     def save_inputs(self, camera: str, points: Passpoints, track: Track) -> None:
         folder = self.camera_dir(camera)
         write_passpoints(folder / "passpoints.csv", points)

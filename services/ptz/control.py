@@ -1,7 +1,7 @@
 """What a PTZ service decides, without I/O or a clock of its own (pure).
 
-Which camera pose holds (the highest version from the calibration service, or the same one
-measured later; never one measured in the future), whether a robot sample moves the camera
+Which camera pose holds (the calibration service's answer to this service's query, never
+one measured in the future: ``pose_source.py``), whether a robot sample moves the camera
 (a pose and the camera's limits known, the camera not failing, not held for calibration, not
 in someone else's hands) and where to, how long to wait after the camera failed (doubling up
 to ``RETRY_MAX_S``), and what the camera's status is. ``services/ptz/service.py`` wires it to
@@ -55,18 +55,19 @@ class PtzControl:
     retry_s: float = RETRY_FIRST_S
     manual: bool = False  # following paused for someone else's move
     held_by: str = ""  # an operator holds the camera (the page): it does not follow
+    pose_problem: str = ""  # the calibration service's answers disagreed, or none came
 
     # --- what comes in ----------------------------------------------------------------------
 
     def take_pose(self, msg: m.CameraPose, now: float) -> str:
-        """``taken``, ``kept`` (an older one: ours stays) or ``future`` (refused: one such
-        pose used to win for good)."""
+        """The calibration service's answer (``pose_source.py``): ``taken``, ``same`` (the
+        pose it has) or ``future`` (refused: one such pose used to win for good)."""
         if msg.measured_s - now > self.max_future_s:
             return "future"
-        if self.pose_msg is not None and _order(msg) < _order(self.pose_msg):
-            return "kept"
-        if msg != self.pose_msg:
-            self.pointing.forget()
+        if self.pose_msg is not None and msg.model_dump(exclude={"sent_s"}) == \
+                self.pose_msg.model_dump(exclude={"sent_s"}):
+            return "same"
+        self.pointing.forget()
         self.pose_msg, self.pose = msg, Pose.of(msg)
         return "taken"
 
@@ -130,9 +131,11 @@ class PtzControl:
                   else "manual" if manual else "waiting_for_pose" if self.pose is None
                   else "tracking" if self.robot else "idle")
         if self.pose is None:
-            health, why = "degraded", "waiting for a camera pose from calib"
+            health, why = "degraded", self.pose_problem or "waiting for a camera pose from calib"
         else:
-            health, why = ("degraded", problem) if problem else ("ok", "")
+            why = "; ".join(w for w in (problem and f"{problem} — the pose asked of calib again",
+                                        self.pose_problem) if w)
+            health = "degraded" if why else "ok"
         error = 0.0
         if self.pose is not None and self.robot is not None:
             error = aim_error_deg(_xyz(self.robot), self.pose, pan_deg, tilt_deg)
@@ -153,10 +156,6 @@ class PtzControl:
             self.follower.forget()  # the next sample sends a fresh command
         self.manual = paused
         return paused
-
-
-def _order(pose: m.CameraPose) -> tuple[int, float]:
-    return pose.version, pose.measured_s
 
 
 def _xyz(robot: m.RobotPosition) -> np.ndarray:

@@ -1,7 +1,9 @@
 """PTZ service: points one AXIS camera at the tracked robot (paper §2.3).
 
-Subscribes: stb/tracker/robot (RobotPosition), stb/calib/{camera}/pose (CameraPose; also
-            queried at start for a pose published before this service ran)
+Subscribes: stb/tracker/robot (RobotPosition); stb/calib/{camera}/pose only as news: the pose
+            itself is asked of the calibration service's queryable (at start, when one is
+            heard, every 30 s, every 5 s while the pictures disagree with it), never taken
+            from a message anyone could put (services/ptz/pose_source.py)
             stb/ptz/{camera}/calibration (CalibrationMode: hold still and detect, with a lease)
             stb/ptz/{camera}/hand (PtzHand: an operator holds, moves or releases the camera)
 Publishes:  stb/ptz/{camera}/state (PtzState: pan, tilt, zoom, status, aim error, and the
@@ -22,17 +24,20 @@ from common import codec, keys
 from common import messages as m
 from common.camera import PtzLimits, focal_mm_for_zoom
 from common.markers import warm_up
-from common.node import Node
+from common.node import Node, run_every
 from services.ptz.calibration import CalibrationHold
 from services.ptz.camera import AxisPtzCamera, PtzCamera, PtzError, http_client
 from services.ptz.control import PtzControl
 from services.ptz.follow import Follower
 from services.ptz.override import ManualOverride
 from services.ptz.pointing import PointingCheck
+from services.ptz.pose_source import PoseAsking, choose
 from services.ptz.preview import PreviewLoop
 from services.ptz.settings import PtzSettings
 
 log = logging.getLogger(__name__)
+ASK_TICK_S = 0.1  # how often the pose asker looks whether asking is due
+ASK_TIMEOUT_S = 1.0
 HAND_MAX_AGE_S = 5.0  # an operator's hand older than this was meant for another moment
 PRESETS_EVERY_S = 30.0  # the camera's presets asked for again (someone may add one)
 
@@ -52,9 +57,12 @@ def run(node: Node[PtzSettings], camera: PtzCamera | None = None) -> None:
     loop = _Loop(node, settings, camera or make_camera(settings),
                  queries=camera or make_camera(settings))
     name = settings.instance
-    node.bus.subscribe(keys.CALIB_POSE, loop.on_pose, latest=False, camera=name)
-    for pose in node.bus.query_latest(keys.CALIB_POSE, timeout_s=1.0, camera=name):
-        loop.on_pose(pose)
+    # a pose put on the key is only news: the pose itself is asked of calib (pose_source.py)
+    node.bus.subscribe(keys.CALIB_POSE, lambda _msg: loop.asking.heard(), latest=True,
+                       camera=name)
+    threading.Thread(target=run_every, args=(ASK_TICK_S, node.stop, loop.ask_pose,
+                                             "pose asker"), name="pose-asker",
+                     daemon=True).start()
     node.bus.subscribe(keys.TRACKER_ROBOT, loop.on_robot)
     # latest wins: a burst of requests is not queued up to move the camera for seconds after
     node.bus.subscribe(keys.PTZ_CALIBRATION, loop.on_calibration, latest=True, camera=name)
@@ -105,6 +113,7 @@ class _Loop:
         self.state_due = 0.0
         self.presets: list[str] = []
         self.presets_due = 0.0
+        self.asking = PoseAsking()
 
     def on_preview(self, preview: m.PtzPreview, focal_mm: float, infrared: bool) -> None:
         """Publish it, and judge from it how well the camera points (services/ptz/pointing)."""
@@ -112,16 +121,31 @@ class _Loop:
         with self.lock:
             self.control.pointing.observe(preview, focal_mm, infrared)
 
-    def on_pose(self, msg: m.CameraPose) -> None:
+    def ask_pose(self) -> None:
+        """Ask the calibration service for the camera's pose when it is due; take its answer
+        (``pose_source.py``)."""
         now = time.time()
         with self.lock:
-            taken = self.control.take_pose(msg, now)
+            due = self.asking.due(now, doubting=self.control.pointing.problem() is not None)
+        if not due:
+            return
+        self.asking.asked(now)
+        name = self.settings.instance
+        answers = self.node.bus.query_latest(keys.CALIB_POSE, timeout_s=ASK_TIMEOUT_S,
+                                             every_answer=True, camera=name)
+        pose, why = choose(answers, name)
+        with self.lock:
+            self.control.pose_problem = why if self.control.pose is None or answers else ""
+            taken = "none" if pose is None else self.control.take_pose(pose, time.time())
+        if why and answers:
+            log.warning("%s", why)
         if taken == "future":
-            key = keys.CALIB_POSE.key(self.node.bus.prefix, camera=msg.camera)
-            self.node.bus.count_drop(key, codec.FROM_FUTURE, f"pose measured "
-                                     f"{msg.measured_s - now:.0f} s in the future: refused")
+            key = keys.CALIB_POSE.key(self.node.bus.prefix, camera=name)
+            self.node.bus.count_drop(key, codec.FROM_FUTURE, "pose measured "
+                                     f"{pose.measured_s - now:.0f} s in the future: refused")
         elif taken == "taken":
-            log.info("camera pose received (fit error %.2f px)", msg.mean_error_px)
+            log.info("camera pose from calib (version %d, fit error %.2f px)", pose.version,
+                     pose.mean_error_px)
 
     def on_calibration(self, msg: m.CalibrationMode) -> None:
         with self.lock:

@@ -37,15 +37,17 @@ def _following(now: float = 200.0) -> PtzControl:
     return control
 
 
-def test_a_pose_from_the_future_is_refused_an_older_one_kept_a_newer_one_taken() -> None:
+def test_the_calibration_services_answer_is_taken_whatever_its_version_but_not_from_the_future(
+        ) -> None:
+    """The pose comes from the calibration service's answer (pose_source.py), so its version
+    orders nothing: a lower one after a discard or a fresh data folder is the pose."""
     control = _control()
     assert control.take_pose(_pose(measured_s=300.0), now=200.0) == "future"
     assert control.pose is None
     assert control.take_pose(_pose(measured_s=100.0, version=2), now=200.0) == "taken"
-    assert control.take_pose(_pose(measured_s=150.0, version=1), now=200.0) == "kept"
-    assert control.take_pose(_pose(measured_s=120.0, version=2, rz_deg=160.0), 200.0) == "taken"
+    assert control.take_pose(_pose(measured_s=100.0, version=2), now=250.0) == "same"
+    assert control.take_pose(_pose(measured_s=150.0, version=1, rz_deg=160.0), 200.0) == "taken"
     assert control.pose == Pose.of(control.pose_msg) and control.pose.rz_deg == 160.0
-    assert control.take_pose(_pose(measured_s=90.0, version=3), now=200.0) == "taken"
 
 
 def test_a_new_pose_clears_the_pointing_check_the_same_one_does_not() -> None:

@@ -47,7 +47,7 @@ def service(make_bus: Callable[..., Bus]) -> Iterator[dict]:
     servers: list[CameraServer] = []
     thread = threading.Thread(target=run, args=(node,))
     ctx = {"port": port, "node": node, "world": world, "states": states, "servers": servers,
-           "thread": thread}
+           "thread": thread, "calib": FakeCalib(make_bus())}
     yield ctx
     node.stop.set()
     thread.join(5)
@@ -56,11 +56,27 @@ def service(make_bus: Callable[..., Bus]) -> Iterator[dict]:
         server.close()
 
 
-def _publish_pose(world: Bus) -> None:
-    world.publish(keys.CALIB_POSE, m.CameraPose(
-        measured_s=time.time(), camera="ptz1", x_mm=MOUNT.x_mm, y_mm=MOUNT.y_mm, z_mm=MOUNT.z_mm,
-        rx_deg=MOUNT.rx_deg, ry_deg=MOUNT.ry_deg, rz_deg=MOUNT.rz_deg, focal_mm=3.8,
-        mean_error_px=1.0, passpoints=100), camera="ptz1")
+class FakeCalib:
+    """What the calibration service is to a PTZ service: the pose its queryable answers with,
+    and the news of each solve on the key."""
+
+    def __init__(self, bus: Bus) -> None:
+        self.bus = bus
+        self.pose: m.CameraPose | None = None
+        bus.serve_latest(keys.CALIB_POSE, lambda: self.pose, camera="ptz1")
+
+    def solve(self, **changes: float) -> m.CameraPose:
+        self.pose = m.CameraPose(**{**dict(
+            measured_s=time.time(), camera="ptz1", x_mm=MOUNT.x_mm, y_mm=MOUNT.y_mm,
+            z_mm=MOUNT.z_mm, rx_deg=MOUNT.rx_deg, ry_deg=MOUNT.ry_deg, rz_deg=MOUNT.rz_deg,
+            focal_mm=3.8, mean_error_px=1.0, passpoints=100), **changes})
+        self.bus.publish(keys.CALIB_POSE, self.pose, camera="ptz1")
+        return self.pose
+
+
+def _publish_pose(service: dict) -> None:
+    """The calibration service solves the true pose."""
+    service["calib"].solve()
 
 
 def _publish_robot(world: Bus, xyz: np.ndarray) -> None:
@@ -78,7 +94,7 @@ def test_waits_for_a_pose_then_follows_the_robot(service: dict) -> None:
         time.sleep(0.05)
     wait_for(lambda: states and states[-1].status == "waiting_for_pose")
     assert states[-1].pan_deg == 0.0 and states[-1].tilt_deg == 0.0, "no move without a pose"
-    _publish_pose(world)
+    _publish_pose(service)
 
     def on_target() -> bool:
         _publish_robot(world, TARGET)
@@ -99,7 +115,7 @@ def test_previews_show_the_robot_near_the_image_centre_once_on_target(service: d
     service["thread"].start()
     wait_for(lambda: previews, timeout=5)
     assert previews[-1].robot_px is None, "no pose yet: no robot pixel"
-    _publish_pose(service["world"])
+    _publish_pose(service)
 
     def centred() -> bool:
         _publish_robot(service["world"], TARGET)
@@ -135,7 +151,7 @@ def test_camera_away_is_reported_and_the_service_recovers(service: dict) -> None
     assert service["node"].health().status == "degraded"
     assert "ptz1" in service["node"].health().detail
     service["servers"].append(_camera_server(service["port"]))
-    _publish_pose(service["world"])
+    _publish_pose(service)
     wait_for(lambda: states[-1].status in ("idle", "tracking"), timeout=10)
     assert service["thread"].is_alive()
 
@@ -145,7 +161,7 @@ def test_positions_far_outside_the_crater_are_ignored(service: dict) -> None:
     service["thread"].start()
     world, states = service["world"], service["states"]
     wait_for(lambda: states)  # the service is up and subscribed
-    _publish_pose(world)
+    _publish_pose(service)
     for _ in range(20):
         _publish_robot(world, np.array([90_000.0, 0.0, 0.0]))
         time.sleep(0.05)
@@ -191,66 +207,80 @@ def test_calibration_mode_holds_still_detects_and_ends_with_its_lease(service: d
 
 def test_a_pose_from_the_future_is_refused_and_cannot_mis_aim_the_camera(service: dict) -> None:
     """One pose with a wrong rotation stamped in the year 2096 used to win for good: ptz1's
-    true aim error went from 0.1° to 60° until a restart, while it reported 'tracking'."""
+    true aim error went from 0.1° to 60° until a restart, while it reported 'tracking'. Even
+    from the calibration service's own answer it is refused."""
     service["servers"].append(_camera_server(service["port"]))
     service["thread"].start()
     world, states = service["world"], service["states"]
     wait_for(lambda: states)  # the service listens
-    _publish_pose(world)
+    _publish_pose(service)
 
     def on_target() -> bool:
         _publish_robot(world, TARGET)
         return bool(states) and states[-1].status == "tracking"
 
     wait_for(on_target, timeout=5, period=0.05)
-    world.publish(keys.CALIB_POSE, m.CameraPose(
-        measured_s=4e9, camera="ptz1", x_mm=MOUNT.x_mm, y_mm=MOUNT.y_mm, z_mm=MOUNT.z_mm,
-        rx_deg=MOUNT.rx_deg, ry_deg=MOUNT.ry_deg - 40.0, rz_deg=MOUNT.rz_deg + 50.0,
-        focal_mm=3.8, mean_error_px=0.5, passpoints=100), camera="ptz1")
-    time.sleep(0.5)
+    node: Node = service["node"]
+    pose_key = keys.CALIB_POSE.key(node.bus.prefix, camera="ptz1")
+    service["calib"].solve(measured_s=4e9, ry_deg=MOUNT.ry_deg - 40.0,
+                           rz_deg=MOUNT.rz_deg + 50.0)
+    wait_for(lambda: node.health().keys[pose_key].dropped.get("from_future", 0) >= 1,
+             timeout=5)
     for _ in range(10):
         _publish_robot(world, TARGET)
         time.sleep(0.05)
     last = states[-1]
     assert aim_error_deg(TARGET, MOUNT, last.pan_deg, last.tilt_deg) < 0.5, "the true aim"
-    node: Node = service["node"]
-    pose_key = keys.CALIB_POSE.key(node.bus.prefix, camera="ptz1")
-    assert node.health().keys[pose_key].dropped.get("from_future") == 1
 
 
-def test_a_higher_version_wins_however_old_its_measurement(service: dict) -> None:
-    """The calibration service answers a pose it did not send with its own at a higher version
-    (measured when it was solved, before the spoof): the PTZ service takes it back. By
-    measurement time alone, a later spoof would keep the camera for good."""
+def _aim_error(service: dict) -> float:
+    _publish_robot(service["world"], TARGET)
+    last = service["states"][-1]
+    return aim_error_deg(TARGET, MOUNT, last.pan_deg, last.tilt_deg)
+
+
+@pytest.mark.parametrize("version", [2**53, 2**53 - 1, 0])
+def test_a_pose_put_on_the_key_is_never_taken_whatever_its_version(service: dict,
+                                                                    version: int) -> None:
+    """One pose message at version 2⁵³ used to mis-aim a camera for good: the calibration
+    service could not out-version it. A message on the key is now only news; the pose is
+    asked of the calibration service, whose stored pose is the truth."""
     service["servers"].append(_camera_server(service["port"]))
     service["thread"].start()
     world, states = service["world"], service["states"]
     wait_for(lambda: states)
-    solved_s = time.time() - 600.0
-    true_pose = dict(camera="ptz1", x_mm=MOUNT.x_mm, y_mm=MOUNT.y_mm, z_mm=MOUNT.z_mm,
-                     rx_deg=MOUNT.rx_deg, ry_deg=MOUNT.ry_deg, rz_deg=MOUNT.rz_deg,
-                     focal_mm=3.8, mean_error_px=1.0, passpoints=100)
-    world.publish(keys.CALIB_POSE, m.CameraPose(measured_s=solved_s, version=3, **true_pose),
-                  camera="ptz1")
-
-    def aim_error() -> float:
-        _publish_robot(world, TARGET)
-        last = states[-1]
-        return aim_error_deg(TARGET, MOUNT, last.pan_deg, last.tilt_deg)
-
-    wait_for(lambda: aim_error() < 0.5 and states[-1].status == "tracking", timeout=5,
+    _publish_pose(service)
+    wait_for(lambda: _aim_error(service) < 0.5 and states[-1].status == "tracking", timeout=5,
              period=0.05)
-    spoof = {**true_pose, "rz_deg": MOUNT.rz_deg + 30.0}
-    world.publish(keys.CALIB_POSE, m.CameraPose(measured_s=time.time(), version=3, **spoof),
-                  camera="ptz1")
-    wait_for(lambda: aim_error() > 20.0, timeout=5, period=0.05)  # same version, later: taken
-    world.publish(keys.CALIB_POSE, m.CameraPose(measured_s=solved_s, version=4, **true_pose),
-                  camera="ptz1")
-    wait_for(lambda: aim_error() < 0.5, timeout=5, period=0.05)
-    world.publish(keys.CALIB_POSE, m.CameraPose(measured_s=time.time(), version=3, **spoof),
-                  camera="ptz1")  # a lower version, however late, is not taken
-    time.sleep(0.5)
-    assert aim_error() < 0.5
+    spoof = service["calib"].pose.model_copy(update={
+        "version": version, "rz_deg": MOUNT.rz_deg + 30.0, "measured_s": time.time()})
+    for _ in range(20):
+        world.publish(keys.CALIB_POSE, spoof, camera="ptz1")
+    quiet_until = time.monotonic() + 1.5  # a window in which the aim must not move
+    while time.monotonic() < quiet_until:
+        assert _aim_error(service) < 0.5, "the spoof did not move the camera"
+        time.sleep(0.05)
+    service["calib"].solve(rz_deg=MOUNT.rz_deg + 0.5, version=1)  # a later solve, lower version
+    wait_for(lambda: abs(_aim_error(service) - 0.5) < 0.3, timeout=5, period=0.05)
+
+
+def test_answers_that_disagree_keep_the_pose_and_say_why(service: dict,
+                                                         make_bus: Callable[..., Bus]) -> None:
+    """A second queryable on the pose key (an open bus): its answer differs from the
+    calibration service's, so the PTZ service takes neither and says so."""
+    service["servers"].append(_camera_server(service["port"]))
+    service["thread"].start()
+    states, node = service["states"], service["node"]
+    wait_for(lambda: states)
+    true = _publish_pose(service) or service["calib"].pose
+    wait_for(lambda: _aim_error(service) < 0.5, timeout=5, period=0.05)
+    rogue = make_bus()
+    wrong = true.model_copy(update={"rz_deg": MOUNT.rz_deg + 30.0})
+    rogue.serve_latest(keys.CALIB_POSE, lambda: wrong, camera="ptz1")
+    rogue.publish(keys.CALIB_POSE, wrong, camera="ptz1")  # news: asked at once
+    wait_for(lambda: "different poses answered" in node.health().detail, timeout=5)
+    assert node.health().status == "degraded"
+    assert _aim_error(service) < 0.5, "the pose it had stays"
 
 
 def test_a_wrong_pose_is_caught_by_the_pointing_check(service: dict) -> None:
@@ -262,7 +292,7 @@ def test_a_wrong_pose_is_caught_by_the_pointing_check(service: dict) -> None:
     service["servers"].append(_camera_server(service["port"]))
     service["thread"].start()
     wait_for(lambda: states, timeout=5)  # subscribed by now
-    _publish_pose(service["world"])
+    _publish_pose(service)
 
     def judged(predicate: Callable[[m.PtzState], bool]) -> bool:
         _publish_robot(service["world"], TARGET)
@@ -275,6 +305,7 @@ def test_a_wrong_pose_is_caught_by_the_pointing_check(service: dict) -> None:
                          y_mm=MOUNT.y_mm, z_mm=MOUNT.z_mm, rx_deg=MOUNT.rx_deg,
                          ry_deg=MOUNT.ry_deg, rz_deg=MOUNT.rz_deg + 40, focal_mm=3.8,
                          mean_error_px=0.2, passpoints=100)
+    service["calib"].pose = wrong  # a wrong solve, as a poisoned store would give
     service["world"].publish(keys.CALIB_POSE, wrong, camera="ptz1")
     poisoned_at = time.monotonic()
     wait_for(lambda: judged(lambda s: s.pointing_problem.startswith("pointing:")), timeout=15,
@@ -284,7 +315,10 @@ def test_a_wrong_pose_is_caught_by_the_pointing_check(service: dict) -> None:
     assert states[-1].aim_error_deg < 1.0, "the pose's own aim error cannot see it"
     health = node.health()
     assert health.status == "degraded" and health.detail.startswith("pointing:")
-    _publish_pose(service["world"])  # the calibration service's true pose again
+    assert "the pose asked of calib again" in health.detail
+    service["calib"].pose = service["calib"].pose.model_copy(update={
+        "rz_deg": MOUNT.rz_deg, "measured_s": time.time()})  # put right at the source: the
+    # PTZ service asks again every few seconds while its pictures disagree, and takes it
     wait_for(lambda: judged(lambda s: s.pointing_problem == ""), timeout=8, period=0.1)
     assert node.health().status == "ok"
 
@@ -299,7 +333,7 @@ def test_a_move_by_someone_else_pauses_following_then_it_follows_again(service: 
     service["thread"].start()
     world, states = service["world"], service["states"]
     wait_for(lambda: states)  # the service is up and listening
-    _publish_pose(world)
+    _publish_pose(service)
 
     def following() -> bool:
         _publish_robot(world, TARGET)
@@ -335,7 +369,7 @@ def test_an_operators_hand_holds_moves_and_releases_the_camera(service: dict) ->
     service["thread"].start()
     world, states = service["world"], service["states"]
     wait_for(lambda: states)
-    _publish_pose(world)
+    _publish_pose(service)
 
     def following() -> bool:
         _publish_robot(world, TARGET)
