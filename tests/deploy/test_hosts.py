@@ -129,11 +129,14 @@ def lab(tmp_path: Path, crater_file: Path) -> Iterator[dict]:
         lan.close()
 
 
-def _publish_true_pose(calib: Bus) -> None:
+def _serve_true_pose(calib: Bus) -> None:
+    """Play the calibration service: answer the PTZ service's question with the camera's true
+    pose, and publish it (a PTZ service takes a pose only from such an answer)."""
     cam = SimSettings().cameras[0]
-    calib.publish(keys.CALIB_POSE, m.CameraPose(
-        measured_s=time.time(), camera=cam.name, **Pose.of(cam).fields(), focal_mm=3.8,
-        mean_error_px=0.5, passpoints=100), camera=cam.name)
+    pose = m.CameraPose(measured_s=time.time(), camera=cam.name, **Pose.of(cam).fields(),
+                        focal_mm=3.8, mean_error_px=0.5, passpoints=100)
+    calib.serve_latest(keys.CALIB_POSE, lambda: pose, camera=cam.name)
+    calib.publish(keys.CALIB_POSE, pose, camera=cam.name)
 
 
 def _read(crane: ModbusCrane):  # type: ignore[no-untyped-def]
@@ -158,7 +161,7 @@ def test_the_chain_across_hosts_survives_cut_links_and_a_router_restart(lab: dic
     operator = Operator(lab["bus"]("operator"))  # the crane moves once an operator arms it
     operator.arm_within(60)
     wait_for(lambda: any(s.status == "tracking" for s in states), timeout=60, period=0.2)
-    _publish_true_pose(calib)
+    _serve_true_pose(calib)
     wait_for(lambda: ptz and ptz[-1].status == "tracking" and ptz[-1].aim_error_deg < 3.0,
              timeout=30, period=0.2)
     crane = lab["crane"]

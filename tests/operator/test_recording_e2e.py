@@ -35,6 +35,8 @@ EXPECTED = ["stb/tracker/markers", "stb/tracker/robot", "stb/gantry/state",
 VIDEO_FPS = 4.0
 RECORD_S = 8.0
 
+pytestmark = pytest.mark.system  # a whole lab recorded on real time: make test-system
+
 
 @pytest.fixture(scope="module")
 def recording(live_lab: LiveLab, tmp_path_factory: pytest.TempPathFactory) -> Path:
