@@ -12,12 +12,14 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from services.gantry.command_rate import CommandRate
 from services.gantry.control import Controller, Fix, Step, Timing
 from services.gantry.crane import Crane, CraneError, CraneReading
 from services.gantry.crosscheck import CrossCheck
@@ -34,6 +36,8 @@ MARKER_FRESH_S = 0.15
 COMMAND_MAX_AGE_S = 2.0
 """An arm, disarm or reset older than this is refused (it was meant for another moment);
 a stop never is."""
+MAX_REFUSALS_QUEUED = 100
+"""Refusals for too many commands answered per poll at most (a flood's rest is only counted)."""
 
 
 @dataclass(frozen=True)
@@ -69,7 +73,8 @@ class GantryLoop:
     def __init__(self, settings: GantrySettings, crane: Crane, frames: FrameSource,
                  controller: Controller, now_s: float,
                  fix: Callable[[], Fix | None] = lambda: None,
-                 crane_marker: Callable[[], Fix | None] = lambda: None) -> None:
+                 crane_marker: Callable[[], Fix | None] = lambda: None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.settings = settings
         self.crane, self.frames, self.controller, self.fix = crane, frames, controller, fix
         self.crane_marker = crane_marker
@@ -86,6 +91,10 @@ class GantryLoop:
         self.reading: CraneReading | None = None
         self._error: CraneError | None = None  # of the last tick's setpoint
         self._requests: deque[Request] = deque()
+        self._too_many: deque[Request] = deque()  # refused by the rate, answered at the poll
+        self.rate = CommandRate(settings.command_per_s, settings.command_burst,
+                                5 * settings.command_per_s, 5 * settings.command_burst)
+        self.clock = clock
         self.last_reply: tuple[float, Reply] | None = None  # (when, the last command's answer)
         self._lock = threading.Lock()
 
@@ -94,9 +103,19 @@ class GantryLoop:
         return self.modes.mode is Mode.ARMED
 
     def request(self, request: Request) -> None:
-        """An operator's command, carried out at the next poll (from any thread)."""
+        """An operator's command, carried out at the next poll (from any thread) if its
+        sender has not sent too many (``CommandRate``)."""
         with self._lock:
-            self._requests.append(request)
+            admission = self.rate.admit(request.by, self.clock(),
+                                        always=request.command is Command.STOP)
+            if admission.admitted:
+                self._requests.append(request)
+            elif len(self._too_many) < MAX_REFUSALS_QUEUED:
+                self._too_many.append(request)
+        if admission.report:
+            log.warning("too many commands from %r: at most %g a second after %d at once; "
+                        "the rest of this flood is answered \"too many\" without more log",
+                        request.by[:128], self.rate.per_s, self.rate.burst)
 
     def poll(self, now_s: float, monotonic_s: float | None = None) -> Tick | None:
         """Read the controller's report, carry out commands and stops, tick when due.
@@ -127,7 +146,12 @@ class GantryLoop:
     def _carry_out_requests(self, now_s: float) -> tuple[Reply, ...]:
         with self._lock:
             requests, self._requests = list(self._requests), deque()
-        replies = tuple(Reply(r, self._carry_out(r, now_s)) for r in requests)
+            too_many, self._too_many = list(self._too_many), deque()
+        replies = tuple(Reply(r, self._carry_out(r, now_s)) for r in requests) + tuple(
+            Reply(r, Decision(False, self.modes.mode, Action.NONE,
+                              f"too many commands from {r.by[:64]!r}: at most "
+                              f"{self.rate.per_s:g} a second; send it again later"))
+            for r in too_many)
         if replies:
             self.last_reply = (now_s, replies[-1])  # the audit in the gantry's state
         return replies

@@ -113,6 +113,11 @@ class GantrySettings(ServiceSettings):
                                 "check)")
     check_window_s: float = Field(0.5, gt=0, le=10, description="a disagreement counts once "
                                   "it has lasted this long")
+    command_per_s: float = Field(2.0, gt=0, le=100, description="commands a second taken "
+                                 "from one sender after its burst; the rest are answered "
+                                 "\"too many\" (a stop is always taken)")
+    command_burst: int = Field(5, ge=1, le=1000, description="commands one sender may send "
+                               "at once (all senders together: five times both)")
     seed: int = 0
     pf_position: ParticleFilterSettings = Field(
         ParticleFilterSettings(), description="pf-position and pf-position-gauss")

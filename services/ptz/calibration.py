@@ -65,6 +65,8 @@ class CalibrationHold:
     publish_detections: Callable[[m.MarkerDetections], None]
     publish_snapshot: Callable[[m.CameraFrame], None]
     max_markers: int = 8
+    moved: Callable[[float | None, float | None], None] = lambda _pan, _tilt: None  # each
+    # move it sends (None: to home, or left as it is), for the manual-override detector
     request: m.CalibrationMode | None = None
     expires_at: float = 0.0
     hold: Hold | None = None  # where the camera is held; None until it stood at home
@@ -109,8 +111,10 @@ class CalibrationHold:
             self.hold = (msg.pan_deg, msg.tilt_deg, msg.zoom)  # type: ignore[assignment]
         else:
             self.hold, self._homed_at = None, time.monotonic()
+            self.moved(None, None)
             self.camera.home()
         if any(v is not None for v in _asked(msg)):
+            self.moved(msg.pan_deg, msg.tilt_deg)
             self.camera.move_to(msg.pan_deg, msg.tilt_deg, msg.zoom)
         self._commanded = True
 
@@ -141,6 +145,7 @@ class CalibrationHold:
             log.warning("%s: moved away from its calibration hold (now pan %.1f°, tilt "
                         "%.1f°): sent back to pan %.1f°, tilt %.1f°", self.camera.name,
                         position[0], position[1], self.hold[0], self.hold[1])
+            self.moved(self.hold[0], self.hold[1])
             self.camera.move_to(*self.hold)
             self._rehold_at = time.monotonic() + REHOLD_S
         return False

@@ -100,6 +100,10 @@ class PtzControl:
     def answered(self) -> None:
         self.retry_s = RETRY_FIRST_S
 
+    def own_move(self, now: float, pan_deg: float | None, tilt_deg: float | None) -> None:
+        """Calibration mode sent the camera here (None: home, or kept): ours, not a hand."""
+        self.override.own_move(now, pan_deg, tilt_deg)
+
     def calibration_left(self) -> None:
         """Calibration mode moved the camera: the next sample sends a fresh command."""
         self.follower.forget()
@@ -143,8 +147,8 @@ class PtzControl:
                       health, why)
 
     def _watch_hands(self, now: float, pan: float, tilt: float, calibrating: bool) -> bool:
-        if calibrating:  # calibration mode moves the camera itself; nothing to compare with
-            self.override.forget()
+        if calibrating:  # calibration mode holds the camera (its moves: ``own_move``)
+            self.override.watch_only(pan, tilt)
             self.manual = False
             return False
         if self.override.observe(now, pan, tilt) and not self.manual:

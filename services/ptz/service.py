@@ -109,7 +109,8 @@ class _Loop:
             camera,
             lambda msg: node.bus.publish(keys.PTZ_DETECTIONS, msg, camera=name),
             lambda msg: node.bus.publish(keys.PTZ_SNAPSHOT, msg, camera=name),
-            max_markers=settings.calibration_max_markers)
+            max_markers=settings.calibration_max_markers,
+            moved=lambda pan, tilt: self.control.own_move(time.time(), pan, tilt))
         self.state_due = 0.0
         self.presets: list[str] = []
         self.presets_due = 0.0

@@ -22,6 +22,7 @@ from common.node import stop_on_signals
 from common.settings import LogLevel, ServiceSettings
 from services.entry import ToolError, checked_key_exprs, tool_session, tool_settings
 from services.recording.foxglove import json_copy
+from services.recording.origin_gate import OriginGate
 from services.recording.record import crater, decode, latest_samples
 from services.recording.typed import CRATER, LabScene, Typed
 
@@ -39,6 +40,9 @@ class FoxgloveSettings(ServiceSettings):
     height_map: Path | None = Field(Path("run/sim/crater.npz"), description="the crater in "
                                     "the 3D scene (.npz); missing: a scene without it")
     scene_hz: float = Field(10.0, gt=0, le=100, description="3D scene updates a second")
+    allowed_origins: list[str] = Field([], description="web pages (their Origin, e.g. "
+                                       "\"https://app.foxglove.dev\") that may connect besides "
+                                       "this machine's; a browser lets any page try")
 
 
 class Bridge:
@@ -130,20 +134,21 @@ def serve(args: argparse.Namespace) -> int:
     scene = LabScene(crater(settings.height_map), scene_hz=settings.scene_hz)
     context = foxglove.Context()
     bridge = Bridge(settings.bus.prefix, scene, context)
-    server = None
+    server = gate = None
     subscribers = []
     try:
-        try:
-            server = foxglove.start_server(name="stb-supervisor", host=settings.host,
-                                          port=settings.port, context=context,
-                                          server_listener=_Listener(scene))
-        except RuntimeError as err:
+        try:  # foxglove-sdk's server on a loopback port of its own, behind the Origin gate
+            server = foxglove.start_server(name="stb-supervisor", host="127.0.0.1", port=0,
+                                          context=context, server_listener=_Listener(scene))
+            gate = OriginGate(settings.host, settings.port, server.port,
+                              settings.allowed_origins).start()
+        except (RuntimeError, OSError) as err:
             raise ToolError(f"cannot serve on {settings.host}:{settings.port}: {err}") from err
         subscribers = [session.declare_subscriber(e, bridge.on_sample) for e in exprs]
         for expr in exprs:  # what was published before we joined (camera poses)
             for sample in latest_samples(session, expr, timeout_s=1.0):
                 bridge.on_sample(sample)
-        print(f"stb foxglove: serving {' '.join(exprs)} on ws://{settings.host}:{server.port} "
+        print(f"stb foxglove: serving {' '.join(exprs)} on ws://{settings.host}:{gate.port} "
               "(Foxglove: Open connection → Foxglove WebSocket; layout: "
               "docs/foxglove-layout.json). Ctrl-C ends.", file=sys.stderr, flush=True)
         stop.wait()
@@ -151,6 +156,8 @@ def serve(args: argparse.Namespace) -> int:
         for sub in subscribers:
             sub.undeclare()
         bridge.close()
+        if gate is not None:
+            gate.stop()
         if server is not None:
             server.stop()
         session.close()

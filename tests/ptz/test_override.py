@@ -59,3 +59,33 @@ def test_zero_pause_never_pauses_and_no_command_no_judgement() -> None:
     fresh = ManualOverride()
     fresh.commanded(0.0, 10.0, 0.0)  # before the first look: nothing to judge from
     assert not fresh.observe(0.1, 90.0, 0.0)
+
+
+def test_a_calibration_hold_still_under_way_after_the_mode_ended_is_ours() -> None:
+    """Calibration mode sent the camera 150° away; the mode ended while it turned, following
+    sent it back the other way, and the camera went on towards the hold for its latency
+    before it turned: all of it ours (a flood of calibration requests once paused following
+    for 30 s this way)."""
+    override = ManualOverride()
+    override.watch_only(0.0, 0.0)  # calibration mode: seen, not judged
+    override.own_move(0.1, 150.0, -40.0)  # the hold
+    override.watch_only(30.0, -9.0)
+    assert not override.observe(0.7, 45.0, -13.0), "the mode ended; still turning to the hold"
+    override.commanded(0.8, -20.0, 5.0)  # following: the robot is the other way
+    assert not override.observe(1.0, 60.0, -16.0), "the hold, queued behind the latency"
+    assert not override.observe(1.6, 20.0, -5.0), "and back towards the robot"
+    for k in range(1, 40):  # following on, past the hold's life: a hand is seen again
+        override.commanded(1.6 + 0.1 * k, -20.0, 5.0)
+    assert not override.observe(5.5, -20.0, 5.0)
+    assert override.observe(6.0, 90.0, 5.0), "someone else's hand, once our moves are done"
+
+
+def test_a_move_home_is_not_judged_while_it_may_last() -> None:
+    override = ManualOverride(own_move_s=5.0)
+    override.observe(0.0, 0.0, 0.0)
+    override.commanded(0.1, 10.0, 0.0)
+    override.own_move(0.2, None, None)  # home: where, we do not know
+    assert not override.observe(1.0, 120.0, -30.0) and not override.paused(1.0)
+    assert not override.observe(5.3, 170.0, -45.0), "no command since: nothing to judge by"
+    override.commanded(5.4, 160.0, -40.0)
+    assert override.observe(5.6, 0.0, 0.0), "judged again after the home move's time"

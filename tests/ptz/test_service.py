@@ -28,9 +28,9 @@ MOUNT = Pose(3550, 1090, 2190, 180, 30, 165)
 TARGET = np.array([-300.0, 200.0, 100.0])
 
 
-def _camera_server(port: int) -> CameraServer:
+def _camera_server(port: int, latency_s: float = 0.05) -> CameraServer:
     t0 = time.monotonic()
-    sim = SimCamera("ptz1", PtzHead(MOUNT, latency_s=0.05), lambda: TARGET[None, :], [],
+    sim = SimCamera("ptz1", PtzHead(MOUNT, latency_s=latency_s), lambda: TARGET[None, :], [],
                     lambda: time.monotonic() - t0, np.random.default_rng(0))
     return CameraServer(sim, "127.0.0.1", port).start()
 
@@ -400,3 +400,39 @@ def test_an_operators_hand_holds_moves_and_releases_the_camera(service: dict) ->
     hand("follow")
     wait_for(following, timeout=5, period=0.05)
     assert states[-1].held_by == ""
+
+
+@pytest.mark.system
+def test_a_flood_of_calibration_requests_never_makes_its_own_moves_someone_elses(
+        service: dict) -> None:
+    """3,000 valid calibration-mode requests in a few seconds (on and off, random holds, short
+    leases): the service's own calibration moves, queued in the camera, are never taken for
+    someone else's hand; once the flood ends the camera follows the robot again."""
+    service["node"].settings = service["node"].settings.model_copy(update={"state_hz": 5.0})
+    server = _camera_server(service["port"], latency_s=PtzHead.latency_s)  # the sim's own
+    service["servers"].append(server)
+    service["thread"].start()
+    world, states = service["world"], service["states"]
+    wait_for(lambda: states)
+    _publish_pose(service)
+
+    def following() -> bool:
+        _publish_robot(world, TARGET)
+        return bool(states) and states[-1].status == "tracking" and \
+            states[-1].aim_error_deg < 1.0
+
+    wait_for(following, timeout=5, period=0.05)
+    rng = np.random.default_rng(5)
+    flood_start = len(states)
+    for i in range(3000):
+        world.publish(keys.PTZ_CALIBRATION, m.CalibrationMode(
+            measured_s=time.time(), camera="ptz1", active=bool(i % 7),
+            pan_deg=float(rng.uniform(-180, 180)), tilt_deg=float(rng.uniform(-90, 0)),
+            zoom=int(rng.integers(1, 9999)), lease_s=3.0), camera="ptz1")
+        if i % 100 == 0:
+            _publish_robot(world, TARGET)
+            time.sleep(0.1)  # 3,000 in about 3 s, the robot's samples among them
+    wait_for(following, timeout=10, period=0.05,
+             why=lambda: f"last state {states[-1].status}, {states[-1].aim_error_deg:.1f}°")
+    statuses = {s.status for s in states[flood_start:]}
+    assert "manual" not in statuses, statuses

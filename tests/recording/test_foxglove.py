@@ -189,7 +189,8 @@ def test_stb_foxglove_serves_the_typed_scene_images_and_json_series(
     # the pose was published before the bridge started: it asks the calib's queryable for it
     bus.serve_latest(keys.CALIB_POSE, _pose, camera="ptz1")
     proc = stb_process("foxglove", "--connect", router_endpoint, "--set", f"port={port}",
-                       "--set", f"height_map={crater_file}", "--set", "bus.zenoh.listen=[]")
+                       "--set", f"height_map={crater_file}", "--set", "bus.zenoh.listen=[]",
+                       "--set", 'allowed_origins=["https://app.foxglove.dev"]')
     try:
         wait_for(lambda: proc.poll() is not None or _listening(port), timeout=20, period=0.2)
         assert proc.poll() is None, proc.stderr.read()
@@ -219,8 +220,14 @@ def test_stb_foxglove_serves_the_typed_scene_images_and_json_series(
                 await task
 
         advertised, got = asyncio.run(run())
+        origins = {origin: asyncio.run(_handshake(f"ws://127.0.0.1:{port}", origin))
+                   for origin in ("https://evil.example", "http://localhost:8080",
+                                  "https://app.foxglove.dev", "http://127.0.0.1.evil.example")}
     finally:
         assert _stop(proc, 2, timeout=15) == 0
+    assert origins == {"https://evil.example": 403, "http://localhost:8080": 101,
+                       "https://app.foxglove.dev": 101, "http://127.0.0.1.evil.example": 403}, \
+        "a foreign web page cannot read the bus; this machine's and the configured can"
     counts = {topic: len(messages) for topic, messages in got.items()}
     assert {SCENE, TF, CRATER, "json/stb/gantry/offload"} <= set(got), (sorted(advertised),
                                                                         counts)
@@ -248,6 +255,18 @@ def test_stb_foxglove_serves_the_typed_scene_images_and_json_series(
     assert len(mesh.points) > 1000, "the crater sent to the client that subscribed"
     offload = json.loads(got["json/stb/gantry/offload"][0])
     assert offload["horizontal_error_mm"] == 100.0 and offload["warn_above_pct"] == 4.0
+
+
+async def _handshake(url: str, origin: str) -> int:
+    """The HTTP status of a WebSocket handshake that a page at ``origin`` makes (101: open);
+    an open connection gets its server info, relayed from foxglove-sdk's server."""
+    try:
+        async with websockets.connect(url, origin=origin,  # type: ignore[arg-type]
+                                      subprotocols=["foxglove.sdk.v1"]) as ws:  # type: ignore[list-item]
+            assert json.loads(await asyncio.wait_for(ws.recv(), 5))["op"] == "serverInfo"
+            return 101
+    except websockets.InvalidStatus as err:
+        return err.response.status_code
 
 
 def _listening(port: int) -> bool:

@@ -1,0 +1,71 @@
+"""The gantry's command rate (services/gantry/command_rate.py) on an injected clock, and a
+flood of commands against the live service and a CraneRig (tests/gantry/rig.py)."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from common import keys
+from common import messages as m
+from services.gantry.command_rate import MAX_SENDERS, CommandRate
+from tests.conftest import wait_for
+
+
+def test_a_sender_gets_its_burst_then_its_rate() -> None:
+    rate = CommandRate(per_s=2.0, burst=5, total_per_s=100, total_burst=100)
+    taken = [rate.admit("eve", 0.0).admitted for _ in range(8)]
+    assert taken == [True] * 5 + [False] * 3
+    assert not rate.admit("eve", 0.4).admitted  # 0.8 of a token
+    assert rate.admit("eve", 0.5).admitted  # one token back after 1/per_s
+    assert rate.admit("olga", 0.5).admitted, "another sender has its own bucket"
+
+
+def test_the_first_refusal_of_a_flood_is_reported_once() -> None:
+    rate = CommandRate(per_s=2.0, burst=2, total_per_s=100, total_burst=100)
+    refusals = [a for a in (rate.admit("eve", 0.0) for _ in range(10)) if not a.admitted]
+    assert [a.report for a in refusals] == [True] + [False] * 7
+    assert refusals[-1].refused_in_flood == 8
+    rate.admit("eve", 10.0)  # its bucket full again: the flood is over
+    flood = [rate.admit("eve", 10.0) for _ in range(3)]
+    assert [a.report for a in flood if not a.admitted] == [True, False]
+
+
+def test_a_stop_is_always_taken_and_spends_tokens() -> None:
+    rate = CommandRate(per_s=1.0, burst=2, total_per_s=100, total_burst=100)
+    assert all(rate.admit("eve", 0.0, always=True).admitted for _ in range(50))
+    assert not rate.admit("eve", 0.0).admitted, "the stops used the sender's tokens"
+
+
+def test_many_names_share_the_total() -> None:
+    rate = CommandRate(per_s=2.0, burst=5, total_per_s=10, total_burst=20)
+    answers = [rate.admit(f"name{i}", 0.0) for i in range(1000)]
+    assert sum(a.admitted for a in answers) == 20
+    assert sum(a.report for a in answers) == MAX_SENDERS, "the log names the first ones only"
+    assert sum(rate.admit(f"late{i}", 1.0).admitted for i in range(100)) == 10
+    assert len(rate._senders) <= MAX_SENDERS  # memory bounded under a flood of names
+
+
+@pytest.mark.timeout(60)
+def test_a_flood_of_commands_is_answered_too_many_and_obeyed_at_the_rate(
+        rig: dict, caplog: pytest.LogCaptureFixture) -> None:
+    """3,000 disarms from one sender in about a second: at most its burst and rate are
+    carried out, the rest answered "too many", logged once; an operator under another name
+    is still obeyed at once."""
+    operator, world = rig["operator"], rig["world"]
+    wait_for(lambda: operator.states, timeout=10)
+    start = time.monotonic()
+    for i in range(3000):
+        world.publish(keys.GANTRY_COMMAND, m.GantryCommand(
+            measured_s=time.time(), command="disarm", operator="flood", id=f"flood-{i}"))
+    seconds = time.monotonic() - start
+    flood = lambda: [r for r in operator.replies if r.id.startswith("flood-")]  # noqa: E731
+    wait_for(lambda: len(flood()) >= 100, timeout=10, why=lambda: f"{len(flood())} replies")
+    taken = [r for r in flood() if "too many" not in r.detail]
+    bound = 5 + 2 * (seconds + 1.0)
+    assert len(taken) <= bound, f"{len(taken)} of 3000 carried out in {seconds:.1f} s"
+    assert any("too many commands from 'flood'" in r.detail for r in flood())
+    assert sum("too many commands from 'flood'" in r.message for r in caplog.records) == 1
+    reply = operator.send("stop")  # the test operator's own bucket
+    assert reply.accepted and reply.mode == "stopped"
