@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from common.files import write_atomically
+
 PASSPOINT_COLUMNS = ("X", "Y", "Z", "u", "v")
 TRACK_COLUMNS = ("t", "X", "Y", "Z")
 
@@ -74,8 +76,7 @@ def read_track(path: Path) -> Track:
 
 
 def write_passpoints(path: Path, points: Passpoints) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(format_passpoints(points))
+    write_atomically(path, format_passpoints(points).encode())  # calib solve may read it
 
 
 def format_passpoints(points: Passpoints) -> str:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import sys
 
+from common.files import write_atomically
 from common.settings import ConfigError, read_lab_file
 from services.deploy.render import (
     COMPOSE_FILE,
@@ -43,8 +44,7 @@ def render_files(args) -> int:  # type: ignore[no-untyped-def]
         return EXIT_DRIFT if drifted else 0
     for name, text in rendered.items():
         path = args.out / name
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text)
+        write_atomically(path, text.encode())  # compose and the router read them
         print(f"wrote {path} (cameras: {names})")
     print("new identities need a password: deploy/zenoh/make-secrets; then restart the router "
           "and start the new services (docker compose up -d)")

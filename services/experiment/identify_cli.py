@@ -8,6 +8,7 @@ import sys
 import time
 from pathlib import Path
 
+from common.files import write_atomically
 from services.experiment.identify import (
     PARAMETERS,
     TOLERANCE,
@@ -66,8 +67,7 @@ def identify(args: argparse.Namespace, gantry: GantrySettings, sim: SimSettings)
 
 
 def _write(path: Path, report: dict) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(report, indent=1) + "\n")
+    write_atomically(path, (json.dumps(report, indent=1) + "\n").encode())
 
 
 def parse_seeds(text: str) -> tuple[int, ...]:

@@ -14,6 +14,7 @@ import numpy as np
 
 from common.bus import Bus, BusUnreachable, open_session
 from common.crane_frame import CraneFrame
+from common.files import write_atomically
 from common.heightmap import HeightMap
 from common.tracking_camera import TrackingCameraModel
 from services.gantry.commissioning_run import (
@@ -211,7 +212,7 @@ def _progress(what: str) -> None:
 def _report(args: argparse.Namespace, settings: GantrySettings, outcome: Outcome) -> None:
     text = toml_fragment(outcome, settings.tracking_camera)
     if args.toml:
-        args.toml.write_text(text)
+        write_atomically(args.toml, text.encode())
     out = sys.stderr if args.json else sys.stdout
     print(_table(outcome), file=out)
     for note in outcome.notes:

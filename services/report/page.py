@@ -9,6 +9,7 @@ import json
 import sys
 from pathlib import Path
 
+from common.files import write_atomically
 from common.heightmap import HeightMap
 from common.mcap_file import RecordingError
 from common.settings import ConfigError, load_settings
@@ -37,8 +38,8 @@ def write_report(rec: Recording, out_dir: Path, height_map: HeightMap | None,
         "aim.png": plots.aim_plot(rec, out_dir / "aim.png"),
     }
     figures = summary(rec)
-    (out_dir / "summary.json").write_text(json.dumps(figures, indent=1) + "\n")
-    (out_dir / "index.html").write_text(render_html(rec, figures, written))
+    write_atomically(out_dir / "summary.json", (json.dumps(figures, indent=1) + "\n").encode())
+    write_atomically(out_dir / "index.html", render_html(rec, figures, written).encode())
     return written
 
 
