@@ -25,6 +25,7 @@ from benchmarks.faults.lab import (
 from benchmarks.faults.meters import Meters
 from benchmarks.faults.process_faults import ProcessFaults
 from benchmarks.faults.rows import GOAL_FLAT_MB, GOAL_MEMORY_MB, Row, largest, least_growth
+from benchmarks.faults.trust_faults import TrustFaults
 from benchmarks.faults.web_faults import WebFaults
 from common import keys
 from common import messages as m
@@ -33,13 +34,15 @@ from common.settings import BusSettings, ZenohSettings
 from services.gantry.settings import GantrySettings
 
 
-class Campaign(BusFaults, ProcessFaults, WebFaults):
+class Campaign(BusFaults, ProcessFaults, WebFaults, TrustFaults):
     """The operator's side and the bookkeeping; the faults are in the bases."""
 
     def __init__(self, up: subprocess.Popen, meters: Meters, bus: Bus, session: zenoh.Session,
-                 short: bool, crane_port: int, web_url: str = "") -> None:
+                 short: bool, crane_port: int, web_url: str = "", endpoint: str = "",
+                 folder: Path = Path()) -> None:
         self.up, self.meters, self.bus, self.session = up, meters, bus, session
         self.short, self.crane_port, self.web_url = short, crane_port, web_url
+        self.endpoint, self.folder = endpoint, folder  # the lab's router; its files
         self.gantry = GantrySettings()
         self.max_age_s = BusSettings().max_age_s
         self.rows: list[Row] = []
@@ -71,8 +74,9 @@ class Campaign(BusFaults, ProcessFaults, WebFaults):
             state = self.meters.states[-1] if self.meters.states else None
             if state is not None and state.measured_s <= since_s:
                 return False  # a state from before (a killed gantry's last one)
-            if state is not None and state.mode != "armed":
+            if state is not None and state.mode == "stopped":
                 self.operator("reset")  # clears a latched fault, as an operator would
+            if state is not None and state.mode != "armed":
                 self.operator("arm")  # refused without a fresh estimate: asked again
             return state is not None and state.mode == "armed" and state.status == "tracking"
         return wait_until(tracking, timeout, period=0.5)
@@ -165,8 +169,9 @@ class Campaign(BusFaults, ProcessFaults, WebFaults):
         self.log(f"{fault}: {self.rows[-1].measured}")
 
 
-STEPS = ["quiet", "fuzz", "churn", "bombs", "frames", "pose", "streams", "stalls", "tracker",
-         "modbus", "kill"]
+STEPS = ["quiet", "fuzz", "churn", "bombs", "frames", "pose", "drift", "calibration-flood",
+         "command-flood", "origin", "crater-file", "streams", "stalls", "tracker", "modbus",
+         "kill"]
 
 
 def run(short: bool, per_key: int, churn: int, folder: Path,
@@ -179,7 +184,7 @@ def run(short: bool, per_key: int, churn: int, folder: Path,
         meters = Meters(session, bus, ports["crane"])
         try:
             campaign = Campaign(up, meters, bus, session, short, ports["crane"],
-                                f"http://127.0.0.1:{ports['web']}")
+                                f"http://127.0.0.1:{ports['web']}", endpoint, folder)
             campaign.log("lab starting; waiting until every service is alive")
             if not wait_until(lambda: all(campaign.meters.pid(s) for s in ALIVE), 90, 0.5):
                 raise SystemExit(f"the lab did not come up: see {folder / 'logs'}")
@@ -197,6 +202,11 @@ def run(short: bool, per_key: int, churn: int, folder: Path,
                 "bombs": campaign.decode_bombs,
                 "frames": lambda: campaign.spoofed_frames(baseline),
                 "pose": campaign.spoofed_pose,
+                "drift": lambda: campaign.drifting_frames(baseline),
+                "calibration-flood": lambda: campaign.calibration_flood(baseline),
+                "command-flood": lambda: campaign.command_flood(baseline),
+                "origin": campaign.foreign_origin,
+                "crater-file": campaign.crater_rewrite,
                 "streams": campaign.event_streams,
                 "stalls": lambda: [campaign.stall("gantry", seconds) for seconds in
                                    ((0.3, 1.0) if short else (0.3, 1.0, 3.0))],

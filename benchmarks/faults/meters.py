@@ -44,6 +44,8 @@ class Meters:
         bus.subscribe(keys.CALIB_POSE, lambda p: self._add(self.poses, p), latest=False)
         self.ptz: list[tuple[float, m.PtzTruth, m.RobotTruth]] = []  # t, camera, robot then
         bus.subscribe(keys.TRUTH_PTZ, self._on_ptz, latest=False)
+        self.ptz_states: list[m.PtzState] = []  # what the PTZ services say (status manual)
+        bus.subscribe(keys.PTZ_STATE, self.ptz_states.append, latest=False)
         self.stops: list[tuple[float, str]] = []  # when the gantry said it stopped, and why
         bus.subscribe(keys.GANTRY_STATE, self._on_state, latest=False)
         bus.subscribe(keys.GANTRY_COMMAND_REPLY, self.replies.append, latest=False)

@@ -22,7 +22,8 @@ def valid(topic: keys.Topic, payload: bytes) -> bool:
     return True
 
 
-EXTREMES = [1e308, -1e308, 2**63, -(2**63), 0, -1, "", "x" * 70000, None, [], {}, True,
+EXTREMES = [1e308, -1e308, 2**63, -(2**63), 2**53, 2**53 - 1, float(2**53), float("inf"),
+            float("-inf"), float("nan"), 0, -1, "", "x" * 70000, None, [], {}, True,
             b"\xff" * 100, [1.0] * 5000]
 
 

@@ -154,30 +154,47 @@ class Controller:
 
     def _measure(self, frames: Sequence[Frame], crane_xy: np.ndarray, horizon_s: float | None
                  ) -> dict:
-        """The newest of ``frames`` that shows the robot (or the newest, showing none)."""
-        newest = None
+        """The newest of ``frames`` that shows the robot where the motion capture sees it
+        (within ``fix_check_mm``); of frames captured at the same time — a frame sent again,
+        changed — the one nearest the motion capture's robot. A frame whose fix disagrees
+        yields to an older one that agrees (a spoofed frame with a slowly drifting spot once
+        dragged the crane 827 mm); none agreeing, the newest that shows the robot (the cross
+        check's window judges it); none showing it, the newest."""
+        looked: list[_Looked] = []
         for captured, image in frames:
-            found = detect(image, max_markers=MAX_MARKERS)
-            xyz, rejected = self._locate(found, crane_xy, captured)
-            newest = newest or (captured, image, found, xyz, rejected)
-            if xyz is not None:
+            chosen = _agreeing(looked, self.tracking_check.tolerance_mm)
+            if chosen is not None and captured < chosen.captured:
                 break
-        else:
-            assert newest is not None, "at least one frame"
-            captured, image, found, xyz, rejected = newest
+            found = detect(image, max_markers=MAX_MARKERS)
+            xyz, rejected, pixel = self._locate(found, crane_xy, captured)
+            looked.append(_Looked(captured, image, found, xyz, rejected, pixel,
+                                  self._mocap_off(xyz, captured)))
+        assert looked, "at least one frame"
+        chosen = (_agreeing(looked, self.tracking_check.tolerance_mm)
+                  or next((f for f in looked if f.xyz is not None), looked[0]))
+        captured, xyz = chosen.captured, chosen.xyz
         if xyz is not None:
             self._seen = [*self._seen[-1:], (captured, xyz[:2])]
+            self.last_pixel = chosen.pixel
         self.estimate = self.predictor.update(captured, None if xyz is None else xyz[:2],
                                               horizon_s)
         self.estimate_s = captured if self.estimate is not None else None
-        return {"frame_s": captured, "frame_shape": image.shape, "detection": found,
-                "measured_xyz": xyz, "rejected_mm": rejected}
+        return {"frame_s": captured, "frame_shape": chosen.image.shape,
+                "detection": chosen.found, "measured_xyz": xyz, "rejected_mm": chosen.rejected}
+
+    def _mocap_off(self, xyz: np.ndarray | None, captured: float) -> float | None:
+        """How far a fix is from the motion capture's robot at the frame's time (None: no fix,
+        or no check)."""
+        if xyz is None or self._fix is None or not self.tracking_check.enabled:
+            return None
+        return float(np.hypot(*(xyz[:2] - self._fix.at(captured))))
 
     def _locate(self, found: Detection, crane_xy: np.ndarray, captured: float
-                ) -> tuple[np.ndarray | None, float | None]:
-        """The robot's marker in the world, or None; and how far off a refused spot was."""
+                ) -> tuple[np.ndarray | None, float | None, tuple[float, float] | None]:
+        """The robot's marker in the world, or None; how far off a refused spot was; the
+        marker's pixel."""
         if not found.markers:
-            return None, None
+            return None, None, None
         ref = self.last_pixel or self.camera.principal
         marker = closest(found.markers, *ref)  # the paper's choice (§3.1)
         assert marker is not None
@@ -191,14 +208,13 @@ class Controller:
                       if m is not marker for w in [self._world(m, crane_xy)]]
             nearest = min(others, key=lambda o: o[0], default=None)
             if nearest is None or nearest[0] > gate:
-                return None, off
+                return None, off, None
             _, marker, xyz = nearest
         if (off_mocap := self._off_mocap(xyz)) is not None:
-            return None, off_mocap
+            return None, off_mocap, None
         if self._disagrees(xyz, captured):
-            return None, self.tracking_check.off_mm
-        self.last_pixel = (marker.u, marker.v)
-        return xyz, None
+            return None, self.tracking_check.off_mm, None
+        return xyz, None, (marker.u, marker.v)
 
     def _disagrees(self, xyz: np.ndarray, captured: float) -> bool:
         """Compare the fix with the motion capture's robot at the frame's time; a fix that
@@ -233,3 +249,28 @@ class Controller:
                 return p1 + (p1 - p0) / (t1 - t0) * (captured - t1)
             return p1
         return None if self._fix is None else self._fix.xy_mm
+
+
+@dataclass(frozen=True)
+class _Looked:
+    """One frame looked at: when it was captured, what was found, where, how far from the
+    motion capture's robot."""
+
+    captured: float
+    image: np.ndarray
+    found: Detection
+    xyz: np.ndarray | None
+    rejected: float | None
+    pixel: tuple[float, float] | None
+    mocap_off_mm: float | None
+
+
+def _agreeing(looked: Sequence[_Looked], tolerance_mm: float) -> _Looked | None:
+    """Of the frames (newest first) whose fix agrees with the motion capture (or cannot be
+    compared), the newest; of those captured at that time, the nearest the motion capture."""
+    agreeing = [f for f in looked if f.xyz is not None
+                and (f.mocap_off_mm is None or f.mocap_off_mm <= tolerance_mm)]
+    if not agreeing:
+        return None
+    newest = [f for f in agreeing if f.captured == agreeing[0].captured]
+    return min(newest, key=lambda f: f.mocap_off_mm or 0.0)

@@ -78,6 +78,35 @@ def test_a_newest_frame_without_the_robot_gives_way_to_an_older_one_that_shows_i
     assert nothing.frame_s == 1.49 and nothing.measured_xyz is None, "the newest, if none"
 
 
+def test_a_frame_sent_again_with_the_spot_moved_yields_to_the_one_the_motion_capture_agrees_with(
+        ) -> None:
+    """A real frame sent again with its spot drifted a little (same capture time, passes the
+    gate) once dragged the crane 827 mm: of frames captured together the one nearest the
+    motion capture's robot is used; a newer frame that disagrees beyond ``fix_check_mm``
+    yields to an older one that agrees; without the motion capture, the newest."""
+    crane = np.array([0.0, 0.0])
+    robot = Fix(1.2, np.array([120.0, 0.0]))
+    for drift in (60.0, 250.0):  # within the gate and the check's tolerance; beyond it
+        control = Controller(SETTINGS, FLAT)
+        control.step(1.0, (0.96, _frame([(100.0, 0.0)], crane)), crane, fix=robot)
+        copy = (1.20, _frame([(120.0 + drift, 0.0)], crane))
+        real = (1.20, _frame([(120.0, 0.0)], crane))
+        step = control.step(1.25, copy, crane, fix=robot, older=[real])
+        assert step.measured_xyz is not None and step.frame_s == 1.20
+        np.testing.assert_allclose(step.measured_xyz[:2], [120.0, 0.0], atol=1.5)
+    control = Controller(SETTINGS, FLAT)
+    control.step(1.0, (0.96, _frame([(100.0, 0.0)], crane)), crane, fix=robot)
+    newer_off = (1.24, _frame([(300.0, 0.0)], crane))  # 180 mm from the motion capture
+    step = control.step(1.25, newer_off, crane, fix=robot,
+                        older=[(1.20, _frame([(121.0, 0.0)], crane))])
+    assert step.frame_s == 1.20, "the older frame that agrees"
+    blind = Controller(SETTINGS, FLAT)  # no motion capture: the newest, as the paper
+    blind.step(1.0, (0.96, _frame([(100.0, 0.0)], crane)), crane)
+    step = blind.step(1.25, (1.20, _frame([(160.0, 0.0)], crane)), crane,
+                      older=[(1.20, _frame([(120.0, 0.0)], crane))])
+    np.testing.assert_allclose(step.measured_xyz[:2], [160.0, 0.0], atol=1.5)
+
+
 def test_of_several_spots_it_keeps_the_one_nearest_the_last() -> None:
     control = Controller(SETTINGS, FLAT)
     crane = np.array([0.0, 0.0])
