@@ -134,12 +134,7 @@ class BusFaults:
                 measured_s=time.time(), camera="tracking", seq=seq, width_px=640,
                 height_px=480, encoding="mono8", data=frame.tobytes()))
             time.sleep(1 / 30)
-        crane = self.meters.crane_window(start)
-        worst = float(crane[:, 3].max()) if len(crane) else float("nan")
-        bound = max(2 * baseline["max_mm"], baseline["max_mm"] + 100)
-        aim, back = self.recovery(time.monotonic(), baseline["max_mm"])
-        after, misses = self._back_text(aim, back)
-        misses = ([] if worst <= bound else ["gap"]) + misses
+        worst, aim, back, after, misses = self.crane_held(start, time.monotonic(), baseline)
         self.rows.append(Row(
             "spoofed frames", "crane stays with the robot (max gap ≤ 2× the baseline's), "
             "back ≤ 5 s after",

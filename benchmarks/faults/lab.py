@@ -39,12 +39,17 @@ def running_lab(folder: Path, mocap: dict[str, float] | None = None
     try:
         yield up, lab, endpoint
     finally:
-        up.send_signal(signal.SIGINT)
-        try:
-            up.wait(30)
-        except subprocess.TimeoutExpired:
-            up.kill()
-            up.wait()
+        interrupt(up, 30)
+
+
+def interrupt(proc: subprocess.Popen, timeout_s: float) -> None:
+    """Ctrl-C, as a user would; killed if it has not ended within ``timeout_s``."""
+    proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(timeout_s)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
 
 
 def children(pid: int) -> list[int]:

@@ -16,7 +16,7 @@ import time
 import numpy as np
 import websockets
 
-from benchmarks.faults.lab import ALIVE, ROOT, wait_until
+from benchmarks.faults.lab import ALIVE, ROOT, interrupt, wait_until
 from benchmarks.faults.rows import Row, duration_text
 from common import keys
 from common import messages as m
@@ -74,6 +74,17 @@ class TrustFaults:
                 return t - end
         return None
 
+    def crane_held(self, start: float, end: float, baseline: dict
+                   ) -> tuple[float, float | None, float | None, str, list[str]]:
+        """Spoofed frames from ``start`` to ``end``: the crane's largest gap to the robot
+        meanwhile (goal: ≤ 2× the baseline's, or + 100 mm), and the recovery after them."""
+        crane = self.meters.crane_window(start, end)
+        worst = float(crane[:, 3].max()) if len(crane) else float("nan")
+        bound = max(2 * baseline["max_mm"], baseline["max_mm"] + 100)
+        aim, back = self.recovery(end, baseline["max_mm"])
+        after, misses = self._back_text(aim, back)
+        return worst, aim, back, after, ([] if worst <= bound else ["dragged"]) + misses
+
     def _back_text(self, aim: float | None, crane: float | None) -> tuple[str, list[str]]:
         misses = ([] if aim is not None else ["aim not back"]) + \
             ([] if crane is not None else ["crane not back"])
@@ -103,12 +114,7 @@ class TrustFaults:
         wait_until(lambda: time.monotonic() > start + seconds, seconds + 5, 0.2)
         end = time.monotonic()
         subscription.close()
-        crane = self.meters.crane_window(start, end)
-        worst = float(crane[:, 3].max()) if len(crane) else float("nan")
-        bound = max(2 * baseline["max_mm"], baseline["max_mm"] + 100)
-        aim, back = self.recovery(end, baseline["max_mm"])
-        after, misses = self._back_text(aim, back)
-        misses = ([] if worst <= bound else ["dragged"]) + misses
+        worst, aim, back, after, misses = self.crane_held(start, end, baseline)
         self.rows.append(Row(
             "drifting spoofed frames", "crane stays with the robot (max gap ≤ 2× the "
             "baseline's), back ≤ 5 s after",
@@ -202,11 +208,7 @@ class TrustFaults:
             statuses = {origin: _handshake(port, origin) for origin in
                         ("https://evil.example", "http://localhost:3000", None)}
         finally:
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+            interrupt(proc, 10)
         ok = statuses == {"https://evil.example": 403, "http://localhost:3000": 101, None: 101}
         self.rows.append(Row(
             "foreign Origin at stb foxglove", "a foreign page refused (403); this machine's "

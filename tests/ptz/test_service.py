@@ -84,6 +84,25 @@ def _publish_robot(world: Bus, xyz: np.ndarray) -> None:
         measured_s=time.time(), label="robot", x_mm=xyz[0], y_mm=xyz[1], z_mm=xyz[2],
         vx_mm_s=0.0, vy_mm_s=0.0, vz_mm_s=0.0))
 
+def _following(service: dict, latency_s: float = 0.05, within_deg: float = 0.5
+               ) -> tuple[CameraServer, Callable[[], bool]]:
+    """Start the service with a sim camera and the true pose; and the check that it follows
+    the robot at ``TARGET`` (a robot sample sent with each look)."""
+    server = _camera_server(service["port"], latency_s)
+    service["servers"].append(server)
+    service["thread"].start()
+    world, states = service["world"], service["states"]
+    wait_for(lambda: states)  # the service is up and listening
+    _publish_pose(service)
+
+    def following() -> bool:
+        _publish_robot(world, TARGET)
+        return bool(states) and states[-1].status == "tracking" and \
+            states[-1].aim_error_deg < within_deg
+
+    return server, following
+
+
 
 def test_waits_for_a_pose_then_follows_the_robot(service: dict) -> None:
     service["servers"].append(_camera_server(service["port"]))
@@ -328,18 +347,8 @@ def test_a_move_by_someone_else_pauses_following_then_it_follows_again(service: 
     ``manual_pause_s`` (status manual), then the service takes it back to the robot."""
     service["node"].settings = service["node"].settings.model_copy(
         update={"manual_pause_s": 2.0})
-    server = _camera_server(service["port"])
-    service["servers"].append(server)
-    service["thread"].start()
+    server, following = _following(service)
     world, states = service["world"], service["states"]
-    wait_for(lambda: states)  # the service is up and listening
-    _publish_pose(service)
-
-    def following() -> bool:
-        _publish_robot(world, TARGET)
-        return bool(states) and states[-1].status == "tracking" and \
-            states[-1].aim_error_deg < 0.5
-
     wait_for(following, timeout=5, period=0.05)
     with httpx.Client(base_url=f"http://127.0.0.1:{server.port}", timeout=2,
                       auth=httpx.DigestAuth("root", "pass")) as operator:
@@ -364,16 +373,8 @@ def test_a_move_by_someone_else_pauses_following_then_it_follows_again(service: 
 def test_an_operators_hand_holds_moves_and_releases_the_camera(service: dict) -> None:
     """From the page (stb/ptz/{camera}/hand): held, the camera follows no more and its own
     moves are not someone else's; moved by hand and to a preset; released, it follows."""
-    server = _camera_server(service["port"])
-    service["servers"].append(server)
-    service["thread"].start()
+    server, following = _following(service)
     world, states = service["world"], service["states"]
-    wait_for(lambda: states)
-    _publish_pose(service)
-
-    def following() -> bool:
-        _publish_robot(world, TARGET)
-        return states[-1].status == "tracking" and states[-1].aim_error_deg < 0.5
 
     def hand(action: str, **values: object) -> None:
         world.publish(keys.PTZ_HAND, m.PtzHand(measured_s=time.time(), camera="ptz1",
@@ -409,17 +410,8 @@ def test_a_flood_of_calibration_requests_never_makes_its_own_moves_someone_elses
     leases): the service's own calibration moves, queued in the camera, are never taken for
     someone else's hand; once the flood ends the camera follows the robot again."""
     service["node"].settings = service["node"].settings.model_copy(update={"state_hz": 5.0})
-    server = _camera_server(service["port"], latency_s=PtzHead.latency_s)  # the sim's own
-    service["servers"].append(server)
-    service["thread"].start()
+    _, following = _following(service, PtzHead.latency_s, within_deg=1.0)  # the sim's own
     world, states = service["world"], service["states"]
-    wait_for(lambda: states)
-    _publish_pose(service)
-
-    def following() -> bool:
-        _publish_robot(world, TARGET)
-        return bool(states) and states[-1].status == "tracking" and \
-            states[-1].aim_error_deg < 1.0
 
     wait_for(following, timeout=5, period=0.05)
     rng = np.random.default_rng(5)
