@@ -45,10 +45,9 @@ log = logging.getLogger(__name__)
 
 def run(node: Node[GantrySettings]) -> None:
     s = node.settings
-    try:
-        heights = HeightMap.load(s.height_map)
-    except ValueError as err:
-        raise StartupError(f"gantry.height_map: {err}") from err
+    heights = _height_map(node)
+    if heights is None:
+        return  # asked to stop while it waited
     log.info("detector ready (%.1f s)", warm_up())  # before the crane is driven, not mid-run
     crane = ModbusCrane(s.crane_host, s.crane_port, s.crane_timeout_s, s.crane,
                         s.crane.frame())
@@ -72,6 +71,25 @@ def run(node: Node[GantrySettings]) -> None:
         run_every(1 / s.poll_hz, node.stop, control.poll, "crane poll")
     finally:
         crane.close()
+
+
+def _height_map(node: Node[GantrySettings]) -> HeightMap | None:
+    """The crater's height map. Not there yet (a fresh lab: the sim writes it as it starts),
+    it is waited for, saying so in the health; a file that is there but not a height map
+    stops the start (exit 4, naming the field)."""
+    path = node.settings.height_map
+    if not path.exists():
+        log.warning("waiting for gantry.height_map %s (the sim writes it as it starts; a real "
+                    "lab's comes from stb crater import)", path)
+        node.set_status("degraded", f"waiting for the crater height map {path}")
+        while not path.exists():
+            if node.stop.wait(0.2):
+                return None
+        node.set_status("ok")
+    try:
+        return HeightMap.load(path)
+    except ValueError as err:
+        raise StartupError(f"gantry.height_map: {err}") from err
 
 
 class LatestFix:

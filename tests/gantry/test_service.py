@@ -16,7 +16,8 @@ from common import keys
 from common import messages as m
 from common.bus import Bus
 from common.crane_registers import FAULT_WATCHDOG
-from common.node import Node
+from common.heightmap import HeightMap
+from common.node import Node, StartupError
 from services.gantry.service import run
 from services.gantry.settings import GantrySettings
 from tests.conftest import free_port, wait_for
@@ -158,3 +159,32 @@ def test_the_crane_holds_while_the_router_is_down_and_tracks_again_after(
         router.wait(5)
         crane.close()
 
+
+
+def test_on_a_fresh_lab_it_waits_for_the_crater_map_and_refuses_a_bad_one(
+        tmp_path: Path, make_bus: Callable[..., Bus], compiled_detector: None) -> None:
+    """A fresh lab: the gantry may start before the sim has written the crater; it waits,
+    saying so in its health, and starts once the map is there (it used to exit 4 and be
+    restarted). A file that is not a height map stops it, naming the field."""
+    crane = CraneRig()
+    path = tmp_path / "run" / "crater.npz"
+    node = Node("gantry", GantrySettings(crane_port=crane.port, height_map=path), make_bus())
+    states: list[m.CraneState] = []
+    make_bus().subscribe(keys.GANTRY_STATE, states.append, latest=False)
+    thread = threading.Thread(target=run, args=(node,), daemon=True)
+    thread.start()
+    try:
+        wait_for(lambda: "waiting for the crater height map" in node.health().detail,
+                 why=lambda: node.health().detail)
+        assert thread.is_alive() and not states
+        HeightMap(np.zeros((3, 3), np.float32), -5000, -5000, 5000).save(path)
+        wait_for(lambda: states, timeout=15)
+        assert "height map" not in node.health().detail, "no longer waiting"
+    finally:
+        node.stop.set()
+        thread.join(5)
+        crane.close()
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a map")
+    with pytest.raises(StartupError, match="gantry.height_map"):
+        run(Node("gantry", GantrySettings(crane_port=free_port(), height_map=bad), make_bus()))
