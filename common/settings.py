@@ -234,11 +234,16 @@ def _env(prefix: str, environ: Mapping[str, str]) -> dict[str, Any]:
         target = out
         for parent in parents:
             target = target.setdefault(parent, {})
-        target[leaf] = _maybe_json(value)
+        target[leaf] = setting_value(value)
     return out
 
 
-def _maybe_json(value: str) -> Any:
+def setting_value(value: str) -> Any:
+    """A setting's value given as text (an environment variable, ``--set FIELD=VALUE``): a
+    list, table or quoted string in JSON, ``null`` for none; anything else as it is written,
+    for the field's type to read (``7`` is a number to a number and a name to a name)."""
+    if value == "null":
+        return None
     if value[:1] in ("[", "{", '"'):
         try:
             return json.loads(value)

@@ -7,13 +7,13 @@ parses its flags (and answers ``--help``) before it imports Zenoh, pydantic, num
 from __future__ import annotations
 
 import argparse
-import json
 import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from common.errors import ConfigError
+from common.settings import setting_value
 
 EXIT_CONFIG = 2
 NUMBERS = re.compile(r"^-\.?\d[\d.,eE+-]*$")
@@ -43,7 +43,8 @@ def base_parser(prog: str, description: str) -> argparse.ArgumentParser:
                         help="router endpoint, e.g. tcp/10.0.0.2:7447 (repeatable)")
     parser.add_argument("--log-level", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                        help="override one setting, e.g. --set bus.max_age_s=0.2 (JSON values)")
+                        help="override one setting, e.g. --set bus.max_age_s=0.2 (lists and "
+                        "tables in JSON)")
     return parser
 
 
@@ -73,10 +74,7 @@ def overrides_from(args: argparse.Namespace) -> dict[str, Any]:
         target = out
         for p in parents:
             target = target.setdefault(p, {})
-        try:
-            target[leaf] = json.loads(raw)
-        except json.JSONDecodeError:
-            target[leaf] = raw
+        target[leaf] = setting_value(raw)  # read as the environment's values are
     if args.instance:
         out["instance"] = args.instance
     if args.log_level:

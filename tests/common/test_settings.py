@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from common.settings import ConfigError, load_settings
+from services.args import base_parser, overrides_from
 from services.router.settings import RouterSettings
 from services.supervisor import UpSettings
 
@@ -114,3 +115,28 @@ def test_a_binary_lab_file_is_named_not_a_traceback(tmp_path: Path) -> None:
     path.write_bytes(b"\x89PNG\r\n\x1a\n\x00\xff\xfe")
     with pytest.raises(ConfigError, match=f"lab config {path} is not valid TOML: not UTF-8"):
         load_settings(RouterSettings, path, environ={})
+
+
+
+@pytest.mark.parametrize(("field", "text", "expected"), [
+    ("instance", "7", "7"),  # a name: the environment's "7", the flag's once a number
+    ("instance", "true", "true"),
+    ("bus.max_age_s", "0.2", 0.2),
+    ("listen", '["tcp/127.0.0.1:7447"]', ["tcp/127.0.0.1:7447"]),
+    ("log_level", "null", ConfigError),  # none: no log level, refused alike
+])
+def test_a_flag_and_the_environment_read_a_value_alike(field: str, text: str,
+                                                        expected: object) -> None:
+    """``--set FIELD=VALUE`` and ``STB_ROUTER__FIELD=VALUE`` give the same setting."""
+    flags = overrides_from(base_parser("stb router", "").parse_args(["--set", f"{field}={text}"]))
+    env = {"STB_ROUTER__" + field.upper().replace(".", "__"): text}
+    if expected is ConfigError:
+        for overrides, environ in ((flags, {}), ({}, env)):
+            with pytest.raises(ConfigError, match=field):
+                load_settings(RouterSettings, None, overrides, environ=environ)
+        return
+    by_flag = load_settings(RouterSettings, None, flags, environ={})
+    by_env = load_settings(RouterSettings, None, {}, environ=env)
+    read = (lambda s: s.bus.max_age_s) if field == "bus.max_age_s" else (
+        lambda s: getattr(s, field))
+    assert (read(by_flag), read(by_env)) == (expected, expected)
