@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 from common.errors import ConfigError
+from common.lab_views import DEFAULT_HEIGHT_MAP
 from services.args import Parser, plain
 from services.experiment.paper import TABLES
 from services.gantry.algorithms import ALGORITHMS
@@ -95,7 +96,7 @@ def _parser() -> argparse.ArgumentParser:
     for sub in (g, i):
         sub.add_argument("--lab", type=Path, metavar="FILE",
                          help="the lab file: its [gantry] and [sim] settings (else defaults)")
-        sub.add_argument("--crater", type=Path, default=Path("run/sim/crater.npz"),
+        sub.add_argument("--crater", type=Path, default=DEFAULT_HEIGHT_MAP,
                          help="height map (made from the sim's default seed if missing)")
     return parser
 

@@ -7,6 +7,7 @@ from pathlib import Path
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
 from common.crane_frame import CraneConnection
+from common.lab_views import DEFAULT_HEIGHT_MAP
 from common.settings import ServiceSettings, above_its_minimum
 from common.tracking_camera import TrackingCameraModel
 from services.gantry.cycle import AFTER_REPORT_S
@@ -83,7 +84,7 @@ class GantrySettings(ServiceSettings):
     report_age_s: float = Field(0.05, ge=0, le=2, description="how old the position the "
                                 "controller reports is when it reports it (stb gantry identify)")
     max_horizon_s: float = Field(1.0, gt=0, le=3, description="never extrapolate further")
-    height_map: Path = Field(Path("run/sim/crater.npz"), description="laser scan (.npz)")
+    height_map: Path = Field(DEFAULT_HEIGHT_MAP, description="laser scan (.npz)")
     marker_height_mm: float = Field(80.0, ge=0, description="marker above the ground")
     x_min_mm: float = -3000.0
     x_max_mm: float = 3000.0

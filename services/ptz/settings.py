@@ -2,25 +2,10 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from pydantic import Field, model_validator
 
-from pydantic import BaseModel, ConfigDict, Field, SecretStr, model_validator
-
+from common.lab_views import CameraConnection, default_cameras
 from common.settings import ServiceSettings
-
-
-class CameraConnection(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    url: str = Field(pattern=r"^https?://")
-    user: str = "root"
-    password: SecretStr = SecretStr("pass")
-    auth: Literal["digest", "basic", "none"] = "digest"
-
-
-def _default_cameras() -> dict[str, CameraConnection]:
-    return {"ptz1": CameraConnection(url="http://127.0.0.1:8081"),
-            "ptz2": CameraConnection(url="http://127.0.0.1:8082")}
 
 
 class PtzSettings(ServiceSettings):
@@ -29,7 +14,7 @@ class PtzSettings(ServiceSettings):
     section = "ptz"
 
     instance: str = Field("ptz1", pattern=r"^[A-Za-z0-9_.-]{1,64}$")
-    cameras: dict[str, CameraConnection] = Field(default_factory=_default_cameras)
+    cameras: dict[str, CameraConnection] = Field(default_factory=default_cameras)
     timeout_s: float = Field(1.0, gt=0, description="every HTTP request to the camera")
     command_hz: float = Field(10.0, gt=0, le=30, description="at most this many moves a second")
     deadband_deg: float = Field(0.3, ge=0, description="smaller corrections are not sent")

@@ -18,6 +18,7 @@ import zenoh
 from pydantic import Field
 
 from common import messages as m
+from common.lab_views import DEFAULT_HEIGHT_MAP
 from common.node import stop_on_signals
 from common.settings import LogLevel, ServiceSettings
 from services.entry import ToolError, checked_key_exprs, tool_session, tool_settings
@@ -37,7 +38,7 @@ class FoxgloveSettings(ServiceSettings):
     host: str = Field("127.0.0.1", description="address to serve Foxglove on; 0.0.0.0 for the "
                       "lab LAN")
     port: int = Field(8765, ge=0, le=65535, description="Foxglove's default is 8765")
-    height_map: Path | None = Field(Path("run/sim/crater.npz"), description="the crater in "
+    height_map: Path | None = Field(DEFAULT_HEIGHT_MAP, description="the crater in "
                                     "the 3D scene (.npz); missing: a scene without it")
     scene_hz: float = Field(10.0, gt=0, le=100, description="3D scene updates a second")
     allowed_origins: list[str] = Field([], description="web pages (their Origin, e.g. "

@@ -22,6 +22,7 @@ from common import codec, keys
 from common import messages as m
 from common.heightmap import HeightMap
 from common.jpeg import jpeg_size
+from common.lab_views import DEFAULT_HEIGHT_MAP, CameraConnection, LabCameras
 from common.mcap_file import RecordWriter
 from common.node import stop_on_signals
 from common.settings import ConfigError, LogLevel, ServiceSettings, load_settings
@@ -31,7 +32,6 @@ from services.entry import (
     tool_session,
     tool_settings,
 )
-from services.ptz.settings import CameraConnection, PtzSettings
 from services.recording.foxglove import json_copy
 from services.recording.typed import LabScene
 from services.recording.video import CameraVideo
@@ -47,7 +47,7 @@ class RecordSettings(ServiceSettings):
     json_copy: bool = Field(True, description="also write the JSON copy Foxglove can show")
     typed: bool = Field(True, description="also write Foxglove's typed channels: the 3D "
                         "scene, camera transforms, images and their annotations")
-    height_map: Path | None = Field(Path("run/sim/crater.npz"), description="the crater in "
+    height_map: Path | None = Field(DEFAULT_HEIGHT_MAP, description="the crater in "
                                     "the 3D scene (.npz); missing: a scene without it")
     video: list[str] = Field(default_factory=list, description="cameras of [ptz.cameras] whose "
                              "video (VAPIX MJPEG) goes into the recording on video/<camera>")
@@ -182,7 +182,7 @@ def video_cameras(names: list[str], args: argparse.Namespace
     if not names:
         return []
     try:
-        known = load_settings(PtzSettings, args.lab).cameras
+        known = load_settings(LabCameras, args.lab).cameras
     except ConfigError as err:
         raise ToolError(str(err)) from err
     unknown = [n for n in names if n not in known]

@@ -16,7 +16,7 @@ from collections.abc import Callable
 
 import httpx
 
-from services.ptz.settings import CameraConnection
+from common.lab_views import CameraConnection
 
 log = logging.getLogger(__name__)
 VIDEO_PATH = "/axis-cgi/mjpg/video.cgi"

@@ -11,10 +11,10 @@ from pathlib import Path
 
 from common.files import write_atomically
 from common.heightmap import HeightMap
+from common.lab_views import GantryHeightMap
 from common.mcap_file import RecordingError
 from common.settings import ConfigError, load_settings
 from services.entry import EXIT_CONFIG
-from services.gantry.settings import GantrySettings
 from services.report import plots
 from services.report.data import Recording, read_recording, summary
 
@@ -99,7 +99,7 @@ def report(args: argparse.Namespace) -> int:
 def _height_map(args: argparse.Namespace) -> HeightMap | None:
     path = args.height_map
     if path is None:
-        default = load_settings(GantrySettings, args.lab).height_map
+        default = load_settings(GantryHeightMap, args.lab).height_map
         if not default.exists():
             return None
         path = default

@@ -13,6 +13,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from common.crane_frame import CraneFrame
 from common.crane_registers import RegisterMap
+from common.lab_views import DEFAULT_HEIGHT_MAP
 from common.settings import ServiceSettings, above_its_minimum
 from common.tracking_camera import TrackingCameraModel
 from services.sim.crane import CraneParams
@@ -179,7 +180,7 @@ class SimSettings(ServiceSettings):
                                "(commissioning: stb gantry identify)")
     loop: bool = Field(True, description="start the scenario again when it ends")
     seed: int = 1
-    crater_file: Path = Field(Path("run/sim/crater.npz"),
+    crater_file: Path = Field(DEFAULT_HEIGHT_MAP,
                               description="height map; generated from the seed if missing")
     truth_rate_hz: float = Field(20.0, gt=0, le=200)
     calibrate_first: list[str] = Field(

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from pydantic import Field, model_validator
 
+from common.lab_views import DEFAULT_HEIGHT_MAP
 from common.settings import ServiceSettings
 
 
@@ -30,7 +31,7 @@ class WebSettings(ServiceSettings):
                                  "recordings (stb record) and their reports go")
     calibration_count: int = Field(100, ge=6, le=10_000, description="passpoints a calibration "
                                    "started from the page collects")
-    height_map: Path | None = Field(Path("run/sim/crater.npz"),
+    height_map: Path | None = Field(DEFAULT_HEIGHT_MAP,
                                     description="crater height map (.npz) drawn under the "
                                     "tracks; missing file: a plain grid")
     track_s: float = Field(60.0, gt=0, le=3600, description="robot track shown, seconds")

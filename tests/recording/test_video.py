@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from services.ptz.settings import CameraConnection
+from common.lab_views import CameraConnection
 from services.recording.video import CameraVideo, MjpegParts, VideoError, boundary_of
 from tests.conftest import stb_process, wait_for
 from tests.ports import free_port

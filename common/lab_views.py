@@ -1,0 +1,53 @@
+"""What tools read of another service's lab-file section, defined once here so that no tool
+imports a service: the PTZ cameras and how to reach them (``[ptz] cameras``, which the PTZ
+services, ``stb record --video`` and the recording's video read) and where the crater's
+height map is (``height_map``, read by the gantry, the page, Foxglove, recordings and
+``stb report``). A view reads its fields of a section and leaves the rest to the service
+that owns it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import ClassVar, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, SecretStr
+
+from common.settings import ServiceSettings
+
+DEFAULT_HEIGHT_MAP = Path("run/sim/crater.npz")
+"""Where the sim writes the crater as it starts (a real lab: ``stb crater import``)."""
+
+
+class CameraConnection(BaseModel):
+    """How to reach one AXIS PTZ camera (VAPIX over HTTP)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    url: str = Field(pattern=r"^https?://")
+    user: str = "root"
+    password: SecretStr = SecretStr("pass")
+    auth: Literal["digest", "basic", "none"] = "digest"
+
+
+def default_cameras() -> dict[str, CameraConnection]:
+    """The sim's two cameras on this machine."""
+    return {"ptz1": CameraConnection(url="http://127.0.0.1:8081"),
+            "ptz2": CameraConnection(url="http://127.0.0.1:8082")}
+
+
+class LabCameras(ServiceSettings):
+    """``[ptz] cameras`` alone (the rest of ``[ptz]`` is the PTZ service's)."""
+
+    model_config = ConfigDict(extra="ignore", frozen=True, validate_default=True)
+    section: ClassVar[str] = "ptz"
+
+    cameras: dict[str, CameraConnection] = Field(default_factory=default_cameras)
+
+
+class GantryHeightMap(ServiceSettings):
+    """``[gantry] height_map`` alone (the rest of ``[gantry]`` is the gantry's)."""
+
+    model_config = ConfigDict(extra="ignore", frozen=True, validate_default=True)
+    section: ClassVar[str] = "gantry"
+
+    height_map: Path = DEFAULT_HEIGHT_MAP
