@@ -6,14 +6,16 @@ tracking camera's raw frames, the cameras' video and Foxglove's typed channels.
 Runs the whole simulated lab under ``stb up`` (every service, the gantry armed), then
 ``stb record`` as a user runs it, once per variant, each for ``--seconds``:
 
-* every key (the default);
-* without the tracking camera's raw frames (``--exclude stb/gantry/camera/frame``);
+* every key (the default: the tracking camera's frames as H.264 video, not raw);
 * that, plus both PTZ cameras' video (``--video ptz1 --video ptz2``, VAPIX MJPEG at
-  ``--video-fps``, 704×576);
-* that, without Foxglove's typed channels (``--set typed=false``) — what they cost.
+  ``--video-fps``, 704×576, recorded as H.264);
+* that, with the raw frames too (``--raw-frames``: what a replay into a gantry needs);
+* both cameras' video without Foxglove's typed channels (``--set typed=false``, the tracking
+  camera's frames left out) — what the typed channels cost.
 
 Per variant: the file's size per minute; how it splits (the messages' bytes before the file's
-zstd compression: bus samples, video, JSON copies, typed channels); the recorder's CPU (user +
+zstd compression: bus samples, video — H.264 channels and raw video frames —, JSON copies,
+the other typed channels); the recorder's CPU (user +
 system of the process over its run, a share of one core, and its peak resident memory); the
 sim's CPU over the same time (the MJPEG streams are rendered and encoded by the sim; a real
 camera does that in hardware).
@@ -39,6 +41,7 @@ from common import keys
 from common.bus import Bus
 from common.settings import BusSettings, ZenohSettings
 from services.args import Parser
+from services.recording.typed import GANTRY_IMAGE
 from tests.gantry.rig import Operator
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -47,15 +50,15 @@ FRAMES = "stb/gantry/camera/frame"
 
 def variants(video_fps: float) -> list[tuple[str, list[str]]]:
     video = ["--video", "ptz1", "--video", "ptz2", "--video-fps", f"{video_fps:g}"]
-    return [("every key", []),
-            ("without the tracking camera's frames", ["--exclude", FRAMES]),
-            (f"… plus both cameras' video at {video_fps:g} fps", ["--exclude", FRAMES, *video]),
-            ("… the same without the typed channels",
+    return [("every key (camera streams as H.264)", []),
+            (f"… plus both cameras' video at {video_fps:g} fps", video),
+            ("… with the raw frames too (`--raw-frames`)", [*video, "--raw-frames"]),
+            ("both cameras' video, no typed channels (`--set typed=false`), no tracking frames",
              ["--exclude", FRAMES, *video, "--set", "typed=false"])]
 
 
 def _group(topic: str) -> str:
-    if topic.startswith("stb/video/"):
+    if topic.startswith("stb/video/") or topic == GANTRY_IMAGE or topic.endswith("/video"):
         return "video"
     if topic.startswith("stb/"):
         return "bus"

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import logging
 import queue
+import shutil
 import sys
 import threading
 import time
@@ -33,10 +34,12 @@ from services.entry import (
     tool_settings,
 )
 from services.recording.foxglove import json_copy
-from services.recording.typed import LabScene
+from services.recording.typed import VIDEO_TOPICS, LabScene
 from services.recording.video import CameraVideo
 
 log = logging.getLogger(__name__)
+EXIT_DISK = 5  # the disk is (nearly) full: the recording stopped, its file finished
+DISK_CHECK_S = 0.5  # free space looked at this often
 
 
 class RecordSettings(ServiceSettings):
@@ -54,6 +57,13 @@ class RecordSettings(ServiceSettings):
     video_fps: float = Field(5.0, gt=0, le=30, description="video frames a second per camera")
     video_resolution: str = Field("704x576", pattern=r"^[1-9][0-9]{1,4}x[1-9][0-9]{1,4}$",
                                   description="the video's size, as VAPIX names it")
+    min_free_mb: float = Field(64.0, ge=0, description="the recording stops (exit 5) when the "
+                               "disk has less free than this, while the file can still be "
+                               "finished with its summary")
+    raw_frames: bool = Field(False, description="also the camera frames as they crossed the bus "
+                             "(stb/gantry/camera/frame, video/<camera>: about 8 MB/s for the "
+                             "tracking camera), for a replay that feeds a gantry; without, "
+                             "they are in the file as H.264 video only")
 
 
 @dataclass
@@ -61,6 +71,7 @@ class Stats:
     samples: Counter = field(default_factory=Counter)
     invalid: Counter = field(default_factory=Counter)
     payload_bytes: int = 0
+    lost: int = 0  # samples not written: the disk was full
 
 
 def latest_samples(session: zenoh.Session, expr: zenoh.KeyExpr | str,
@@ -78,9 +89,11 @@ class Recorder:
 
     def __init__(self, session: zenoh.Session, prefix: str, key_exprs: Sequence[str],
                  out: IO[bytes], *, exclude: Sequence[str] = (), with_json: bool = True,
-                 scene: LabScene | None = None,
+                 scene: LabScene | None = None, raw_frames: bool = True,
                  metadata: dict[str, str] | None = None) -> None:
         self.prefix, self.with_json, self._session = prefix, with_json, session
+        self.raw_frames = raw_frames  # False: camera streams as the scene's video only
+        self.write_error: OSError | None = None  # the disk is full: nothing more is written
         self.scene = scene
         self._video_seq: dict[str, int] = {}
         self.stats = Stats()
@@ -117,8 +130,15 @@ class Recorder:
 
     def _run(self) -> None:
         while (item := self._queue.get()) is not None:
+            if self.write_error is not None:
+                self.stats.lost += 1  # the disk is full: the rest is counted, not written
+                continue
             try:
                 self._write(*item)
+            except OSError as err:  # a full disk (FULL) or a failing one
+                self.write_error = err
+                self.stats.lost += 1
+                log.error("cannot write the recording: %s; it stops", err)
             except Exception:  # noqa: BLE001 - one bad sample must not end the recording
                 log.exception("cannot record a sample of %s", item[0])
 
@@ -129,11 +149,13 @@ class Recorder:
         model = topic.model.__name__ if topic is not None else ""
         measured = (msg.measured_s if isinstance(msg, m.Message)
                     else _float_or_none(msg.get("measured_s")) if isinstance(msg, dict) else None)
-        sequence = self._writer.write(key, payload, encoding=encoding, model=model,
-                                      received_s=received, measured_s=measured)
         self.stats.samples[key] += 1
         self.stats.payload_bytes += len(payload)
-        if self.with_json and msg is not None and (copy := json_copy(msg)) is not None:
+        raw = self.raw_frames or self.scene is None or not self.scene.video \
+            or topic not in VIDEO_TOPICS or msg is None
+        sequence = self._writer.write(key, payload, encoding=encoding, model=model,
+                                      received_s=received, measured_s=measured) if raw else 0
+        if raw and self.with_json and msg is not None and (copy := json_copy(msg)) is not None:
             data, schema = copy
             self._writer.write_json(key, data, schema=schema, received_s=received,
                                     measured_s=measured, sequence=sequence)
@@ -167,12 +189,14 @@ class Recorder:
                          f"{codec.CONTENT_TYPE};CameraFrame", received_s, frame))
 
     def close(self) -> None:
-        """Stop listening, write what is queued, and finish the file (its summary)."""
+        """Stop listening, write what is queued, and finish the file (its summary; a disk
+        that filled up leaves the file readable up to its last whole chunk)."""
         for sub in self._subs:
             sub.undeclare()
         self._queue.put(None)
         self._thread.join()
-        self._writer.finish()
+        if self.write_error is None:
+            self._writer.finish()
 
 
 def video_cameras(names: list[str], args: argparse.Namespace
@@ -241,38 +265,79 @@ def record(args: argparse.Namespace) -> int:
                 "exclude": " ".join(exclude), "started_s": f"{time.time():.6f}"}
     recorder = Recorder(session, settings.bus.prefix, exprs, out, exclude=exclude,
                         with_json=settings.json_copy, metadata=metadata,
-                        scene=LabScene(crater(settings.height_map)) if settings.typed else None)
+                        raw_frames=settings.raw_frames or not settings.typed,
+                        scene=LabScene(crater(settings.height_map), video=True)
+                        if settings.typed else None)
     print(f"stb record: recording {' '.join(exprs)} to {args.out} (Ctrl-C ends)",
           file=sys.stderr)
     recorder.ask_latest()
     videos = [CameraVideo(name, connection, settings.video_fps, settings.video_resolution,
                           recorder.add_video).start() for name, connection in cameras]
+    disk = DiskWatch(args.out, settings.min_free_mb, recorder)
     try:
-        _wait(recorder, stop, args.duration, settings.progress_s)
+        _wait(recorder, stop, args.duration, settings.progress_s, disk)
     finally:
         for video in videos:
             video.stop()
         recorder.close()
-        out.close()
+        try:
+            out.close()
+        except OSError as err:  # the rest of a full disk's buffer
+            recorder.write_error = recorder.write_error or err
         session.close()
         restore()
     _summary(recorder.stats, args.out)
+    if disk.why:
+        readable = "up to its last whole chunk" if recorder.write_error else "and finished"
+        raise ToolError(f"stopped: {disk.why}; {args.out} is readable {readable} — free "
+                        "space, or record to another disk", EXIT_DISK)
     return 0
 
 
+@dataclass
+class DiskWatch:
+    """Whether the recording must stop for its disk: less free than ``min_free_mb`` (while the
+    file can still be finished), or a write failed (the disk filled up faster)."""
+
+    out: Path
+    min_free_mb: float
+    recorder: Recorder
+    why: str = ""
+
+    def free_mb(self) -> float:
+        try:
+            return shutil.disk_usage(self.out.parent).free / 1e6
+        except OSError:
+            return float("inf")
+
+    def full(self) -> bool:
+        if self.recorder.write_error is not None:
+            self.why = f"cannot write: {self.recorder.write_error}"
+        elif (free := self.free_mb()) < self.min_free_mb:
+            self.why = (f"{free:.0f} MB free on {self.out.parent}, less than [record] "
+                        f"min_free_mb = {self.min_free_mb:g}")
+        return bool(self.why)
+
+
 def _wait(recorder: Recorder, stop: threading.Event, duration: float | None,
-          progress_s: float) -> None:
+          progress_s: float, disk: DiskWatch) -> None:
     started = time.monotonic()
     deadline = None if duration is None else started + duration
-    before = 0
-    while not stop.wait(progress_s if deadline is None
-                        else max(0.0, min(progress_s, deadline - time.monotonic()))):
-        if deadline is not None and time.monotonic() >= deadline:
+    before, progress_at = 0, started + progress_s
+    while not disk.full() and not stop.wait(
+            DISK_CHECK_S if deadline is None
+            else max(0.0, min(DISK_CHECK_S, deadline - time.monotonic()))):
+        now = time.monotonic()
+        if deadline is not None and now >= deadline:
             return
+        if now < progress_at:
+            continue
+        progress_at = now + progress_s
         total = sum(recorder.stats.samples.values())
-        print(f"stb record: {total} samples on {len(recorder.stats.samples)} keys, "
-              f"{recorder.stats.payload_bytes / 1e6:.1f} MB, "
-              f"{(total - before) / progress_s:.0f}/s, {time.monotonic() - started:.0f} s",
+        size = disk.out.stat().st_size / 1e6 if disk.out.exists() else 0.0
+        print(f"stb record: {now - started:.0f} s, {total} samples on "
+              f"{len(recorder.stats.samples)} keys ({(total - before) / progress_s:.0f}/s), "
+              f"file {size:.1f} MB, {disk.free_mb() / 1e3:.1f} GB free",
               file=sys.stderr, flush=True)
         before = total
 
@@ -286,4 +351,6 @@ def _summary(stats: Stats, out: Path) -> None:
         print(f"  {key}: {count}", file=sys.stderr)
     for what, count in sorted(stats.invalid.items()):
         print(f"  invalid (recorded as bytes only) {what}: {count}", file=sys.stderr)
+    if stats.lost:
+        print(f"  not written (the disk was full): {stats.lost}", file=sys.stderr)
 

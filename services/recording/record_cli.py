@@ -14,8 +14,11 @@ are recorded too (as bytes, without a JSON copy) and counted. Ctrl-C, SIGTERM or
 into ``video/<camera>`` — beside the mocap and gantry channels on the same clock; replay puts
 it on the bus, Foxglove shows it on ``/<camera>/video``.
 
-The tracking camera's raw frames (``stb/gantry/camera/frame``) are about 8 MB/s before
-compression; leave them out with ``--exclude stb/gantry/camera/frame`` when they are not needed.
+Camera streams — the tracking camera's frames (``stb/gantry/camera/frame``) and the
+``--video`` cameras — go into the file as H.264 video (libx264 through PyAV) on Foxglove's
+``CompressedVideo`` channels ``/gantry/image`` and ``/<camera>/video``, each frame stamped with
+its capture time. Their raw frames (about 8 MB/s for the tracking camera) only with
+``--raw-frames``: what ``stb replay`` needs to feed a gantry again.
 """
 
 from __future__ import annotations
@@ -41,7 +44,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                         "[ptz.cameras]; repeatable)")
     parser.add_argument("--video-fps", type=float, metavar="FPS",
                         help="video frames a second per camera (default 5)")
+    parser.add_argument("--raw-frames", action="store_true",
+                        help="also the camera frames as they crossed the bus (large)")
     args = parser.parse_args(argv)
+    if args.raw_frames:
+        args.set[:0] = ["raw_frames=true"]
     if args.video:  # the flags are settings of [record]: --set has the last word
         args.set[:0] = [f"video={json.dumps(args.video)}"]
     if args.video_fps is not None:

@@ -12,8 +12,10 @@ and plot panels show a run without any extension.
     /CAMERA/image       CompressedImage  each PTZ camera's preview (JPEG as the camera sent it)
     /CAMERA/annotations ImageAnnotations the markers the detector found (circles) and where the
                                          robot should be (a cross)
-    /gantry/image       CompressedImage  the tracking camera's frames (mono8 JPEG-encoded)
-    /CAMERA/video       CompressedImage  a camera's video as ``stb record --video`` took it
+    /gantry/image       CompressedImage  the tracking camera's frames (mono8 JPEG-encoded), or
+                        CompressedVideo  in a recording: H.264 (``encode.py``)
+    /CAMERA/video       CompressedImage  a camera's video as ``stb record --video`` took it, or
+                        CompressedVideo  in a recording: H.264
     /CAMERA/snapshot    CompressedImage  its snapshots in calibration mode
 
 Positions in metres (Foxglove's unit), frame ``world`` = the mocap's frame. Each output is a
@@ -39,6 +41,8 @@ from common import keys
 from common import messages as m
 from common.camera import Intrinsics, Pose, head_pose
 from common.heightmap import HeightMap
+from services.recording.encode import FORMAT as H264
+from services.recording.encode import H264Stream
 
 MM = 1e-3  # the lab's millimetres in Foxglove's metres
 WORLD = "world"
@@ -52,6 +56,8 @@ JPEG_QUALITY = 80
 FRAME_TOPICS = {keys.GANTRY_FRAME: GANTRY_IMAGE, keys.VIDEO: "/{camera}/video",
                 keys.PTZ_SNAPSHOT: "/{camera}/snapshot"}
 """Where each kind of camera frame goes (all are ``CameraFrame`` on the bus)."""
+VIDEO_TOPICS = {keys.GANTRY_FRAME, keys.VIDEO}
+"""Camera streams that go as H.264 video where the scene encodes video (a recording)."""
 
 
 @dataclass(frozen=True)
@@ -142,8 +148,10 @@ class LabScene:
     a second and each camera's transform at most that often; images go as they come."""
 
     def __init__(self, height_map: HeightMap | None = None, *, scene_hz: float = 10.0,
-                 crater_every_s: float = 60.0) -> None:
+                 crater_every_s: float = 60.0, video: bool = False) -> None:
         self.height_map, self.scene_period_s = height_map, 1.0 / scene_hz
+        self.video = video  # camera streams as H.264 (VIDEO_TOPICS), one stream per topic
+        self._streams: dict[str, H264Stream] = {}
         self.crater_every_s = crater_every_s
         self.robot: m.RobotPosition | None = None
         self.crane: m.CraneState | None = None
@@ -182,7 +190,11 @@ class LabScene:
         elif isinstance(msg, m.PtzPreview):
             out += _preview(msg)
         elif isinstance(msg, m.CameraFrame) and topic in FRAME_TOPICS:
-            out += _frame(msg, FRAME_TOPICS[topic].format(camera=msg.camera))
+            to = FRAME_TOPICS[topic].format(camera=msg.camera)
+            if self.video and topic in VIDEO_TOPICS:
+                out += _video(msg, to, self._streams.setdefault(to, H264Stream()))
+            else:
+                out += _frame(msg, to)
         if self.height_map is not None and t - self._crater_at >= self.crater_every_s:
             self._crater_at = t
             out.append(crater_mesh(self.height_map, t))
@@ -308,6 +320,21 @@ def _preview(msg: m.PtzPreview) -> list[Typed]:
     return [_typed(f"/{msg.camera}/image", image, t),
             _typed(f"/{msg.camera}/annotations",
                    fm.ImageAnnotations(circles=circles, points=points), t)]
+
+
+def _video(msg: m.CameraFrame, to: str, stream: H264Stream) -> list[Typed]:
+    if msg.encoding == "jpeg":
+        image = cv2.imdecode(np.frombuffer(msg.data, np.uint8), cv2.IMREAD_UNCHANGED)
+        if image is None:
+            return []
+    else:
+        pixels = np.frombuffer(msg.data, np.uint8)
+        if pixels.size != msg.width_px * msg.height_px:
+            return []
+        image = pixels.reshape(msg.height_px, msg.width_px)
+    return [_typed(to, fm.CompressedVideo(timestamp=_time(unit.time_s), frame_id=msg.camera,
+                                          data=unit.data, format=H264), unit.time_s)
+            for unit in stream.encode(image, msg.measured_s)]
 
 
 def _frame(msg: m.CameraFrame, to: str) -> list[Typed]:

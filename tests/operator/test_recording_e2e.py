@@ -9,6 +9,7 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
+import av
 import cv2
 import numpy as np
 import pytest
@@ -27,11 +28,11 @@ from tests.services.test_processes import _stop
 
 EXPECTED = ["stb/tracker/markers", "stb/tracker/robot", "stb/gantry/state",
             "stb/gantry/setpoint", "stb/gantry/estimate", "stb/gantry/detections",
-            "stb/gantry/offload", "stb/gantry/camera/frame", "stb/ptz/ptz1/state",
+            "stb/gantry/offload", "stb/ptz/ptz1/state",
             "stb/ptz/ptz2/state", "stb/ptz/ptz1/preview", "stb/ptz/ptz2/preview",
             "stb/sim/truth/crane", "stb/sim/truth/robot/locomotive", "stb/health/gantry/main",
-            "stb/health/tracker/main", "stb/health/sim/main", "stb/health/web/main",
-            "stb/video/ptz1", "stb/video/ptz2"]
+            "stb/health/tracker/main", "stb/health/sim/main", "stb/health/web/main"]
+CAMERA_STREAMS = ["stb/gantry/camera/frame", "stb/video/ptz1", "stb/video/ptz2"]  # as video
 VIDEO_FPS = 4.0
 RECORD_S = 8.0
 
@@ -56,6 +57,7 @@ def test_the_recording_has_every_key_in_order_and_decodable(recording: Path) -> 
     counts = recorded_keys(recording)
     missing = [k for k in EXPECTED if not counts.get(k)]
     assert not missing, f"not recorded: {missing} (recorded: {sorted(counts)})"
+    assert not set(CAMERA_STREAMS) & set(counts), "camera streams as video only (no --raw-frames)"
     assert counts["stb/tracker/markers"] > 50 * RECORD_S, "the mocap runs at 100 Hz"
     last: dict[str, tuple[float, int]] = {}
     received = []
@@ -84,11 +86,18 @@ def test_the_recording_opens_in_foxglove_with_typed_channels(recording: Path) ->
              if c.message_encoding == "protobuf"}
     assert {t: s.name for t, s in typed.items()} == {
         "/scene": "foxglove.SceneUpdate", "/crater": "foxglove.SceneUpdate",
-        "/tf": "foxglove.FrameTransforms", "/gantry/image": "foxglove.CompressedImage",
+        "/tf": "foxglove.FrameTransforms", "/gantry/image": "foxglove.CompressedVideo",
         "/ptz1/image": "foxglove.CompressedImage", "/ptz2/image": "foxglove.CompressedImage",
         "/ptz1/annotations": "foxglove.ImageAnnotations",
         "/ptz2/annotations": "foxglove.ImageAnnotations",
-        "/ptz1/video": "foxglove.CompressedImage", "/ptz2/video": "foxglove.CompressedImage"}
+        "/ptz1/video": "foxglove.CompressedVideo", "/ptz2/video": "foxglove.CompressedVideo"}
+    for topic in ("/gantry/image", "/ptz1/video", "/ptz2/video"):  # each plays (PyAV)
+        decoder = av.CodecContext.create("h264", "r")
+        units = decoded_typed(recording, topic)
+        frames = [f for u in units for f in decoder.decode(av.Packet(u.data))]
+        assert len(frames) == len(units) > 2 * VIDEO_FPS, topic
+        stamps = [u.timestamp.seconds + u.timestamp.nanos * 1e-9 for u in units]
+        assert stamps == sorted(stamps), f"{topic}: in time order"
     schemaless = [c.topic for c in summary.channels.values()
                   if c.topic.startswith("json/") and c.schema_id == 0]
     assert not schemaless, f"JSON copies without a schema: {schemaless}"

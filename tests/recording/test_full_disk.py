@@ -1,0 +1,80 @@
+"""A recording on a disk that fills up: it stops with a clear message and exit 5, its file
+readable, and writes nothing more (it once went on for 36 s printing 890 tracebacks)."""
+
+from __future__ import annotations
+
+import errno
+import io
+import logging
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from common import keys
+from common import messages as m
+from common.bus import Bus
+from services.recording.record import EXIT_DISK, Recorder
+from tests.conftest import stb_process, wait_for
+
+
+def _robot(t: float) -> m.RobotPosition:
+    return m.RobotPosition(measured_s=t, label="robot", x_mm=1.0, y_mm=2.0, z_mm=0.0,
+                           vx_mm_s=0.0, vy_mm_s=0.0, vz_mm_s=0.0)
+
+
+def test_below_its_free_space_floor_stb_record_finishes_the_file_and_exits_5(
+        make_bus: Callable[..., Bus], router_endpoint: str, tmp_path: Path) -> None:
+    """``[record] min_free_mb`` above what the disk has: the recording stops at once, the
+    file finished with its summary (the mcap library reads it), exit 5 with why."""
+    bus = make_bus()
+    out = tmp_path / "run.mcap"
+    proc = stb_process("record", str(out), "--connect", router_endpoint, "--duration", "30",
+                       "--set", "min_free_mb=1e12", "--set", "typed=false")
+    deadline = time.monotonic() + 30
+    while proc.poll() is None and time.monotonic() < deadline:
+        bus.publish(keys.TRACKER_ROBOT, _robot(time.time()))
+        time.sleep(0.05)
+    assert proc.wait(timeout=5) == EXIT_DISK
+    error = proc.stderr.read()
+    assert "stopped:" in error and "min_free_mb" in error and "readable and finished" in error
+    with open(out, "rb") as f:
+        assert make_reader(f).get_summary() is not None, "finished: the file has its summary"
+
+
+class FillingFile(io.BytesIO):
+    """A file on a disk with ``room`` bytes left: a write beyond fails as the OS says."""
+
+    def __init__(self, room: int) -> None:
+        super().__init__()
+        self.room = room
+
+    def write(self, data: bytes) -> int:  # type: ignore[override]
+        if self.tell() + len(data) > self.room:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return super().write(data)
+
+
+def test_a_disk_that_fills_up_stops_the_writing_with_one_error(
+        make_bus: Callable[..., Bus], caplog: pytest.LogCaptureFixture) -> None:
+    publisher, recorder_bus = make_bus(), make_bus()
+    out = FillingFile(room=300_000)
+    recorder = Recorder(recorder_bus.session, "stb", ["stb/**"], out)  # type: ignore[arg-type]
+    wait_for(lambda: publisher.publish(keys.TRACKER_ROBOT, _robot(time.time())) or
+             sum(recorder.stats.samples.values()), why=lambda: "the recorder hears the bus")
+    noise = np.random.default_rng(0)
+    for i in range(40):  # 12 MB of noise, which zstd cannot shrink
+        publisher.publish(keys.GANTRY_FRAME, m.CameraFrame(
+            measured_s=time.time(), camera="tracking", seq=i + 2, width_px=640, height_px=480,
+            encoding="mono8", data=noise.integers(0, 256, 640 * 480, np.uint8).tobytes()))
+        time.sleep(0.02)
+    wait_for(lambda: recorder.write_error is not None, timeout=10)
+    wait_for(lambda: recorder.stats.lost > 0)
+    recorder.close()  # no exception: nothing more is written
+    assert recorder.write_error.errno == errno.ENOSPC
+    errors = [r for r in caplog.records if r.levelno >= logging.ERROR]
+    assert len(errors) == 1 and "cannot write the recording" in errors[0].getMessage()
+    assert len(out.getvalue()) <= 300_000
