@@ -37,7 +37,7 @@ def test_below_its_free_space_floor_stb_record_finishes_the_file_and_exits_5(
     deadline = time.monotonic() + 30
     while proc.poll() is None and time.monotonic() < deadline:
         bus.publish(keys.TRACKER_ROBOT, _robot(time.time()))
-        time.sleep(0.05)
+        time.sleep(0.05)  # the robot's samples at a pace while the recorder runs
     assert proc.wait(timeout=5) == EXIT_DISK
     error = proc.stderr.read()
     assert "stopped:" in error and "min_free_mb" in error and "readable and finished" in error
@@ -70,7 +70,7 @@ def test_a_disk_that_fills_up_stops_the_writing_with_one_error(
         publisher.publish(keys.GANTRY_FRAME, m.CameraFrame(
             measured_s=time.time(), camera="tracking", seq=i + 2, width_px=640, height_px=480,
             encoding="mono8", data=noise.integers(0, 256, 640 * 480, np.uint8).tobytes()))
-        time.sleep(0.02)
+        time.sleep(0.02)  # a pace the bus keeps up with (a burst is dropped)
     wait_for(lambda: recorder.write_error is not None, timeout=10)
     wait_for(lambda: recorder.stats.lost > 0)
     recorder.close()  # no exception: nothing more is written
