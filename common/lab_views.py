@@ -12,10 +12,8 @@ from typing import ClassVar, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, SecretStr
 
+from common.lab_paths import DEFAULT_HEIGHT_MAP
 from common.settings import ServiceSettings
-
-DEFAULT_HEIGHT_MAP = Path("run/sim/crater.npz")
-"""Where the sim writes the crater as it starts (a real lab: ``stb crater import``)."""
 
 
 class CameraConnection(BaseModel):

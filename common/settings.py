@@ -33,6 +33,7 @@ from pydantic import (
 
 from common.errors import ConfigError
 from common.keys import DEFAULT_PREFIX, check_prefix
+from common.setting_text import setting_value
 
 S = TypeVar("S", bound="ServiceSettings")
 
@@ -236,20 +237,6 @@ def _env(prefix: str, environ: Mapping[str, str]) -> dict[str, Any]:
             target = target.setdefault(parent, {})
         target[leaf] = setting_value(value)
     return out
-
-
-def setting_value(value: str) -> Any:
-    """A setting's value given as text (an environment variable, ``--set FIELD=VALUE``): a
-    list, table or quoted string in JSON, ``null`` for none; anything else as it is written,
-    for the field's type to read (``7`` is a number to a number and a name to a name)."""
-    if value == "null":
-        return None
-    if value[:1] in ("[", "{", '"'):
-        try:
-            return json.loads(value)
-        except json.JSONDecodeError:
-            return value
-    return value
 
 
 def _deep_merge(into: dict[str, Any], new: Mapping[str, Any]) -> dict[str, Any]:

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from common.errors import ConfigError
-from common.settings import setting_value
+from common.setting_text import setting_value
 
 EXIT_CONFIG = 2
 NUMBERS = re.compile(r"^-\.?\d[\d.,eE+-]*$")

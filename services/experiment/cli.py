@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 from common.errors import ConfigError
-from common.lab_views import DEFAULT_HEIGHT_MAP
+from common.lab_paths import DEFAULT_HEIGHT_MAP
 from services.args import Parser, plain
 from services.experiment.paper import TABLES
 from services.gantry.algorithms import ALGORITHMS

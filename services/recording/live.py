@@ -18,7 +18,7 @@ import zenoh
 from pydantic import Field
 
 from common import messages as m
-from common.lab_views import DEFAULT_HEIGHT_MAP
+from common.lab_paths import DEFAULT_HEIGHT_MAP
 from common.node import stop_on_signals
 from common.settings import LogLevel, ServiceSettings
 from services.entry import ToolError, checked_key_exprs, tool_session, tool_settings

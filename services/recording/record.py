@@ -23,7 +23,8 @@ from common import codec, keys
 from common import messages as m
 from common.heightmap import HeightMap
 from common.jpeg import jpeg_size
-from common.lab_views import DEFAULT_HEIGHT_MAP, CameraConnection, LabCameras
+from common.lab_paths import DEFAULT_HEIGHT_MAP
+from common.lab_views import CameraConnection, LabCameras
 from common.mcap_file import RecordWriter
 from common.node import stop_on_signals
 from common.settings import ConfigError, LogLevel, ServiceSettings, load_settings

@@ -13,7 +13,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from common.crane_frame import CraneFrame
 from common.crane_registers import RegisterMap
-from common.lab_views import DEFAULT_HEIGHT_MAP
+from common.lab_paths import DEFAULT_HEIGHT_MAP
 from common.settings import ServiceSettings, above_its_minimum
 from common.tracking_camera import TrackingCameraModel
 from services.sim.crane import CraneParams

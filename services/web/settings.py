@@ -8,7 +8,7 @@ from pathlib import Path
 
 from pydantic import Field, model_validator
 
-from common.lab_views import DEFAULT_HEIGHT_MAP
+from common.lab_paths import DEFAULT_HEIGHT_MAP
 from common.settings import ServiceSettings
 
 
