@@ -37,6 +37,7 @@ class BusFaults:
         topics = [t for t in vars(keys).values() if isinstance(t, keys.Topic)
                   and t not in MEASURED]
         pids, start, rounds, sent = self.pids(), time.monotonic(), [], 0
+        stored = {camera: self._stored_pose(camera) for camera in MOUNTS}
         for _ in range(2 if again else 1):
             memory = self.settled_memory()
             sent = self._fuzz_once(topics, per_key)
@@ -46,9 +47,11 @@ class BusFaults:
         extra, ok = {}, True
         if not again:  # the fuzz is an attack on the aim too: back after it?
             aim, crane = self.recovery(time.monotonic(), self.normal_mm)
+            kept = all(before is not None and (after := self._stored_pose(camera)) is not None
+                       and _same_solve(before, after) for camera, before in stored.items())
             extra = {"aim ≤ 1° after": duration_text(aim), "crane back after":
-                     duration_text(crane)}
-            ok = aim is not None and crane is not None
+                     duration_text(crane), "calib's poses": "kept" if kept else "CHANGED"}
+            ok = aim is not None and crane is not None and kept
         self._survived("fuzz" + " again" * again, what, start, pids, rounds, extra, ok,
                        again=again)
 
