@@ -192,7 +192,8 @@ class LabScene:
         elif isinstance(msg, m.CameraFrame) and topic in FRAME_TOPICS:
             to = FRAME_TOPICS[topic].format(camera=msg.camera)
             if self.video and topic in VIDEO_TOPICS:
-                out += _video(msg, to, self._streams.setdefault(to, H264Stream()))
+                stream = self._streams.get(to) or self._streams.setdefault(to, H264Stream())
+                out += _video(msg, to, stream)
             else:
                 out += _frame(msg, to)
         if self.height_map is not None and t - self._crater_at >= self.crater_every_s:
