@@ -52,7 +52,13 @@ from common.settings import BusSettings, ZenohSettings
 from services.args import Parser
 from services.ptz import vapix
 from services.sim.lab import Lab
-from services.sim.settings import CraneSettings, MocapSettings, PtzCameraSettings, SimSettings
+from services.sim.settings import (
+    CraneSettings,
+    MocapSettings,
+    ObservationCameraSettings,
+    PtzCameraSettings,
+    SimSettings,
+)
 from tests.ports import free_port
 
 CENTRE = np.array([352.0, 288.0])
@@ -114,7 +120,8 @@ def run_scenario(scenario: str, seconds: float, workdir: Path, realtime_priority
         scenario=scenario, crater_file=workdir / "crater.npz", loop=True,
         mocap=MocapSettings(port=free_port()), crane=CraneSettings(port=free_port()),
         cameras=[PtzCameraSettings(**{**c.model_dump(), "port": free_port()})
-                 for c in base.cameras])
+                 for c in base.cameras],
+        observation_camera=ObservationCameraSettings(port=free_port()))
     Lab.build(settings)  # writes the crater file once, before the sim processes read it
     t0 = time.monotonic() + 3.0  # the shared sim time starts once both parts are up
     pipes, sims = [], []

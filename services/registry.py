@@ -37,6 +37,9 @@ SERVICES: dict[str, ServiceInfo] = {
                        "(http://127.0.0.1:8080)", "services.web.settings:WebSettings"),
     "camera": ServiceInfo("the tracking camera's frames on the bus, from a camera on this host",
                           "services.camera.settings:CameraSettings"),
+    "observation": ServiceInfo("the crane's observation camera (bird's-eye video) on the bus, "
+                               "from an IP camera's MJPEG stream",
+                               "services.observation.settings:ObservationSettings"),
     "sim": ServiceInfo("the simulated lab: QTM RT mocap, VAPIX cameras, Modbus crane, frames",
                        "services.sim.settings:SimSettings"),
 }
@@ -75,7 +78,7 @@ TOOLS: dict[str, ServiceInfo] = {
 }
 
 DEFAULT_UP: tuple[str, ...] = ("router", "sim", "tracker", "calib", "ptz:ptz1", "ptz:ptz2",
-                               "gantry", "web")
+                               "gantry", "observation", "web")
 """What ``stb up`` starts when the lab file does not say: everything that exists so far."""
 
 

@@ -7,7 +7,13 @@ from pathlib import Path
 import pytest
 
 from services.sim.lab import Lab, load_or_make_crater
-from services.sim.settings import CraneSettings, MocapSettings, PtzCameraSettings, SimSettings
+from services.sim.settings import (
+    CraneSettings,
+    MocapSettings,
+    ObservationCameraSettings,
+    PtzCameraSettings,
+    SimSettings,
+)
 from services.sim.world import CraterMap
 from tests.ports import free_port
 
@@ -17,7 +23,7 @@ def sim_settings(crater_file: Path, **changes: object) -> SimSettings:
     cameras = [PtzCameraSettings(**{**c.model_dump(), "port": free_port()}) for c in base.cameras]
     values = {"crater_file": crater_file, "cameras": cameras,
               "mocap": MocapSettings(port=free_port()), "crane": CraneSettings(port=free_port()),
-              **changes}
+              "observation_camera": ObservationCameraSettings(port=free_port()), **changes}
     return SimSettings(**values)
 
 

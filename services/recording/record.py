@@ -26,6 +26,7 @@ from common.jpeg import jpeg_size
 from common.lab_paths import DEFAULT_HEIGHT_MAP
 from common.lab_views import CameraConnection, LabCameras
 from common.mcap_file import RecordWriter
+from common.mjpeg import CameraVideo
 from common.node import stop_on_signals
 from common.settings import ConfigError, LogLevel, ServiceSettings, load_settings
 from services.entry import (
@@ -36,7 +37,6 @@ from services.entry import (
 )
 from services.recording.foxglove import json_copy
 from services.recording.typed import VIDEO_TOPICS, LabScene
-from services.recording.video import CameraVideo
 
 log = logging.getLogger(__name__)
 EXIT_DISK = 5  # the disk is (nearly) full: the recording stopped, its file finished

@@ -1,5 +1,7 @@
-"""A simulated AXIS 215 PTZ camera on HTTP: VAPIX, Digest (or Basic) authentication, JPEG
-snapshots and an MJPEG stream."""
+"""A simulated AXIS camera on HTTP: VAPIX, Digest (or Basic) authentication, JPEG snapshots
+and an MJPEG stream — the AXIS 215 PTZ cameras (``SimCamera``: also PTZ control, parameters,
+users) and any fixed camera that only takes pictures (``ServedCamera``: the crane's
+observation camera, ``services.sim.observation``)."""
 
 from __future__ import annotations
 
@@ -17,7 +19,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
-from typing import Literal
+from typing import Literal, Protocol
 from urllib.parse import parse_qsl, urlsplit
 
 import cv2
@@ -40,6 +42,21 @@ BOUNDARY = "myboundary"  # what AXIS cameras put between the JPEGs of video.cgi
 NONCE_LIFETIME_S = 300.0
 
 
+class ServedCamera(Protocol):
+    """What the server needs of any camera: its name, credentials, pictures and their sizes
+    (VAPIX names, the first is the default)."""
+
+    name: str
+    user: str
+    password: str
+    auth: Literal["digest", "basic", "none"]
+    jpeg_quality: int
+    mjpeg_fps: float
+    resolutions: dict[str, tuple[int, int]]
+
+    def snapshot(self, width: int, height: int) -> np.ndarray: ...
+
+
 @dataclass
 class SimCamera:
     """What the server needs to play one camera: its head, its scene and its credentials."""
@@ -59,6 +76,7 @@ class SimCamera:
     robots: Callable[[], list[tuple[np.ndarray, float, float]]] = lambda: []
     """(marker position, heading, ground height) of each robot now: their chassis are drawn"""
     memory: CameraMemory = field(default_factory=CameraMemory)
+    resolutions: dict[str, tuple[int, int]] = field(default_factory=lambda: vapix.RESOLUTIONS)
     commands: deque[tuple[float, float]] = field(default_factory=lambda: deque(maxlen=100_000))
     """(arrival wall time, X-STB-Measured) of every traced PTZ command: latency figures. The
     arrival is the kernel's receive time of the bytes carrying the request line."""
@@ -150,9 +168,9 @@ def _split_commas(text: str) -> list[str]:
 
 
 class CameraServer:
-    """Serves one SimCamera on ``host:port`` from a background thread."""
+    """Serves one camera on ``host:port`` from a background thread."""
 
-    def __init__(self, camera: SimCamera, host: str, port: int) -> None:
+    def __init__(self, camera: ServedCamera, host: str, port: int) -> None:
         self.camera = camera
         self._secret = secrets.token_bytes(16)
         self._closing = threading.Event()
@@ -220,21 +238,23 @@ class CameraServer:
                 args.update(parse_qsl(body.decode(errors="replace"), keep_blank_values=True))
         if not self._authorized(request, method):
             return
-        now = self.camera.clock()
         if url.path == vapix.MJPEG_PATH:
             self._stream(request, args)
             return
-        self._send(request, self._reply(url.path, args, body, now, request, arrived))
+        self._send(request, self._reply(url.path, args, body, request, arrived))
 
-    def _reply(self, path: str, args: dict[str, str], body: bytes, now: float,
+    def _reply(self, path: str, args: dict[str, str], body: bytes,
                request: BaseHTTPRequestHandler, arrived: float) -> vapix.Reply:
         cam = self.camera
-        if path == vapix.PTZ_PATH:
-            self._trace(request, arrived)
-            return handle_ptz(args, cam.head, cam.memory, now)
         if path == vapix.IMAGE_PATH:
-            size = vapix.image_size(args)
+            size = vapix.image_size(args, cam.resolutions)
             return size if isinstance(size, vapix.Reply) else self._jpeg(size, args)
+        if not isinstance(cam, SimCamera):  # a fixed camera: pictures only
+            return vapix.not_found()
+        now = cam.clock()
+        if path == vapix.PTZ_PATH:
+            self._trace(cam, request, arrived)
+            return handle_ptz(args, cam.head, cam.memory, now)
         if path == vapix.PARAM_PATH:
             return cam.device.param_cgi(args, now)
         if path == vapix.BASIC_DEVICE_INFO_PATH:
@@ -247,11 +267,12 @@ class CameraServer:
             return cam.device.user_groups()
         return vapix.not_found()
 
-    def _trace(self, request: BaseHTTPRequestHandler, arrived: float) -> None:
+    @staticmethod
+    def _trace(cam: SimCamera, request: BaseHTTPRequestHandler, arrived: float) -> None:
         measured = request.headers.get(TRACE_HEADER)
         if measured is not None:
             with contextlib.suppress(ValueError):  # a malformed trace header: not recorded
-                self.camera.commands.append((arrived, float(measured)))
+                cam.commands.append((arrived, float(measured)))
 
     def _authorized(self, request: BaseHTTPRequestHandler, method: str) -> bool:
         cam = self.camera
@@ -288,7 +309,7 @@ class CameraServer:
     def _stream(self, request: BaseHTTPRequestHandler, args: dict[str, str]) -> None:
         """``video.cgi``: multipart JPEGs at ``fps`` (or the camera's rate) until the client
         leaves, ``duration`` seconds or ``nbrofframes`` frames are over, or the server closes."""
-        asked = vapix.stream_request(args, self.camera.mjpeg_fps)
+        asked = vapix.stream_request(args, self.camera.mjpeg_fps, self.camera.resolutions)
         if isinstance(asked, vapix.Reply):
             self._send(request, asked)
             return

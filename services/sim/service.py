@@ -1,7 +1,8 @@
 """Sim service: the Space Testbed's devices, served on their real protocols.
 
-Serves:     QTM RT on mocap.port (22223), VAPIX HTTP per camera (8081, 8082),
-            Modbus/TCP crane controller on crane.port (5020)
+Serves:     QTM RT on mocap.port (22223), VAPIX HTTP per camera (8081, 8082), the crane's
+            observation camera's pictures (VAPIX, 8083), Modbus/TCP crane controller on
+            crane.port (5020)
 Publishes:  stb/gantry/camera/frame (CameraFrame, 25 Hz) as the tracking camera's host would,
             each tracking_camera.delay_s after its exposure ended;
             stb/sim/truth/robot/{robot}, stb/sim/truth/crane, stb/sim/truth/ptz/{camera}
@@ -22,11 +23,12 @@ import numpy as np
 from common import keys
 from common import messages as m
 from common.node import Node, StartupError, run_every
-from services.sim.camera_server import CameraServer, SimCamera
+from services.sim.camera_server import CameraServer, ServedCamera, SimCamera
 from services.sim.clock import Clock
 from services.sim.crane_server import CraneServer
 from services.sim.lab import Lab
 from services.sim.mocap_server import MocapServer, MocapSource
+from services.sim.observation import ObservationCamera, ObservationView
 from services.sim.qtm_process import QtmProcess
 from services.sim.scene import GroundView
 from services.sim.settings import SimSettings
@@ -100,22 +102,43 @@ def _start_robot_once_calibrated(node: Node, lab: Lab, cameras: list[str], clock
 
 
 def start_cameras(lab: Lab, settings: SimSettings, clock: Clock) -> list[CameraServer]:
-    servers = []
+    """The PTZ cameras' servers and the observation camera's."""
+    served: list[tuple[ServedCamera, str, int]] = []
     for i, cam in enumerate(settings.cameras):
         sim_camera = SimCamera(cam.name, lab.heads[cam.name], lambda: lab.bright_points(clock()),
                                lab.ptz_glints, clock, np.random.default_rng((settings.seed, 3, i)),
                                cam.user, cam.password, cam.auth, mjpeg_fps=cam.mjpeg_fps,
                                ground=GroundView.of(lab.crater, settings.seed),
                                robots=lambda: [lab.robot_pose(clock())])
+        served.append((sim_camera, cam.host, cam.port))
+    o = settings.observation_camera
+    if o.enabled:
+        served.append((observation_camera(lab, settings, clock), o.host, o.port))
+    servers: list[CameraServer] = []
+    for camera, host, port in served:
         try:
-            servers.append(CameraServer(sim_camera, settings.host_of(cam.host), cam.port).start())
+            servers.append(CameraServer(camera, settings.host_of(host), port).start())
         except OSError as err:
             for server in servers:
                 server.close()
-            raise StartupError(f"camera {cam.name}: cannot listen on {cam.host}:{cam.port}: "
+            raise StartupError(f"camera {camera.name}: cannot listen on {host}:{port}: "
                                f"{err.strerror}") from err
-        log.info("camera %s (VAPIX) on http://%s:%d", cam.name, cam.host, servers[-1].port)
+        log.info("camera %s (VAPIX) on http://%s:%d", camera.name, host, servers[-1].port)
     return servers
+
+
+def observation_camera(lab: Lab, settings: SimSettings, clock: Clock) -> ObservationCamera:
+    o = settings.observation_camera
+
+    def robot(now: float) -> tuple[np.ndarray, float, float, float]:
+        return (*lab.robot_pose(now), float(np.linalg.norm(lab.robot_velocity(now)[:2])))
+
+    return ObservationCamera(
+        o.name, ObservationView(o.focal_mm, o.chip_mm, o.offset_mm, o.height_mm),
+        GroundView.of(lab.crater, settings.seed), lab.crane_frame,
+        lambda now: lab.crane_state(now)[0], robot, clock,
+        np.random.default_rng((settings.seed, 29)), o.user, o.password, o.auth,
+        jpeg_quality=o.jpeg_quality, mjpeg_fps=o.mjpeg_fps)
 
 
 class DeviceLoop:

@@ -140,6 +140,37 @@ class TrackingCameraSettings(_Section, TrackingCameraModel):
                                       for name in TrackingCameraModel.model_fields})
 
 
+class ObservationCameraSettings(_Section):
+    """The crane's colour observation camera beside the tracking camera (paper §3.1), served
+    as an IP camera serves its pictures (VAPIX ``jpg/image.cgi``, ``mjpg/video.cgi``; 640x480
+    or 320x240). The paper gives no figures for it: the defaults are a common 1/3-inch colour
+    camera (4.8 × 3.6 mm chip) with a 6 mm lens, 150 mm beside the crane's reported point
+    (about 2.8 × 2.1 m of ground below it). Nothing in the code models it (it is for people)."""
+
+    enabled: bool = Field(True, description="serve it")
+    name: str = Field("observation", pattern=r"^[A-Za-z0-9_.-]{1,64}$")
+    host: str = "127.0.0.1"
+    port: int = Field(8083, ge=0, le=65535)
+    user: str = "root"
+    password: str = "pass"
+    auth: Literal["digest", "basic", "none"] = "digest"
+    focal_mm: float = Field(6.0, gt=0, le=100)
+    chip_mm: tuple[float, float] = Field((4.8, 3.6), description="the chip's width and height")
+    offset_mm: tuple[float, float] = Field((150.0, 0.0), description="the lens from the "
+                                           "crane's reported point, in the crane's frame (mm)")
+    height_mm: float = Field(3450.0, gt=0, description="the lens above the world's z = 0")
+    mjpeg_fps: float = Field(10.0, gt=0, le=30, description="the MJPEG stream's frame rate "
+                             "when the request names none")
+    jpeg_quality: int = Field(85, ge=10, le=100)
+
+    @field_validator("chip_mm")
+    @classmethod
+    def _positive_chip(cls, chip: tuple[float, float]) -> tuple[float, float]:
+        if min(chip) <= 0:
+            raise ValueError("a chip's width and height are positive")
+        return chip
+
+
 _WALK, _RAIL = Walk(), Railway()
 
 
@@ -198,6 +229,7 @@ class SimSettings(ServiceSettings):
     cameras: list[PtzCameraSettings] = Field(default_factory=_default_cameras)
     crane: CraneSettings = CraneSettings()
     tracking_camera: TrackingCameraSettings = TrackingCameraSettings()
+    observation_camera: ObservationCameraSettings = ObservationCameraSettings()
     walker: WalkerSettings = WalkerSettings()
     locomotive: LocomotiveSettings = LocomotiveSettings()
 

@@ -65,14 +65,16 @@ def number(args: Mapping[str, str], name: str) -> float | None:
     return value
 
 
-def image_size(args: Mapping[str, str]) -> tuple[int, int] | Reply:
-    """The requested resolution (``image.cgi``, ``video.cgi``), or an error reply."""
+def image_size(args: Mapping[str, str], resolutions: Mapping[str, tuple[int, int]] = RESOLUTIONS
+               ) -> tuple[int, int] | Reply:
+    """The requested resolution (``image.cgi``, ``video.cgi``) among the camera's
+    ``resolutions`` (the first is its default), or an error reply."""
     if args.get("camera", "1") != "1":
         return error(f'camera: invalid value "{args["camera"]}"')
-    resolution = args.get("resolution", "704x576")
-    if resolution not in RESOLUTIONS:
+    resolution = args.get("resolution", next(iter(resolutions)))
+    if resolution not in resolutions:
         return error(f'resolution: invalid value "{resolution}"')
-    return RESOLUTIONS[resolution]
+    return resolutions[resolution]
 
 
 @dataclass(frozen=True)
@@ -85,8 +87,10 @@ class StreamRequest:
     frames: int | None  # None: no limit
 
 
-def stream_request(args: Mapping[str, str], default_fps: float) -> StreamRequest | Reply:
-    size = image_size(args)
+def stream_request(args: Mapping[str, str], default_fps: float,
+                   resolutions: Mapping[str, tuple[int, int]] = RESOLUTIONS
+                   ) -> StreamRequest | Reply:
+    size = image_size(args, resolutions)
     if isinstance(size, Reply):
         return size
     try:

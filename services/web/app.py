@@ -6,6 +6,8 @@
     GET  /state.json      the state once          GET /events   text/event-stream of the state
     GET  /map.json        height map extent (mm)  GET /map.png  the height map
     GET  /preview/CAMERA.jpg                      a camera's latest preview
+    GET  /video/CAMERA.jpg                        a camera's latest video frame (the
+                                                  observation camera's bird's-eye view)
     POST /gantry/arm|disarm|stop|reset            an operator's command; the gantry's answer
 
 Everything but the sign-in form and its script needs a signed-in session or HTTP Basic with a
@@ -80,7 +82,8 @@ class LiveView:
 
 
 def build_app(gate: Gate, view: Callable[[], dict[str, Any]],
-              preview: Callable[[str], bytes | None], crater: CraterImage, *,
+              preview: Callable[[str], bytes | None],
+              video: Callable[[str], bytes | None], crater: CraterImage, *,
               push_period_s: float, max_streams: int,
               command: Callable[[str, str], dict] | None = None,
               console: Console | None = None) -> Starlette:
@@ -171,6 +174,13 @@ def build_app(gate: Gate, view: Callable[[], dict[str, Any]],
             return Response("no such preview", 404)
         return Response(jpeg, media_type="image/jpeg", headers=NO_STORE)
 
+    async def video_jpeg(request: Request) -> Response:
+        camera = request.path_params["camera"]
+        jpeg = video(camera) if CAMERA.match(camera) else None
+        if jpeg is None:
+            return Response("no video from that camera", 404)
+        return Response(jpeg, media_type="image/jpeg", headers=NO_STORE)
+
     async def authorize(request: Request) -> Caller | Response:
         """The operator behind a command, or the refusal (401, 403) to answer with."""
         caller = await anyio.to_thread.run_sync(who, request)
@@ -204,6 +214,7 @@ def build_app(gate: Gate, view: Callable[[], dict[str, Any]],
         Route("/events", signed_in(events)), Route("/map.json", signed_in(map_info)),
         Route("/map.png", signed_in(map_png)),
         Route("/preview/{camera}.jpg", signed_in(preview_jpeg)),
+        Route("/video/{camera}.jpg", signed_in(video_jpeg)),
         Route("/gantry/{command}", gantry_command, methods=["POST"]),
     ]
     if console is not None:

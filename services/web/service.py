@@ -9,6 +9,7 @@ import time
 import zenoh
 
 from common import keys
+from common import messages as m
 from common.node import Node, StartupError
 from common.settings import bus_environment
 from services.web.app import build_app
@@ -74,10 +75,19 @@ def run(node: Node[WebSettings]) -> None:
         with lock:
             return state.preview_jpeg(camera)
 
+    def video(camera: str) -> bytes | None:
+        with lock:
+            return state.video_jpeg(camera)
+
+    def on_video(frame: m.CameraFrame) -> None:
+        with lock:
+            state.on_video(frame)
+
     for topic in TOPICS:
         node.bus.subscribe(topic, on_message)
     for topic in COMMAND_TOPICS:
         node.bus.subscribe(topic, on_message, latest=False)
+    node.bus.subscribe(keys.VIDEO, on_video)
     node.bus.subscribe(keys.HEALTH, on_message, latest=True)
     node.bus.subscribe(keys.CALIB_POSE, on_message, latest=False)
     for pose in node.bus.query_latest(keys.CALIB_POSE, timeout_s=1.0):
@@ -86,7 +96,7 @@ def run(node: Node[WebSettings]) -> None:
         keys.alive_pattern(node.bus.prefix), on_alive, history=True)
     desk = RecordingDesk(settings.recordings_dir, bus_environment(settings.bus),
                          settings.height_map)
-    app = build_app(gate, view, preview, CraterImage(settings.height_map),
+    app = build_app(gate, view, preview, video, CraterImage(settings.height_map),
                     push_period_s=1 / settings.push_hz, max_streams=settings.max_streams,
                     command=GantryCommander(node.bus).send,
                     console=Console(node.bus, desk, settings.calibration_count))

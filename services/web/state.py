@@ -67,6 +67,7 @@ class LiveState:
     ptz: dict[str, m.PtzState] = field(default_factory=dict)
     poses: dict[str, m.CameraPose] = field(default_factory=dict)
     previews: dict[str, m.PtzPreview] = field(default_factory=dict)
+    videos: dict[str, m.CameraFrame] = field(default_factory=dict)  # stb/video/<camera>
     # calibration mode: the latest snapshot and the markers found in it (same capture time)
     snapshots: dict[str, tuple[m.CameraFrame, list[m.DetectedMarker]]] = field(
         default_factory=dict)
@@ -125,6 +126,15 @@ class LiveState:
         elif isinstance(msg, m.GantryCommand | m.GantryCommandReply):
             self._command(msg)
 
+    def on_video(self, frame: m.CameraFrame) -> None:
+        """A camera's video frame (the observation camera's bird's-eye view)."""
+        if frame.encoding == "jpeg":
+            _keep(self.videos, frame.camera, frame, MAX_CAMERAS)
+
+    def video_jpeg(self, camera: str) -> bytes | None:
+        frame = self.videos.get(camera)
+        return None if frame is None else frame.data
+
     def _remember(self, offload: m.GravityOffload) -> None:
         """The plot's history: per ``HISTORY_STEP_S``, the largest error and pull."""
         t = math.floor(offload.measured_s / HISTORY_STEP_S) * HISTORY_STEP_S
@@ -172,6 +182,8 @@ class LiveState:
                         "points": [[round(t - now_s, 1), round(e), round(p, 2)]
                                    for t, e, p in self.history]},
             "services": services,
+            "videos": {name: {"seq": f.seq, "width_px": f.width_px, "height_px": f.height_px,
+                              "age_s": now_s - f.measured_s} for name, f in self.videos.items()},
             "robot": None if self.robot is None else {
                 "x_mm": self.robot.x_mm, "y_mm": self.robot.y_mm, "z_mm": self.robot.z_mm,
                 "speed_mm_s": math.hypot(self.robot.vx_mm_s, self.robot.vy_mm_s),

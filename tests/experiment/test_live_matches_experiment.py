@@ -44,6 +44,8 @@ crater_file = "{crater}"
 port = {free_port()}
 [sim.crane]
 port = {crane}
+[sim.observation_camera]
+port = {free_port()}
 [[sim.cameras]]
 name = "ptz1"
 port = {free_port()}

@@ -25,6 +25,7 @@ from tests.webpage import PageClient, basic
 
 ALICE, VICTOR = ("alice", "alice-password-1"), ("victor", "victor-password-1")
 PROTECTED = ["/app.js", "/state.json", "/events", "/map.json", "/map.png", "/preview/ptz1.jpg",
+             "/video/observation.jpg",
              "/session.json"]
 
 
@@ -179,7 +180,7 @@ def _serve(users: Users | None, tmp: Path, tls: tuple[Path, Path] | None = None,
 
     gate = Gate(users, 3600, tls=tls is not None)
     app = build_app(gate, lambda: {"robot": {"x_mm": 1.0}}, lambda c: b"\xff\xd8jpeg",
-                    CraterImage(tmp / "none.npz"), push_period_s=0.05,
+                    lambda c: b"\xff\xd8video", CraterImage(tmp / "none.npz"), push_period_s=0.05,
                     max_streams=max_streams, command=command)
     web = WebServer(app, "127.0.0.1", 0, tls).start()
     page = Page(f"{web.scheme}://127.0.0.1:{web.port}", tls[0] if tls else None, commands)
@@ -212,6 +213,8 @@ def test_scripts_use_basic_with_the_same_users(page: Page) -> None:
     status, _, body = page.request("GET", "/state.json", auth=VICTOR)
     assert status == 200 and json.loads(body)["robot"]["x_mm"] == 1.0
     assert page.request("GET", "/state.json", auth=(VICTOR[0], "wrong"))[0] == 401
+    status, _, body = page.request("GET", "/video/observation.jpg", auth=VICTOR)
+    assert status == 200 and body == b"\xff\xd8video"
     status, _, body = page.request("POST", "/gantry/arm", auth=VICTOR)
     assert status == 403 and "viewer" in json.loads(body)["detail"]
     status, _, body = page.request("POST", "/gantry/arm", auth=ALICE)
@@ -310,7 +313,8 @@ def test_over_tls_the_session_cookie_is_secure(users_file: Path, tmp_path: Path)
 def test_a_bad_certificate_is_an_error_at_start(tmp_path: Path) -> None:
     (tmp_path / "bad.pem").write_text("not a certificate")
     gate = Gate(None, 60, tls=True)
-    app = build_app(gate, dict, lambda c: None, CraterImage(None), push_period_s=1,
+    app = build_app(gate, dict, lambda c: None, lambda c: None, CraterImage(None),
+                    push_period_s=1,
                     max_streams=1)
     with pytest.raises(OSError):
         WebServer(app, "127.0.0.1", 0, (tmp_path / "bad.pem", tmp_path / "bad.pem"))

@@ -34,7 +34,8 @@ def console_page(tmp_path: Path, make_bus: Callable[..., Bus], router_endpoint: 
     users = Users.load(write_users(tmp_path / "users.json"))
     desk = RecordingDesk(tmp_path / "recordings",
                          bus_environment(client_settings(router_endpoint)))
-    app = build_app(Gate(users, 3600, tls=False), dict, lambda c: None, CraterImage(None),
+    app = build_app(Gate(users, 3600, tls=False), dict, lambda c: None, lambda c: None,
+                    CraterImage(None),
                     push_period_s=1, max_streams=2, console=Console(make_bus(), desk, 40))
     web = WebServer(app, "127.0.0.1", 0).start()
     try:

@@ -118,7 +118,7 @@ def server(tmp_path: Path) -> Iterator[tuple[WebServer, Path]]:
     state.on_message(_robot(1.0, 5.0))
     crater = CraterImage(tmp_path / "crater.npz", retry_s=0.0)
     app = build_app(Gate(None, 3600, tls=False), lambda: state.view(2.0), state.preview_jpeg,
-                    crater, push_period_s=0.05, max_streams=10)
+                    state.video_jpeg, crater, push_period_s=0.05, max_streams=10)
     web = WebServer(app, "127.0.0.1", 0).start()
     yield web, tmp_path / "crater.npz"
     web.close()

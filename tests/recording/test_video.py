@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from common.lab_views import CameraConnection
-from services.recording.video import CameraVideo, MjpegParts, VideoError, boundary_of
+from common.mjpeg import CameraVideo, MjpegParts, VideoError, boundary_of
 from tests.conftest import stb_process, wait_for
 from tests.ports import free_port
 

@@ -22,7 +22,7 @@ from tests.conftest import free_port, stb_process, wait_for
 
 def write_lab(tmp_path: Path, router_endpoint: str, crater_file: Path) -> tuple[Path, dict]:
     ports = {"mocap": free_port(), "crane": free_port(), "ptz1": free_port(),
-             "ptz2": free_port()}
+             "ptz2": free_port(), "observation": free_port()}
     lab = tmp_path / "lab.toml"
     lab.write_text(f"""
 [bus.zenoh]
@@ -38,12 +38,16 @@ height_map = "{crater_file}"
 url = "http://127.0.0.1:{ports["ptz1"]}"
 [ptz.cameras.ptz2]
 url = "http://127.0.0.1:{ports["ptz2"]}"
+[observation]
+url = "http://127.0.0.1:{ports["observation"]}"
 [sim]
 crater_file = "{crater_file}"
 [sim.mocap]
 port = {ports["mocap"]}
 [sim.crane]
 port = {ports["crane"]}
+[sim.observation_camera]
+port = {ports["observation"]}
 [[sim.cameras]]
 name = "ptz1"
 port = {ports["ptz1"]}

@@ -619,6 +619,22 @@ document.getElementById("signout").addEventListener("click", async () => {
   signedOut();
 });
 
+// The crane's observation camera (stb/video/observation): its latest picture, loaded when a
+// new one has come; how old it is under it.
+const BIRDSEYE = "observation";
+let birdseyeSeq = null;
+function drawBirdseye(state) {
+  const v = (state.videos || {})[BIRDSEYE], img = document.getElementById("birdseye");
+  const age = document.getElementById("birdseye-age");
+  if (!v) { age.textContent = "no picture yet (stb camera --set role=observation)"; return; }
+  age.textContent = `${v.width_px}×${v.height_px}, ${fmt(v.age_s, 1)} s old`;
+  age.classList.toggle("warn", v.age_s > 2);
+  if (v.seq !== birdseyeSeq) {
+    birdseyeSeq = v.seq;
+    img.src = `video/${BIRDSEYE}.jpg?seq=${v.seq}`;
+  }
+}
+
 function draw(state) {
   latest = state;
   drawMap(state);
@@ -630,6 +646,7 @@ function draw(state) {
   drawServices(state);
   drawOffload(state);
   drawCameras(state);
+  drawBirdseye(state);
   document.getElementById("robot-xy").textContent = state.robot
     ? `robot: ${fmt(state.robot.x_mm)}, ${fmt(state.robot.y_mm)} mm, ${fmt(state.robot.speed_mm_s)} mm/s`
     : "robot: —";

@@ -1,9 +1,10 @@
-"""A camera's video for the recording: VAPIX MJPEG (``/axis-cgi/mjpg/video.cgi``) read by
-``stb record --video CAMERA``, each JPEG stamped when it arrived (the same clock as every
-recorded bus sample, so that video, mocap and gantry line up).
+"""A camera's video as an AXIS camera streams it: VAPIX MJPEG (``/axis-cgi/mjpg/video.cgi``),
+read by ``stb record --video CAMERA`` and by ``stb camera`` for the observation camera, each
+JPEG stamped when it arrived (the same clock as every recorded bus sample, so that video,
+mocap and gantry line up).
 
 ``MjpegParts`` splits the multipart stream (pure); ``CameraVideo`` keeps a connection to one
-camera — Digest, Basic or no auth as ``[ptz.cameras.<name>]`` says — and reconnects after a
+camera — Digest, Basic or no auth as its ``CameraConnection`` says — and reconnects after a
 failure, waiting 1 s doubling to 10 s; nothing it meets ends the recording."""
 
 from __future__ import annotations
