@@ -18,7 +18,8 @@ from string import Template
 from common import keys
 
 PREFIX = "stb"
-FIXED_IDENTITIES = ("tracker", "gantry", "calib", "sim", "operator", "camera", "monitor", "web")
+FIXED_IDENTITIES = ("tracker", "gantry", "calib", "sim", "operator", "camera", "observation",
+                    "monitor", "web")
 ROUTER_CONFIG = "deploy/zenoh/router.json5"
 COMPOSE_FILE = "docker-compose.yml"
 _NAME = re.compile(r"^[a-z0-9][a-z0-9_-]*$")  # a compose service name and a Zenoh user name

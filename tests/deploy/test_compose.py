@@ -37,7 +37,7 @@ def _services(**env: str) -> dict:
 def test_compose_file_is_valid_and_every_service_restarts() -> None:
     services = _services()
     assert set(services) == {"router", "tracker", "ptz-1", "ptz-2", "calib", "gantry", "monitor",
-                             "web", "sim", "camera"}
+                             "web", "sim", "camera", "observation"}
     assert services["sim"]["profiles"] == ["sim"], "the sim only with --profile sim"
     assert services["camera"]["profiles"] == ["camera"], "a camera only where there is one"
     for name, service in services.items():

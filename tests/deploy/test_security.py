@@ -83,7 +83,11 @@ def test_only_operators_and_the_web_page_command_the_gantry(lab: dict) -> None:
         ("operator", "stb/gantry/command/reply", b"forged reply"),
         ("camera", "stb/gantry/camera/frame", b"camera frame"),
         ("camera", "stb/gantry/setpoint", b"camera setpoint"),
-    ], allowed={b"operator arms", b"web page stops", b"gantry replies", b"camera frame"})
+        ("observation", "stb/video/observation", b"bird's-eye view"),
+        ("observation", "stb/video/ptz1", b"observation plays ptz1"),
+        ("observation", "stb/gantry/command", b"observation arms"),
+    ], allowed={b"operator arms", b"web page stops", b"gantry replies", b"camera frame",
+                b"bird's-eye view"})
 
 
 def test_only_operators_and_the_web_page_calibrate_or_take_a_camera_in_hand(lab: dict) -> None:
