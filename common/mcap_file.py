@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import struct
 from collections import Counter
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
@@ -138,6 +139,31 @@ def read_samples(path: Path, keys: Iterable[str] | None = None) -> Iterator[Samp
                     yield _sample(channel, message)
     except READ_ERRORS as err:
         raise RecordingError(f"{path}: not a readable MCAP recording ({err})") from err
+
+
+def read_run(paths: Path | Sequence[Path], keys: Iterable[str] | None = None
+             ) -> Iterator[Sample]:
+    """The samples of a run recorded as one file or as its parts (``stb record --split-*``),
+    file after file, each in receive order. What a part writes again at its start (the camera
+    poses heard before it) is left out: a sample no newer than its key's last one in the
+    parts before."""
+    last: dict[str, float] = {}
+    for path in [paths] if isinstance(paths, Path) else paths:
+        before = dict(last)
+        for sample in read_samples(path, keys):
+            if sample.received_s <= before.get(sample.key, -math.inf):
+                continue
+            last[sample.key] = sample.received_s
+            yield sample
+
+
+def run_keys(paths: Path | Sequence[Path]) -> dict[str, int]:
+    """Every key recorded in any file of a run, and its number of samples (from each file's
+    summary; a pose written again at a part's start counts again)."""
+    counts: Counter = Counter()
+    for path in [paths] if isinstance(paths, Path) else paths:
+        counts.update(recorded_keys(path))
+    return dict(counts)
 
 
 def recorded_keys(path: Path) -> dict[str, int]:

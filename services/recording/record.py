@@ -11,7 +11,7 @@ import sys
 import threading
 import time
 from collections import Counter
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
@@ -36,6 +36,7 @@ from services.entry import (
     tool_settings,
 )
 from services.recording.foxglove import json_copy
+from services.recording.split import SplitRule, part_path
 from services.recording.typed import VIDEO_TOPICS, LabScene
 
 log = logging.getLogger(__name__)
@@ -61,6 +62,10 @@ class RecordSettings(ServiceSettings):
     min_free_mb: float = Field(64.0, ge=0, description="the recording stops (exit 5) when the "
                                "disk has less free than this, while the file can still be "
                                "finished with its summary")
+    split_mb: float | None = Field(None, gt=0, description="start a new file (each a complete "
+                                   "MCAP: run-001.mcap, run-002.mcap, …) at this size")
+    split_s: float | None = Field(None, gt=0, description="start a new file after this many "
+                                  "seconds")
     raw_frames: bool = Field(False, description="also the camera frames as they crossed the bus "
                              "(stb/gantry/camera/frame, video/<camera>: about 8 MB/s for the "
                              "tracking camera), for a replay that feeds a gantry; without, "
@@ -86,19 +91,30 @@ def latest_samples(session: zenoh.Session, expr: zenoh.KeyExpr | str,
 
 class Recorder:
     """Subscribes to key expressions and writes what arrives from a thread of its own; the
-    Zenoh callback only queues (key, payload, encoding, receive time)."""
+    Zenoh callback only queues (key, payload, encoding, receive time).
+
+    With a ``split`` rule and ``next_part`` (opens the next file), a full part is finished and
+    the next begun: each part is a complete recording — its own summary, the camera poses
+    heard so far written again, the crater and each video stream starting afresh (a
+    keyframe)."""
 
     def __init__(self, session: zenoh.Session, prefix: str, key_exprs: Sequence[str],
                  out: IO[bytes], *, exclude: Sequence[str] = (), with_json: bool = True,
                  scene: LabScene | None = None, raw_frames: bool = True,
-                 metadata: dict[str, str] | None = None) -> None:
+                 metadata: dict[str, str] | None = None, split: SplitRule = SplitRule(),
+                 next_part: Callable[[], IO[bytes]] | None = None) -> None:
         self.prefix, self.with_json, self._session = prefix, with_json, session
         self.raw_frames = raw_frames  # False: camera streams as the scene's video only
         self.write_error: OSError | None = None  # the disk is full: nothing more is written
         self.scene = scene
         self._video_seq: dict[str, int] = {}
         self.stats = Stats()
-        self._writer = RecordWriter(out, metadata)
+        self.out, self.parts = out, 1
+        self._split, self._next_part = split, next_part
+        self._part_started_s: float | None = None
+        self._latched: dict[str, tuple] = {}  # the camera poses: written again in every part
+        self._metadata = metadata or {}
+        self._writer = RecordWriter(out, self._metadata)
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._exprs = [zenoh.KeyExpr(k) for k in key_exprs]
         self._exclude = [zenoh.KeyExpr(k) for k in exclude]
@@ -135,6 +151,7 @@ class Recorder:
                 self.stats.lost += 1  # the disk is full: the rest is counted, not written
                 continue
             try:
+                self._next_part_if_due(item[3])
                 self._write(*item)
             except OSError as err:  # a full disk (FULL) or a failing one
                 self.write_error = err
@@ -143,15 +160,36 @@ class Recorder:
             except Exception:  # noqa: BLE001 - one bad sample must not end the recording
                 log.exception("cannot record a sample of %s", item[0])
 
+    def _next_part_if_due(self, received_s: float) -> None:
+        if self._part_started_s is None:
+            self._part_started_s = received_s
+        if self._next_part is None or not self._split.due(self.out.tell(), self._part_started_s,
+                                                          received_s):
+            return
+        self._writer.finish()
+        self.out.close()
+        self.out = self._next_part()
+        self.parts += 1
+        self._part_started_s = received_s
+        self._writer = RecordWriter(self.out, {**self._metadata, "part": str(self.parts)})
+        if self.scene is not None:
+            self.scene.restart()
+        for item in list(self._latched.values()):
+            self._write(*item, again=True)
+
     def _write(self, key: str, payload: bytes, encoding: str, received: float,
-               made: m.Message | None) -> None:
-        """One sample; ``made``: the message itself when the recorder made it (video)."""
+               made: m.Message | None, *, again: bool = False) -> None:
+        """One sample; ``made``: the message itself when the recorder made it (video);
+        ``again``: a camera pose written again at the start of a part (not counted)."""
         msg, topic = (made, keys.VIDEO) if made is not None else self._decode(key, payload)
+        if topic is keys.CALIB_POSE and msg is not None and not again:
+            self._latched[key] = (key, payload, encoding, received, made)
         model = topic.model.__name__ if topic is not None else ""
         measured = (msg.measured_s if isinstance(msg, m.Message)
                     else _float_or_none(msg.get("measured_s")) if isinstance(msg, dict) else None)
-        self.stats.samples[key] += 1
-        self.stats.payload_bytes += len(payload)
+        if not again:
+            self.stats.samples[key] += 1
+            self.stats.payload_bytes += len(payload)
         raw = self.raw_frames or self.scene is None or not self.scene.video \
             or topic not in VIDEO_TOPICS or msg is None
         sequence = self._writer.write(key, payload, encoding=encoding, model=model,
@@ -250,15 +288,24 @@ def record(args: argparse.Namespace) -> int:
     exprs = checked_key_exprs(args.key_exprs or [f"{settings.bus.prefix}/**"])
     exclude = checked_key_exprs(args.exclude)
     cameras = video_cameras(settings.video, args)
+    split = SplitRule(None if settings.split_mb is None else int(settings.split_mb * 1e6),
+                      settings.split_s)
+    paths = [part_path(args.out, 1) if split.splits else args.out]
+
+    def next_part() -> IO[bytes]:
+        paths.append(part_path(args.out, len(paths) + 1))
+        log.info("recording: part %d, %s", len(paths), paths[-1])
+        return open(paths[-1], "wb")
+
     try:
-        out = open(args.out, "wb")  # noqa: SIM115 - closed below, after the writer finished
+        out = open(paths[0], "wb")  # noqa: SIM115 - closed below, after the writer finished
     except OSError as err:
-        raise ToolError(f"cannot write {args.out}: {err}") from err
+        raise ToolError(f"cannot write {paths[0]}: {err}") from err
     try:
         session = tool_session(settings)
     except ToolError:
         out.close()
-        args.out.unlink(missing_ok=True)
+        paths[0].unlink(missing_ok=True)
         raise
     stop = threading.Event()
     restore = stop_on_signals(stop)
@@ -268,13 +315,13 @@ def record(args: argparse.Namespace) -> int:
                         with_json=settings.json_copy, metadata=metadata,
                         raw_frames=settings.raw_frames or not settings.typed,
                         scene=LabScene(crater(settings.height_map), video=True)
-                        if settings.typed else None)
-    print(f"stb record: recording {' '.join(exprs)} to {args.out} (Ctrl-C ends)",
-          file=sys.stderr)
+                        if settings.typed else None, split=split, next_part=next_part)
+    print(f"stb record: recording {' '.join(exprs)} to {paths[0]}"
+          f"{' (and parts after it)' if split.splits else ''} (Ctrl-C ends)", file=sys.stderr)
     recorder.ask_latest()
     videos = [CameraVideo(name, connection, settings.video_fps, settings.video_resolution,
                           recorder.add_video).start() for name, connection in cameras]
-    disk = DiskWatch(args.out, settings.min_free_mb, recorder)
+    disk = DiskWatch(paths, settings.min_free_mb, recorder)
     try:
         _wait(recorder, stop, args.duration, settings.progress_s, disk)
     finally:
@@ -282,16 +329,17 @@ def record(args: argparse.Namespace) -> int:
             video.stop()
         recorder.close()
         try:
-            out.close()
+            recorder.out.close()
         except OSError as err:  # the rest of a full disk's buffer
             recorder.write_error = recorder.write_error or err
         session.close()
         restore()
-    _summary(recorder.stats, args.out)
+    _summary(recorder.stats, paths)
     if disk.why:
         readable = "up to its last whole chunk" if recorder.write_error else "and finished"
-        raise ToolError(f"stopped: {disk.why}; {args.out} is readable {readable} — free "
-                        "space, or record to another disk", EXIT_DISK)
+        raise ToolError(f"stopped: {disk.why}; {paths[-1]} is readable {readable}"
+                        f"{' (the parts before it are complete)' if len(paths) > 1 else ''}"
+                        " — free space, or record to another disk", EXIT_DISK)
     return 0
 
 
@@ -300,14 +348,22 @@ class DiskWatch:
     """Whether the recording must stop for its disk: less free than ``min_free_mb`` (while the
     file can still be finished), or a write failed (the disk filled up faster)."""
 
-    out: Path
+    paths: list[Path]  # the recording's files so far (one, or its parts)
     min_free_mb: float
     recorder: Recorder
     why: str = ""
 
+    @property
+    def folder(self) -> Path:
+        return self.paths[0].parent
+
+    def size_mb(self) -> float:
+        """The recording's size so far, all its parts."""
+        return sum(p.stat().st_size for p in self.paths if p.exists()) / 1e6
+
     def free_mb(self) -> float:
         try:
-            return shutil.disk_usage(self.out.parent).free / 1e6
+            return shutil.disk_usage(self.folder).free / 1e6
         except OSError:
             return float("inf")
 
@@ -315,7 +371,7 @@ class DiskWatch:
         if self.recorder.write_error is not None:
             self.why = f"cannot write: {self.recorder.write_error}"
         elif (free := self.free_mb()) < self.min_free_mb:
-            self.why = (f"{free:.0f} MB free on {self.out.parent}, less than [record] "
+            self.why = (f"{free:.0f} MB free on {self.folder}, less than [record] "
                         f"min_free_mb = {self.min_free_mb:g}")
         return bool(self.why)
 
@@ -335,18 +391,19 @@ def _wait(recorder: Recorder, stop: threading.Event, duration: float | None,
             continue
         progress_at = now + progress_s
         total = sum(recorder.stats.samples.values())
-        size = disk.out.stat().st_size / 1e6 if disk.out.exists() else 0.0
+        parts = f" in {len(disk.paths)} files" if len(disk.paths) > 1 else ""
         print(f"stb record: {now - started:.0f} s, {total} samples on "
               f"{len(recorder.stats.samples)} keys ({(total - before) / progress_s:.0f}/s), "
-              f"file {size:.1f} MB, {disk.free_mb() / 1e3:.1f} GB free",
+              f"{disk.size_mb():.1f} MB{parts}, {disk.free_mb() / 1e3:.1f} GB free",
               file=sys.stderr, flush=True)
         before = total
 
 
-def _summary(stats: Stats, out: Path) -> None:
+def _summary(stats: Stats, paths: list[Path]) -> None:
     total = sum(stats.samples.values())
-    size = out.stat().st_size / 1e6 if out.exists() else 0.0
-    print(f"stb record: wrote {total} samples on {len(stats.samples)} keys to {out} "
+    size = sum(p.stat().st_size for p in paths if p.exists()) / 1e6
+    where = paths[0] if len(paths) == 1 else f"{len(paths)} files, {paths[0]} … {paths[-1]}"
+    print(f"stb record: wrote {total} samples on {len(stats.samples)} keys to {where} "
           f"({size:.1f} MB)", file=sys.stderr)
     for key, count in sorted(stats.samples.items()):
         print(f"  {key}: {count}", file=sys.stderr)

@@ -18,7 +18,16 @@ Camera streams — the tracking camera's frames (``stb/gantry/camera/frame``) an
 ``--video`` cameras — go into the file as H.264 video (libx264 through PyAV) on Foxglove's
 ``CompressedVideo`` channels ``/gantry/image`` and ``/<camera>/video``, each frame stamped with
 its capture time. Their raw frames (about 8 MB/s for the tracking camera) only with
-``--raw-frames``: what ``stb replay`` needs to feed a gantry again.
+``--raw-frames``: what ``stb replay`` needs to feed a gantry again. The observation camera's
+bird's-eye view (``stb observation``, on ``stb/video/observation``) is recorded the same way,
+on ``/observation/video``.
+
+Long runs: ``--split-size MB`` and ``--split-time S`` start a new file when the current one is
+that large or long — ``OUT-001.mcap``, ``OUT-002.mcap``, …, each a complete recording (its
+summary, the camera poses again, every video starting with a keyframe); ``stb report`` and
+``stb replay`` take the parts as one run. The progress line shows the elapsed time, the size
+so far and the free space; below ``[record] min_free_mb`` free (or when a write fails) the
+recording stops with exit 5, its file readable.
 """
 
 from __future__ import annotations
@@ -44,11 +53,20 @@ def main(argv: Sequence[str] | None = None) -> int:
                         "[ptz.cameras]; repeatable)")
     parser.add_argument("--video-fps", type=float, metavar="FPS",
                         help="video frames a second per camera (default 5)")
+    parser.add_argument("--split-size", type=float, metavar="MB",
+                        help="start a new file at this size (OUT-001.mcap, OUT-002.mcap, …; "
+                        "each a complete recording)")
+    parser.add_argument("--split-time", type=float, metavar="S",
+                        help="start a new file after this many seconds")
     parser.add_argument("--raw-frames", action="store_true",
                         help="also the camera frames as they crossed the bus (large)")
     args = parser.parse_args(argv)
     if args.raw_frames:
         args.set[:0] = ["raw_frames=true"]
+    if args.split_size is not None:
+        args.set[:0] = [f"split_mb={args.split_size}"]
+    if args.split_time is not None:
+        args.set[:0] = [f"split_s={args.split_time}"]
     if args.video:  # the flags are settings of [record]: --set has the last word
         args.set[:0] = [f"video={json.dumps(args.video)}"]
     if args.video_fps is not None:

@@ -15,7 +15,7 @@ import msgpack
 import zenoh
 
 from common import codec
-from common.mcap_file import RecordingError, Sample, read_samples, recorded_keys
+from common.mcap_file import RecordingError, Sample, read_run, run_keys
 from common.node import stop_on_signals
 from common.settings import LogLevel, ServiceSettings
 from services.entry import (
@@ -69,20 +69,21 @@ def pace(samples: Iterable[Sample], speed: float, stop: threading.Event,
         yield sample, origin, start
 
 
-def replay(session: zenoh.Session, path: Path, *, speed: float = 1.0, keys: Sequence[str] = (),
-           exclude: Sequence[str] = (), as_recorded: bool = False,
+def replay(session: zenoh.Session, paths: Path | Sequence[Path], *, speed: float = 1.0,
+           keys: Sequence[str] = (), exclude: Sequence[str] = (), as_recorded: bool = False,
            stop: threading.Event | None = None) -> Counter:
-    """Put the recording on the bus; returns how many samples went out per key."""
+    """Put the recording (one file, or the parts of a split one in order) on the bus, one
+    sample at a time as it is read; returns how many samples went out per key."""
     stop = stop or threading.Event()
     wanted = [zenoh.KeyExpr(k) for k in keys]
     unwanted = [zenoh.KeyExpr(k) for k in exclude]
-    chosen = [k for k in recorded_keys(path)
+    chosen = [k for k in run_keys(paths)
               if (not wanted or any(w.includes(zenoh.KeyExpr(k)) for w in wanted))
               and not any(u.includes(zenoh.KeyExpr(k)) for u in unwanted)]
     publishers: dict[str, zenoh.Publisher] = {}
     sent: Counter = Counter()
     try:
-        for sample, origin, start in pace(read_samples(path, chosen), speed, stop):
+        for sample, origin, start in pace(read_run(paths, chosen), speed, stop):
             publisher = publishers.get(sample.key)
             if publisher is None:
                 publisher = session.declare_publisher(  # a replay waits rather than drops
@@ -106,14 +107,15 @@ def replay_file(args: argparse.Namespace) -> int:
     settings = tool_settings(ReplaySettings, args)
     keys, exclude = checked_key_exprs(args.keys), checked_key_exprs(args.exclude)
     try:
-        counts = recorded_keys(args.recording)
+        counts = run_keys(args.recording)
     except RecordingError as err:
         raise ToolError(str(err)) from err
     session = tool_session(settings)
     stop = threading.Event()
     restore = stop_on_signals(stop)
+    files = " ".join(str(p) for p in args.recording)
     print(f"stb replay: {sum(counts.values())} samples on {len(counts)} keys from "
-          f"{args.recording} at speed {args.speed:g}", file=sys.stderr, flush=True)
+          f"{files} at speed {args.speed:g}", file=sys.stderr, flush=True)
     try:
         sent = replay(session, args.recording, speed=args.speed, keys=keys, exclude=exclude,
                       as_recorded=args.as_recorded, stop=stop)

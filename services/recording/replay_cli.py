@@ -1,4 +1,6 @@
-"""``stb replay IN.mcap [--speed X]``: put a recording back on the bus with its timing.
+"""``stb replay IN.mcap [MORE.mcap ...] [--speed X]``: put a recording back on the bus with its
+timing. The parts of a split recording (``stb record --split-size``) are given in order and go
+out as one run; the files are read as they are sent (memory does not grow with their length).
 
 Samples go out in the order they were received, spaced as they were (divided by ``--speed``).
 By default every message's clock fields (``measured_s``, ``sent_s``, ``started_s``) are moved
@@ -22,7 +24,8 @@ from services.args import base_parser
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = base_parser("stb replay", __doc__ or "")
-    parser.add_argument("recording", type=Path, metavar="IN.mcap")
+    parser.add_argument("recording", type=Path, nargs="+", metavar="IN.mcap",
+                        help="the recording, or its parts in order")
     parser.add_argument("--speed", type=float, default=1.0, help="1 = as recorded, 2 = twice "
                         "as fast (default 1)")
     parser.add_argument("--keys", action="append", default=[], metavar="KEYEXPR",

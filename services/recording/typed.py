@@ -205,6 +205,14 @@ class LabScene:
             out += self.scene(t)
         return out
 
+    def restart(self) -> None:
+        """A new file begins: each video stream starts again with a keyframe, the crater and
+        the scene go again with the next messages."""
+        self._streams.clear()
+        self.resend_crater()
+        self._scene_at = -math.inf
+        self._tf_at.clear()
+
     def resend_crater(self) -> None:
         """The crater goes with the next message (a client that just subscribed)."""
         self._crater_at = -math.inf

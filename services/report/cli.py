@@ -1,5 +1,7 @@
-"""``stb report IN.mcap --out DIR``: the paper's plots of a recorded run as PNG and a one-page
-HTML summary (``DIR/index.html``) with the run's figures.
+"""``stb report IN.mcap [MORE.mcap ...] --out DIR``: the paper's plots of a recorded run as PNG
+and a one-page HTML summary (``DIR/index.html``) with the run's figures. A split recording's
+parts (``stb record --split-size``) are given in order and reported as one run; the files are
+read once, as a stream (memory grows with the series the plots need, not with the video).
 
 The tracks are drawn over the crater's height map (``--height-map``, default: the gantry's
 ``height_map`` from the lab file, if the file exists). Calibration residuals are computed again
@@ -21,7 +23,8 @@ from services.args import Parser, plain
 def main(argv: Sequence[str] | None = None) -> int:
     parser = Parser(prog="stb report", description=plain(__doc__ or ""),
                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("recording", type=Path, metavar="IN.mcap")
+    parser.add_argument("recording", type=Path, nargs="+", metavar="IN.mcap",
+                        help="the recording, or its parts in order")
     parser.add_argument("--out", type=Path, required=True, metavar="DIR")
     parser.add_argument("--lab", type=Path, metavar="FILE", help="lab config (height map path)")
     parser.add_argument("--height-map", type=Path, metavar="FILE.npz")

@@ -4,6 +4,7 @@ figures computed from them (pure functions of those series)."""
 from __future__ import annotations
 
 from collections import Counter, defaultdict
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -12,7 +13,7 @@ import numpy as np
 from common import codec, keys
 from common import messages as m
 from common.camera import Intrinsics, Pose, head_pose, reprojection_px
-from common.mcap_file import read_samples
+from common.mcap_file import read_run
 from common.passpoint_collector import Collector
 
 STATE_MATCH_S = 0.5
@@ -69,11 +70,13 @@ class Recording:
         return max(0.0, self.last_s - self.first_s)
 
 
-def read_recording(path: Path, prefix: str = keys.DEFAULT_PREFIX) -> Recording:
-    """Decode every sample the report uses; invalid ones are counted, not fatal.
-    Raises RecordingError for a file that is not a recording."""
-    rec = Recording(path)
-    for sample in read_samples(path):
+def read_recording(paths: Path | Sequence[Path], prefix: str = keys.DEFAULT_PREFIX
+                   ) -> Recording:
+    """Decode every sample the report uses, streaming through the file (or a split
+    recording's parts, in order); invalid ones are counted, not fatal. Raises RecordingError
+    for a file that is not a recording."""
+    rec = Recording(paths if isinstance(paths, Path) else paths[0])
+    for sample in read_run(paths):
         rec.counts[sample.key] += 1
         rec.first_s = min(rec.first_s, sample.received_s)
         rec.last_s = max(rec.last_s, sample.received_s)

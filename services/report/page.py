@@ -84,7 +84,8 @@ def _fmt(value: object) -> str:
 def report(args: argparse.Namespace) -> int:
     try:
         height_map = _height_map(args)
-        print(f"stb report: reading {args.recording} ...", file=sys.stderr, flush=True)
+        files = " ".join(str(p) for p in args.recording)
+        print(f"stb report: reading {files} ...", file=sys.stderr, flush=True)
         rec = read_recording(args.recording, args.prefix)
     except (ConfigError, RecordingError, OSError, ValueError) as err:
         print(f"stb report: {err}", file=sys.stderr)
