@@ -42,6 +42,7 @@ from services.recording.typed import VIDEO_TOPICS, LabScene
 log = logging.getLogger(__name__)
 EXIT_DISK = 5  # the disk is (nearly) full: the recording stopped, its file finished
 DISK_CHECK_S = 0.5  # free space looked at this often
+NO_SPLIT = SplitRule()
 
 
 class RecordSettings(ServiceSettings):
@@ -101,7 +102,7 @@ class Recorder:
     def __init__(self, session: zenoh.Session, prefix: str, key_exprs: Sequence[str],
                  out: IO[bytes], *, exclude: Sequence[str] = (), with_json: bool = True,
                  scene: LabScene | None = None, raw_frames: bool = True,
-                 metadata: dict[str, str] | None = None, split: SplitRule = SplitRule(),
+                 metadata: dict[str, str] | None = None, split: SplitRule = NO_SPLIT,
                  next_part: Callable[[], IO[bytes]] | None = None) -> None:
         self.prefix, self.with_json, self._session = prefix, with_json, session
         self.raw_frames = raw_frames  # False: camera streams as the scene's video only
