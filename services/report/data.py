@@ -3,7 +3,8 @@ figures computed from them (pure functions of those series)."""
 
 from __future__ import annotations
 
-from collections import Counter, defaultdict
+import math
+from collections import Counter, defaultdict, deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -13,12 +14,15 @@ import numpy as np
 from common import codec, keys
 from common import messages as m
 from common.camera import Intrinsics, Pose, head_pose, reprojection_px
-from common.mcap_file import read_run
+from common.mcap_file import Sample, read_run
 from common.passpoint_collector import Collector
 
 STATE_MATCH_S = 0.5
 """A crane state is compared with the robot only if a robot sample lies this close."""
 MOCAP_AHEAD_S = 0.05
+FRAMES_AROUND_S = 5.0
+"""Mocap frames are kept (for the calibration residuals) only this close to a PTZ camera's
+detections: a long run's 100 frames a second are not held in memory."""
 
 
 @dataclass
@@ -61,7 +65,7 @@ class Recording:
     poses: dict[str, m.CameraPose] = field(default_factory=dict)
     algorithms: Counter = field(default_factory=Counter)
     health: dict[str, m.ServiceHealth] = field(default_factory=dict)
-    frames: list[m.MarkerFrame] = field(default_factory=list)
+    frames: list[m.MarkerFrame] = field(default_factory=list)  # around detections only
     detections: dict[str, list[m.MarkerDetections]] = field(
         default_factory=lambda: defaultdict(list))
 
@@ -76,20 +80,34 @@ def read_recording(paths: Path | Sequence[Path], prefix: str = keys.DEFAULT_PREF
     recording's parts, in order); invalid ones are counted, not fatal. Raises RecordingError
     for a file that is not a recording."""
     rec = Recording(paths if isinstance(paths, Path) else paths[0])
+    recent: deque[Sample] = deque()  # mocap frames of the last FRAMES_AROUND_S, undecoded
+    keep_until = -math.inf  # mocap frames are kept up to here (after a detection)
     for sample in read_run(paths):
         rec.counts[sample.key] += 1
         rec.first_s = min(rec.first_s, sample.received_s)
         rec.last_s = max(rec.last_s, sample.received_s)
         topic = keys.topic_for(prefix, sample.key)
-        if topic is None:
+        if topic is keys.TRACKER_MARKERS and sample.received_s > keep_until:
+            recent.append(sample)
+            while recent[0].received_s < sample.received_s - FRAMES_AROUND_S:
+                recent.popleft()
             continue
-        try:
-            msg = codec.decode(topic.model, sample.payload, max_bytes=topic.max_payload_bytes)
-        except codec.DecodeError as err:
-            rec.invalid[f"{sample.key}: {err.reason}"] += 1
-            continue
-        _take(rec, topic, msg)
+        if topic is keys.PTZ_DETECTIONS:
+            keep_until = sample.received_s + FRAMES_AROUND_S
+            while recent:
+                _decode_into(rec, keys.TRACKER_MARKERS, recent.popleft())
+        if topic is not None:
+            _decode_into(rec, topic, sample)
     return rec
+
+
+def _decode_into(rec: Recording, topic: keys.Topic, sample: Sample) -> None:
+    try:
+        msg = codec.decode(topic.model, sample.payload, max_bytes=topic.max_payload_bytes)
+    except codec.DecodeError as err:
+        rec.invalid[f"{sample.key}: {err.reason}"] += 1
+        return
+    _take(rec, topic, msg)
 
 
 def _take(rec: Recording, topic: keys.Topic, msg: m.Message) -> None:  # noqa: C901 - a dispatch

@@ -1,0 +1,64 @@
+"""A 30-minute run in three parts (tests/recording/long_run.py: the demo lab's message rates)
+is reported and replayed as one run, each in a process whose peak memory stays under 500 MB:
+both stream through the files."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from common import keys
+from common import messages as m
+from common.bus import Bus
+from tests.conftest import ROOT
+from tests.recording.long_run import GANTRY_HZ, write_long_run
+
+MINUTES, PARTS, MEMORY_MB = 30, 3, 500
+
+
+def _peak_mb(*args: str) -> tuple[int, float, str]:
+    """Run ``stb ARGS``; (exit code, its peak resident memory in MB, its stderr)."""
+    proc = subprocess.Popen([sys.executable, "-m", "services.cli", *args], cwd=ROOT,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        _, status, usage = os.wait4(proc.pid, 0)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    return os.waitstatus_to_exitcode(status), usage.ru_maxrss / 1024, proc.stderr.read()
+
+
+@pytest.fixture(scope="module")
+def long_run(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    return write_long_run(tmp_path_factory.mktemp("long") / "run.mcap", MINUTES, PARTS)
+
+
+@pytest.mark.system
+@pytest.mark.timeout(600)
+def test_a_thirty_minute_run_in_three_parts_is_reported_in_bounded_memory(
+        long_run: list[Path], tmp_path: Path) -> None:
+    code, peak, err = _peak_mb("report", *map(str, long_run), "--out", str(tmp_path))
+    assert code == 0, err
+    assert peak <= MEMORY_MB, f"stb report peaked at {peak:.0f} MB"
+    page = (tmp_path / "index.html").read_text()
+    assert f"{MINUTES * 60 - 1}" in page or f"{MINUTES * 60}" in page, "the whole run's length"
+    assert "40.0" in page, "the crane's 40 mm error, over all three parts"
+
+
+@pytest.mark.system
+@pytest.mark.timeout(600)
+def test_a_thirty_minute_run_in_three_parts_is_replayed_in_bounded_memory(
+        long_run: list[Path], router_endpoint: str, make_bus: Callable[..., Bus]) -> None:
+    states: list[m.CraneState] = []
+    make_bus().subscribe(keys.GANTRY_STATE, states.append, latest=False, queue_size=10**6)
+    # the tracker's 100 Hz keys are read through but not sent: the bus would take minutes
+    code, peak, err = _peak_mb("replay", *map(str, long_run), "--connect", router_endpoint,
+                               "--speed", "500", "--exclude", "stb/tracker/**")
+    assert code == 0, err
+    assert peak <= MEMORY_MB, f"stb replay peaked at {peak:.0f} MB"
+    assert len(states) == MINUTES * 60 * GANTRY_HZ, "every crane state of the three parts"
