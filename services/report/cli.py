@@ -8,6 +8,12 @@ The tracks are drawn over the crater's height map (``--height-map``, default: th
 from the passpoints found in the recording (the calib collector over its mocap frames and
 detections, marker ``--calib-marker``); without a calibration in the recording the plot shows
 each recorded pose's own fit error.
+
+Moments of the run — the largest crane error and where alarms began (the crane reacquiring,
+stale, at fault, stopped or unreachable; the sideways pull above its limit) — get stills from
+every video in the recording (the observation camera's bird's-eye view, the PTZ cameras' videos
+and previews, the tracking camera), under "Moments" in the page. ``--video`` also exports
+``DIR/birdseye.mp4``: the bird's-eye view with the crane's error written over it.
 """
 
 from __future__ import annotations
@@ -31,6 +37,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--calib-marker", default="wand",
                         help="label of the calibration marker (default: wand)")
     parser.add_argument("--prefix", default="stb", help="key prefix of the recording")
+    parser.add_argument("--video", action="store_true",
+                        help="also DIR/birdseye.mp4: the observation camera's bird's-eye view "
+                        "with the crane's error written over it")
+    parser.add_argument("--video-seconds", type=float, default=60.0, metavar="S",
+                        help="the MP4's length, around the largest crane error (default 60; "
+                        "0: the whole run)")
     args = parser.parse_args(argv)
     from services.report.page import report
 

@@ -20,6 +20,8 @@ from common.passpoint_collector import Collector
 STATE_MATCH_S = 0.5
 """A crane state is compared with the robot only if a robot sample lies this close."""
 MOCAP_AHEAD_S = 0.05
+ALARM_STATUSES = ("reacquiring", "stale", "fault", "stopped", "unreachable")
+"""Crane statuses the report marks as moments of the run (with stills), when they begin."""
 FRAMES_AROUND_S = 5.0
 """Mocap frames are kept (for the calibration residuals) only this close to a PTZ camera's
 detections: a long run's 100 frames a second are not held in memory."""
@@ -68,6 +70,9 @@ class Recording:
     frames: list[m.MarkerFrame] = field(default_factory=list)  # around detections only
     detections: dict[str, list[m.MarkerDetections]] = field(
         default_factory=lambda: defaultdict(list))
+    alarms: list[tuple[float, str]] = field(default_factory=list)  # (when it began, what)
+    _crane_status: str = ""
+    _pulling: bool = False
 
     @property
     def duration_s(self) -> float:
@@ -118,12 +123,19 @@ def _take(rec: Recording, topic: keys.Topic, msg: m.Message) -> None:  # noqa: C
         rec.truth.add(t, msg.x_mm, msg.y_mm)
     elif isinstance(msg, m.CraneState):
         rec.crane.add(t, msg.x_mm, msg.y_mm, float(msg.enabled))
+        if msg.status in ALARM_STATUSES and msg.status != rec._crane_status:
+            rec.alarms.append((t, f"crane {msg.status}"))
+        rec._crane_status = msg.status
     elif isinstance(msg, m.RobotEstimate):
         rec.estimate.add(t, msg.x_mm, msg.y_mm, msg.vx_mm_s, msg.vy_mm_s, float(msg.valid))
         rec.algorithms[msg.algorithm] += 1
     elif isinstance(msg, m.GravityOffload):
         rec.offload.add(t, msg.horizontal_error_mm, msg.horizontal_share_pct,
                         msg.vertical_loss_pct)
+        if msg.warning and not rec._pulling:
+            rec.alarms.append((t, f"sideways pull {msg.horizontal_share_pct:.1f} % (limit "
+                                  f"{msg.warn_above_pct:g} %)"))
+        rec._pulling = msg.warning
     elif isinstance(msg, m.PtzState):
         rec.ptz_state[msg.camera].add(t, msg.pan_deg, msg.tilt_deg)
         if msg.status == "tracking":
@@ -153,6 +165,23 @@ def crane_error(rec: Recording) -> tuple[np.ndarray, np.ndarray]:
     t = t[keep]
     robot_xy = np.column_stack([np.interp(t, rt, robot[:, 0]), np.interp(t, rt, robot[:, 1])])
     return t, crane[keep, :2] - robot_xy
+
+
+def moments(rec: Recording, most: int = 6, apart_s: float = 5.0) -> list[tuple[float, str]]:
+    """The run's moments worth a picture, in time order: the largest crane error and the
+    beginnings of alarms (at most ``most``, none within ``apart_s`` of one kept before)."""
+    t, error = crane_error(rec)
+    candidates = []
+    if len(t):
+        distance = np.hypot(error[:, 0], error[:, 1])
+        worst = int(np.argmax(distance))
+        candidates.append((float(t[worst]), f"largest crane error, {distance[worst]:.0f} mm"))
+    candidates += rec.alarms
+    kept: list[tuple[float, str]] = []
+    for when, what in candidates:
+        if len(kept) < most and all(abs(when - k) >= apart_s for k, _ in kept):
+            kept.append((when, what))
+    return sorted(kept)
 
 
 def collect_again(frames: list[m.MarkerFrame], detections: list[m.MarkerDetections],

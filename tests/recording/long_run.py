@@ -12,6 +12,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+from foxglove import messages as fm
 
 from common import codec, keys
 from common import messages as m
@@ -20,7 +21,6 @@ from services.recording.split import part_path
 
 MOCAP_HZ, GANTRY_HZ, PTZ_HZ, PREVIEW_HZ, OBSERVATION_HZ = 100, 25, 10, 2, 5
 VIDEO_BYTES = {"/gantry/image": 1_500, "/observation/video": 12_000}  # H.264 access units
-SCHEMA = ("foxglove.CompressedVideo", "protobuf", b"")
 
 
 def _robot_at(t: float) -> tuple[float, float]:
@@ -32,16 +32,19 @@ def write_long_run(out: Path, minutes: float, parts: int, t0: float = 1.7e9) -> 
     """The run's parts (``out``-001.mcap …), each ``minutes / parts`` long."""
     rng = np.random.default_rng(0)
     jpeg = bytes(rng.integers(0, 256, 40_000, dtype=np.uint8))
-    video = {topic: bytes(rng.integers(0, 256, size, dtype=np.uint8))
-             for topic, size in VIDEO_BYTES.items()}
+    video = {topic: fm.CompressedVideo(  # not H.264 inside: no keyframe, no still
+        frame_id=topic, format="h264", data=bytes(rng.integers(0, 256, size, dtype=np.uint8))
+    ).encode() for topic, size in VIDEO_BYTES.items()}
     part_s = minutes * 60 / parts
     paths = []
     for part in range(parts):
         paths.append(part_path(out, part + 1))
         with open(paths[-1], "wb") as f:
             writer = RecordWriter(f, {"prefix": "stb", "part": str(part + 1)})
+            schema = fm.CompressedVideo.get_schema()
+            schema_of = (schema.name, schema.encoding, bytes(schema.data))
             for i in range(int(part * part_s * MOCAP_HZ), int((part + 1) * part_s * MOCAP_HZ)):
-                _tick(writer, i, t0 + i / MOCAP_HZ, jpeg, video)
+                _tick(writer, i, t0 + i / MOCAP_HZ, jpeg, video, schema_of)
             writer.finish()
     return paths
 
@@ -53,7 +56,8 @@ def _put(writer: RecordWriter, topic: keys.Topic, msg: m.Message, t: float, **pa
                  measured_s=msg.measured_s)
 
 
-def _tick(writer: RecordWriter, i: int, t: float, jpeg: bytes, video: dict[str, bytes]) -> None:
+def _tick(writer: RecordWriter, i: int, t: float, jpeg: bytes, video: dict[str, bytes],
+          schema: tuple[str, str, bytes]) -> None:
     x, y = _robot_at(t)
     markers = [m.Marker(label="robot", x_mm=x, y_mm=y, z_mm=300.0)] + [
         m.Marker(label=f"static_{k}", x_mm=3000.0 * k, y_mm=100.0, z_mm=0.0) for k in range(3)]
@@ -72,10 +76,10 @@ def _tick(writer: RecordWriter, i: int, t: float, jpeg: bytes, video: dict[str, 
             measured_s=t, horizontal_error_mm=40.0, cable_length_mm=3000.0,
             vertical_loss_pct=0.01, horizontal_share_pct=1.3, warning=False,
             warn_above_pct=5.0), t)
-        writer.write_typed("/gantry/image", schema=SCHEMA, message_encoding="protobuf",
+        writer.write_typed("/gantry/image", schema=schema, message_encoding="protobuf",
                            data=video["/gantry/image"], time_s=t)
     if i % (MOCAP_HZ // OBSERVATION_HZ) == 0:
-        writer.write_typed("/observation/video", schema=SCHEMA, message_encoding="protobuf",
+        writer.write_typed("/observation/video", schema=schema, message_encoding="protobuf",
                            data=video["/observation/video"], time_s=t)
     for camera in ("ptz1", "ptz2"):
         if i % (MOCAP_HZ // PTZ_HZ) == 0:

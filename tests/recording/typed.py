@@ -6,22 +6,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
 
-_CLASSES: dict[tuple[str, bytes], Any] = {}
+from services.report.video import message_class
 
-
-def message_class(name: str, descriptors: bytes) -> Any:
-    """The protobuf class of ``name`` from a serialized FileDescriptorSet."""
-    cls = _CLASSES.get((name, descriptors))
-    if cls is None:
-        pool = descriptor_pool.DescriptorPool()
-        for file in descriptor_pb2.FileDescriptorSet.FromString(descriptors).file:
-            pool.Add(file)
-        cls = _CLASSES[(name, descriptors)] = message_factory.GetMessageClass(
-            pool.FindMessageTypeByName(name))
-    return cls
+__all__ = ["decoded_typed", "message_class"]
 
 
 def decoded_typed(path: Path, topic: str) -> list[Any]:
