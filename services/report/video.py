@@ -11,6 +11,7 @@ SPS and PPS) and ends at the last frame taken at or before the moment.
 from __future__ import annotations
 
 import logging
+from collections import deque
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -122,7 +123,5 @@ def still(paths: Sequence[Path], topic: str, at_s: float) -> tuple[float, np.nda
     keyframes = [i for i, unit in enumerate(window) if unit.keyframe]
     if not keyframes:
         return None
-    last = None
-    for last in decoded(iter(window[keyframes[-1]:])):
-        pass
-    return last
+    last = deque(decoded(iter(window[keyframes[-1]:])), maxlen=1)
+    return last.pop() if last else None
