@@ -1,0 +1,98 @@
+"""Recording the demo lab onto a real 20 MB filesystem (a tmpfs of its own, mounted in a
+private mount namespace): ``stb record`` ends with a clear message and exit 5, no traceback;
+the file is readable by the mcap library up to its last message (finished with its summary
+when the free-space floor stopped it first); the lab goes on as before."""
+
+from __future__ import annotations
+
+import shlex
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+from mcap.records import Message
+from mcap.stream_reader import StreamReader
+
+from common import keys
+from common import messages as m
+from common.bus import Bus
+from services.recording.record import EXIT_DISK
+from tests.conftest import ROOT, client_settings, open_when_up, wait_for
+from tests.operator.conftest import LiveLab
+
+pytestmark = [pytest.mark.system,
+              pytest.mark.skipif(shutil.which("unshare") is None, reason="needs unshare(1)")]
+SIZE_MB = 20
+
+
+def _record_on_small_disk(live_lab: LiveLab, folder: Path, *settings: str
+                          ) -> tuple[int, str, Path]:
+    """``stb record`` into a fresh 20 MB tmpfs; (exit code, stderr, the file copied out)."""
+    disk, kept = folder / "disk", folder / "kept"
+    disk.mkdir()
+    kept.mkdir()
+    record = [sys.executable, "-m", "services.cli", "record", str(disk / "run.mcap"), "--lab",
+              str(live_lab.lab), "--duration", "120", "--set", "progress_s=1",
+              "--set", f"height_map={live_lab.crater_file}", "--raw-frames", *settings]
+    script = (f"mount -t tmpfs -o size={SIZE_MB}m tmpfs {shlex.quote(str(disk))} || exit 99; "
+              f"{shlex.join(record)}; code=$?; df -m {shlex.quote(str(disk))} >&2; "
+              f"cp {shlex.quote(str(disk / 'run.mcap'))} {shlex.quote(str(kept))}/; exit $code")
+    done = subprocess.run(["unshare", "-m", "sh", "-c", script], cwd=ROOT, capture_output=True,
+                          text=True, timeout=180)
+    if done.returncode == 99:
+        pytest.skip(f"cannot mount a tmpfs here: {done.stderr.strip()}")
+    return done.returncode, done.stderr, kept / "run.mcap"
+
+
+def _messages_until_the_end(path: Path) -> int:
+    """Messages the mcap library reads from the file's start until it ends or breaks off."""
+    count = 0
+    with open(path, "rb") as f:
+        try:
+            for record in StreamReader(f, emit_chunks=False).records:
+                count += isinstance(record, Message)
+        except (McapError, EOFError, ValueError):
+            pass  # where the disk ran full
+    return count
+
+
+def _lab_goes_on(live_lab: LiveLab) -> None:
+    session = open_when_up(client_settings(live_lab.endpoint).zenoh)
+    bus = Bus(session, client_settings(live_lab.endpoint))
+    states: list[m.CraneState] = []
+    try:
+        bus.subscribe(keys.GANTRY_STATE, states.append, latest=False)
+        since = time.time()
+        wait_for(lambda: any(s.measured_s > since and s.status == "tracking" for s in states),
+                 timeout=10, why=lambda: f"gantry: {[s.status for s in states[-3:]]}")
+    finally:
+        bus.close()
+        session.close()
+
+
+def test_a_disk_that_fills_up_ends_the_recording_readable_and_the_lab_goes_on(
+        live_lab: LiveLab, tmp_path: Path) -> None:
+    code, err, kept = _record_on_small_disk(live_lab, tmp_path, "--set", "min_free_mb=0")
+    assert code == EXIT_DISK, err
+    assert "Traceback" not in err
+    assert "stopped: cannot write" in err and "No space left on device" in err, err
+    assert "readable up to its last whole chunk" in err
+    assert kept.stat().st_size > (SIZE_MB - 4) * 1e6, "it wrote until the disk was full"
+    assert _messages_until_the_end(kept) > 100
+    _lab_goes_on(live_lab)
+
+
+def test_the_free_space_floor_stops_it_first_with_the_file_finished(
+        live_lab: LiveLab, tmp_path: Path) -> None:
+    code, err, kept = _record_on_small_disk(live_lab, tmp_path, "--set", "min_free_mb=8")
+    assert code == EXIT_DISK and "Traceback" not in err, err
+    assert "less than [record] min_free_mb = 8" in err and "readable and finished" in err, err
+    with open(kept, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics.message_count > 100
+    _lab_goes_on(live_lab)
