@@ -124,8 +124,9 @@ GANTRY_COMMAND = Topic("gantry/command", m.GantryCommand,
 GANTRY_COMMAND_REPLY = Topic("gantry/command/reply", m.GantryCommandReply,
                              "the gantry's answer to each command", stream=False)
 VIDEO = Topic("video/{camera}", m.CameraFrame,
-              "a camera's video (JPEG) as `stb record --video` takes it from the camera (VAPIX "
-              "MJPEG): in recordings, and on the bus when one is replayed",
+              "a camera's video (JPEG, as the camera's VAPIX MJPEG sent it): the observation "
+              "camera's bird's-eye view from `stb observation`; the PTZ cameras' as "
+              "`stb record --video` takes them (on the bus when a recording is replayed)",
               max_payload_bytes=2 * MIB)
 TRUTH_ROBOT = Topic("sim/truth/robot/{robot}", m.RobotTruth, "sim only: true robot marker")
 TRUTH_CRANE = Topic("sim/truth/crane", m.CraneTruth, "sim only: true crane position")
