@@ -88,7 +88,7 @@ def main() -> None:
         cameras = streams(lab, settings, args.seconds)
     scene = LabScene(video=True)
     total = 0.0
-    print(f"| camera | frames/s | CPU ms a frame | share of one core | H.264 kB/s |")
+    print("| camera | frames/s | CPU ms a frame | share of one core | H.264 kB/s |")
     print("|---|---|---|---|---|")
     for name, (topic, fps, frames) in cameras.items():
         started, size = time.process_time(), 0
