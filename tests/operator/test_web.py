@@ -132,6 +132,18 @@ def test_camera_previews_the_plot_and_offload_figures_are_shown(page: object,
     page.screenshot(path=str(shots / "page-following.png"))  # type: ignore[attr-defined]
 
 
+def test_the_bird_s_eye_view_is_shown_and_follows_the_observation_camera(page: object
+                                                                         ) -> None:
+    picture = page.locator("#birdseye")  # type: ignore[attr-defined]
+    # (one look at both: a newer picture may be loading between two looks)
+    wait_for(lambda: picture.evaluate("i => i.complete && [i.naturalWidth, i.naturalHeight]")
+             == [640, 480], timeout=20, why=lambda: f"src {picture.get_attribute('src')}")
+    first = picture.get_attribute("src")
+    wait_for(lambda: picture.get_attribute("src") != first, timeout=10,
+             why=lambda: "a newer picture is loaded as it comes")
+    assert "640×480" in page.locator("#birdseye-age").inner_text()  # type: ignore[attr-defined]
+
+
 def test_the_gantry_buttons_stop_reset_and_arm_it(page: object, live_lab: LiveLab) -> None:
     mode = page.locator("#gantry-mode")  # type: ignore[attr-defined]
     answer = page.locator("#gantry-answer")  # type: ignore[attr-defined]
