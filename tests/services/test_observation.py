@@ -61,3 +61,10 @@ def test_a_silent_camera_makes_it_degraded_naming_why(router_endpoint: str, tmp_
         assert proc.poll() is None, "it carries on"
     finally:
         _stop(proc)
+
+
+def test_a_bad_setting_stops_start_up_naming_the_field() -> None:
+    proc = stb_process("observation", "--set", "url=ftp://camera", "--set", "fps=0")
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 2
+    assert "observation.url" in err and "observation.fps" in err
