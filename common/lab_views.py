@@ -8,12 +8,17 @@ that owns it."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import ClassVar, Literal
+from typing import TYPE_CHECKING, ClassVar, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, SecretStr
 
 from common.lab_paths import DEFAULT_HEIGHT_MAP
 from common.settings import ServiceSettings
+
+if TYPE_CHECKING:  # httpx is imported where a camera is reached, not by tools that only read
+    import httpx
+
+CameraAuth = Literal["digest", "basic", "none"]
 
 
 class CameraConnection(BaseModel):
@@ -24,7 +29,21 @@ class CameraConnection(BaseModel):
     url: str = Field(pattern=r"^https?://")
     user: str = "root"
     password: SecretStr = SecretStr("pass")
-    auth: Literal["digest", "basic", "none"] = "digest"
+    auth: CameraAuth = "digest"
+
+    def http_auth(self) -> httpx.Auth | None:
+        return http_auth(self.user, self.password.get_secret_value(), self.auth)
+
+
+def http_auth(user: str, password: str, auth: CameraAuth) -> httpx.Auth | None:
+    """How an AXIS camera is signed in to: Digest (its default), Basic, or not at all."""
+    import httpx
+
+    if auth == "digest":
+        return httpx.DigestAuth(user, password)
+    if auth == "basic":
+        return httpx.BasicAuth(user, password)
+    return None
 
 
 def default_cameras() -> dict[str, CameraConnection]:

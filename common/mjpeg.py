@@ -115,12 +115,6 @@ class CameraVideo:
         self._stop.set()
         self._thread.join(timeout=self.timeout_s + 1)
 
-    def _auth(self) -> httpx.Auth | None:
-        c = self.connection
-        password = c.password.get_secret_value()
-        return {"digest": httpx.DigestAuth(c.user, password),
-                "basic": httpx.BasicAuth(c.user, password)}.get(c.auth)
-
     def _run(self) -> None:
         wait = 1.0
         while not self._stop.is_set():
@@ -138,7 +132,7 @@ class CameraVideo:
     def _stream(self) -> None:
         timeout = httpx.Timeout(self.timeout_s, read=self.timeout_s)
         with httpx.Client(base_url=self.connection.url.rstrip("/"), timeout=timeout,
-                          auth=self._auth()) as client, \
+                          auth=self.connection.http_auth()) as client, \
                 client.stream("GET", VIDEO_PATH, params=self.params) as reply:
             if reply.status_code != 200:
                 raise VideoError(f"{VIDEO_PATH} answered HTTP {reply.status_code}")

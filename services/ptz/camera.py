@@ -9,6 +9,7 @@ import numpy as np
 
 from common.camera import PtzLimits
 from common.jpeg import JpegError, decode_gray
+from common.lab_views import CameraAuth, http_auth
 from common.trace import TRACE_HEADER
 from services.ptz import vapix
 
@@ -139,12 +140,8 @@ def decode_jpeg(data: bytes, name: str) -> np.ndarray:
         raise PtzRejected(f"{name}: snapshot: {err}") from err
 
 
-def http_client(url: str, user: str, password: str, auth: str = "digest",
+def http_client(url: str, user: str, password: str, auth: CameraAuth = "digest",
                 timeout_s: float = 2.0) -> httpx.Client:
     """An httpx client for one camera: Digest (AXIS default) or Basic auth, bounded timeouts."""
-    credentials: httpx.Auth | None = None
-    if auth == "digest":
-        credentials = httpx.DigestAuth(user, password)
-    elif auth == "basic":
-        credentials = httpx.BasicAuth(user, password)
-    return httpx.Client(base_url=url, auth=credentials, timeout=httpx.Timeout(timeout_s))
+    return httpx.Client(base_url=url, auth=http_auth(user, password, auth),
+                        timeout=httpx.Timeout(timeout_s))
