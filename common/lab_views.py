@@ -19,6 +19,9 @@ if TYPE_CHECKING:  # httpx is imported where a camera is reached, not by tools t
     import httpx
 
 CameraAuth = Literal["digest", "basic", "none"]
+PAPER_MARKER_MM = 19.0
+"""The robot's reflective marker's diameter in the paper (§3.1: "a diameter of 19 mm"): the
+default of ``[ptz] robot_marker_mm``."""
 
 
 class CameraConnection(BaseModel):

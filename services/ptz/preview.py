@@ -17,6 +17,7 @@ import numpy as np
 
 from common import messages as m
 from common.camera import Intrinsics, Pose, focal_mm_for_zoom, head_pose, project_camera
+from common.lab_views import PAPER_MARKER_MM
 from common.markers import detect, to_message
 from services.ptz.aim import predict
 from services.ptz.camera import PtzCamera, PtzError, decode_jpeg
@@ -26,7 +27,8 @@ log = logging.getLogger(__name__)
 
 def robot_view(mount: Pose | None, robot: m.RobotPosition | None, pan_deg: float,
                tilt_deg: float, focal_mm: float, width_px: int, height_px: int, at_s: float,
-               marker_diameter_mm: float = 19.0) -> tuple[list[float] | None, float | None]:
+               marker_diameter_mm: float = PAPER_MARKER_MM
+               ) -> tuple[list[float] | None, float | None]:
     """Where the robot marker appears in an image taken at ``at_s`` and how large (radius,
     px), from one prediction (pure); (None, None) without a pose or a robot, or when it is
     behind the camera."""
@@ -71,7 +73,8 @@ class PreviewLoop:
                  publish: Callable[[m.PtzPreview, float, bool], None],
                  mount: Callable[[], Pose | None], robot: Callable[[], m.RobotPosition | None],
                  paused: Callable[[], bool], stop: threading.Event,
-                 infrared_every_s: float = 0.0, marker_diameter_mm: float = 19.0) -> None:
+                 infrared_every_s: float = 0.0,
+                 marker_diameter_mm: float = PAPER_MARKER_MM) -> None:
         """``publish(preview, focal_mm, infrared)``: the preview, the focal length it was taken
         at, and whether the IR-cut filter was off for it (the markers bright). Every
         ``infrared_every_s`` (0: never) a preview is taken with the filter off, for the

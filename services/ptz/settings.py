@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pydantic import Field, model_validator
 
-from common.lab_views import CameraConnection, default_cameras
+from common.lab_views import PAPER_MARKER_MM, CameraConnection, default_cameras
 from common.settings import ServiceSettings
 
 
@@ -34,7 +34,7 @@ class PtzSettings(ServiceSettings):
     pointing_tolerance_deg: float = Field(
         3.0, gt=0, le=90, description="the pointing check (docs/operator.md): a preview whose "
         "robot marker is farther than this from where the pose puts it disagrees")
-    robot_marker_mm: float = Field(19.0, gt=0, le=200, description="the robot marker's "
+    robot_marker_mm: float = Field(PAPER_MARKER_MM, gt=0, le=200, description="the robot marker's "
                                    "diameter (a standard 19 mm mocap marker)")
     pointing_min_marker_px: float = Field(
         1.4, ge=0, le=100, description="a preview in which the robot marker would appear "

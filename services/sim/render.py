@@ -12,8 +12,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from common.camera import Intrinsics, Pose, project
+from services.sim.robots import MARKER_DIAMETER_MM
 
-MARKER_RADIUS_MM = 9.5
+MARKER_RADIUS_MM = MARKER_DIAMETER_MM / 2
 
 
 @dataclass(frozen=True)
