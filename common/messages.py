@@ -12,7 +12,7 @@ Conventions (see docs/wire-format.md, which is generated from this module):
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -306,6 +306,8 @@ CraneStatus = Literal["idle", "tracking", "reacquiring", "holding", "stale", "fa
 
 GantryMode = Literal["disarmed", "armed", "stopped"]
 GantryCommandName = Literal["arm", "disarm", "stop", "reset"]
+GANTRY_COMMANDS: tuple[GantryCommandName, ...] = get_args(GantryCommandName)
+"""The operator's commands to the gantry, in their order of the help texts."""
 
 
 class CraneState(Message):

@@ -16,15 +16,9 @@ from collections.abc import Sequence
 
 from services.args import service_args
 
-COMMANDS = ("arm", "disarm", "stop", "reset")
-
 
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv[:1] and argv[0] in COMMANDS:
-        from services.gantry.command_cli import main as command_main
-
-        return command_main(argv)
     if argv[:1] == ["identify"]:
         from services.gantry.commission_cli import main as identify_main
 
@@ -33,6 +27,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         from services.gantry.first_day_cli import main as commission_main
 
         return commission_main(argv[1:])
+    if argv[:1] and not argv[0].startswith("-"):  # an operator's command: arm, disarm, …
+        from services.gantry.command_cli import main as command_main
+
+        return command_main(argv)
     args = service_args("gantry", __doc__ or "", argv)
     from services.entry import run_service
     from services.gantry.service import run

@@ -22,7 +22,6 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from services.args import base_parser
-from services.gantry.__main__ import COMMANDS
 
 if TYPE_CHECKING:  # imported once the flags are parsed: --help answers at once
     from common.bus import Bus
@@ -31,15 +30,20 @@ EXIT_REFUSED, EXIT_NO_SERVICE = 1, 3
 
 
 def main(argv: Sequence[str]) -> int:
-    parser = base_parser(f"stb gantry {'|'.join(COMMANDS)}", __doc__ or "")
-    parser.add_argument("command", choices=COMMANDS)
+    parser = base_parser("stb gantry arm|disarm|stop|reset", __doc__ or "")
+    parser.add_argument("command", help="arm, disarm, stop or reset")
     parser.add_argument("--reason", default="", help="why (shown with the gantry's mode)")
     parser.add_argument("--operator", default=f"{getpass.getuser()}@{socket.gethostname()}",
                         help="who asks (default: user@host)")
     parser.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the "
                         "gantry's answer")
     args = parser.parse_args(argv)
+    from common.messages import GANTRY_COMMANDS
     from services.entry import tool_main
+
+    if args.command not in GANTRY_COMMANDS:
+        parser.error(f"unknown command {args.command!r} (choose from "
+                     f"{', '.join(GANTRY_COMMANDS)})")
 
     return tool_main(f"gantry {args.command}", lambda: _send(args))
 

@@ -31,13 +31,13 @@ from starlette.requests import Request
 from starlette.responses import JSONResponse, Response, StreamingResponse
 from starlette.routing import Route
 
+from common.messages import GANTRY_COMMANDS
 from services.web.console import Console, console_routes
 from services.web.crater_image import CraterImage
 from services.web.gate import COOKIE, Caller, Gate, command_refusal
 
 log = logging.getLogger(__name__)
 CAMERA = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
-COMMANDS = ("arm", "disarm", "stop", "reset")
 STATIC = {"index.html": "text/html; charset=utf-8", "app.js": "text/javascript; charset=utf-8",
           "signin.html": "text/html; charset=utf-8",
           "signin.js": "text/javascript; charset=utf-8"}
@@ -195,7 +195,7 @@ def build_app(gate: Gate, view: Callable[[], dict[str, Any]],
 
     async def gantry_command(request: Request) -> Response:
         name = request.path_params["command"]
-        if name not in COMMANDS or command is None:
+        if name not in GANTRY_COMMANDS or command is None:
             return Response("no such command", 404)
         caller = await authorize(request)
         if isinstance(caller, Response):

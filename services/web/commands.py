@@ -13,8 +13,6 @@ from common import keys
 from common import messages as m
 from common.bus import Bus
 
-COMMANDS = ("arm", "disarm", "stop", "reset")
-
 
 class GantryCommander:
     def __init__(self, bus: Bus, timeout_s: float = 3.0) -> None:
@@ -34,7 +32,7 @@ class GantryCommander:
     def send(self, command: str, operator: str) -> dict:
         """Send ``command`` as ``operator`` and wait for the answer: {accepted, detail,
         mode}."""
-        if command not in COMMANDS:
+        if command not in m.GANTRY_COMMANDS:
             raise ValueError(f"unknown command {command!r}")
         ident = f"web-{os.getpid()}-{next(self._ids)}"
         self.bus.publish(keys.GANTRY_COMMAND, m.GantryCommand(
