@@ -14,7 +14,8 @@ from tests.conftest import ROOT
 
 COMMANDS = [[], ["router"], ["tracker"], ["ptz"], ["ptz", "aim"], ["calib"],
             ["calib", "solve"], ["calib", "collect"], ["gantry"], ["gantry", "arm"],
-            ["gantry", "identify"], ["web"], ["camera"], ["observation"], ["sim"], ["sim", "estop"], ["up"],
+            ["gantry", "identify"], ["web"], ["camera"], ["observation"], ["sim"],
+            ["sim", "estop"], ["up"],
             ["monitor"], ["record"], ["replay"], ["report"], ["config", "check"],
             ["experiment"], ["experiment", "gantry"], ["experiment", "identify"], ["deploy"],
             ["detect"]]
