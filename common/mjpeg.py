@@ -17,6 +17,7 @@ from collections.abc import Callable
 
 import httpx
 
+from common.backoff import Backoff
 from common.lab_views import CameraConnection
 
 log = logging.getLogger(__name__)
@@ -116,18 +117,17 @@ class CameraVideo:
         self._thread.join(timeout=self.timeout_s + 1)
 
     def _run(self) -> None:
-        wait = 1.0
+        backoff = Backoff(1.0, 10.0)
         while not self._stop.is_set():
             try:
                 self._stream()
-                wait = 1.0
+                backoff.succeeded()
             except (httpx.HTTPError, VideoError, OSError) as err:
                 problem = f"{type(err).__name__}: {err}" if str(err) else type(err).__name__
                 if problem != self.problem:
                     log.warning("video of %s: %s (trying again)", self.name, problem)
                 self.problem = problem
-            self._stop.wait(wait)
-            wait = min(10.0, wait * 2)
+            self._stop.wait(backoff.failed())  # a stream that ended is opened again too
 
     def _stream(self) -> None:
         timeout = httpx.Timeout(self.timeout_s, read=self.timeout_s)

@@ -17,6 +17,7 @@ import zenoh
 from pydantic import Field, field_validator
 
 from common import keys
+from common.backoff import doubled
 from common.bus import SUPERSEDED, Bus, BusUnreachable, open_session
 from common.messages import ServiceHealth
 from common.settings import ServiceSettings
@@ -50,7 +51,7 @@ def next_delay(previous_s: float | None, ran_for_s: float, settings: UpSettings)
     """Restart delay after a process that ran ``ran_for_s`` exited (pure)."""
     if previous_s is None or ran_for_s >= settings.stable_after_s:
         return settings.restart_initial_s
-    return min(previous_s * 2, settings.restart_max_s)
+    return doubled(previous_s, settings.restart_max_s)
 
 
 @dataclass

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from common import messages as m
+from common.backoff import doubled
 from common.camera import Pose, PtzLimits
 from services.ptz.aim import aim_error_deg
 from services.ptz.follow import Command, Follower
@@ -94,7 +95,7 @@ class PtzControl:
     def failed(self, now: float) -> None:
         """The camera failed: wait, twice as long each time in a row; ask its limits again
         (it may have been replaced or reconfigured)."""
-        self.retry_at, self.retry_s = now + self.retry_s, min(self.retry_s * 2, RETRY_MAX_S)
+        self.retry_at, self.retry_s = now + self.retry_s, doubled(self.retry_s, RETRY_MAX_S)
         self.limits = None
 
     def answered(self) -> None:

@@ -22,6 +22,7 @@ import numpy as np
 import qtm_rt
 from qtm_rt.packet import QRTComponentType
 
+from common.backoff import Backoff
 from common.camera import quaternion_wxyz
 from common.messages import MarkerFrame, RigidBody
 
@@ -142,7 +143,7 @@ class QualisysMocap:
 
     async def _main(self, on_frame: FrameHandler, stop: threading.Event,
                     on_state: StateHandler) -> None:
-        delay = self.retry_initial_s
+        backoff = Backoff(self.retry_initial_s, self.retry_max_s)
         while not stop.is_set():
             lost = asyncio.Event()
             conn = await qtm_rt.connect(self.host, port=self.port, version="1.25",
@@ -150,16 +151,14 @@ class QualisysMocap:
                                         timeout=self.timeout_s)
             if conn is None:
                 on_state(False, f"QTM at {self.host}:{self.port} does not answer")
-                await _wait(stop, delay)
-                delay = min(delay * 2, self.retry_max_s)
+                await _wait(stop, backoff.failed())
                 continue
             try:
                 await self._stream(conn, on_frame, stop, lost, on_state)
-                delay = self.retry_initial_s
+                backoff.succeeded()
             except (TimeoutError, qtm_rt.QRTCommandException, ET.ParseError) as err:
                 on_state(False, f"QTM at {self.host}:{self.port}: {err}")
-                await _wait(stop, delay)
-                delay = min(delay * 2, self.retry_max_s)
+                await _wait(stop, backoff.failed())
             finally:
                 if conn.has_transport():  # qtm-rt's disconnect() fails once QTM has gone
                     conn.disconnect()
