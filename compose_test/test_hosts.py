@@ -25,7 +25,7 @@ from compose_test.lab import (
 
 HOSTS = {"router-pc": ["router", "sim", "tracker", "calib", "web"],
          "camera-pc": ["ptz-1", "ptz-2"],
-         "gantry-pc": ["gantry"]}
+         "gantry-pc": ["gantry", "observation"]}  # the observation camera hangs on the crane
 LAN = "stb-compose-lan"
 # On one engine the sim's crater reaches the gantry PC through a shared volume; on real hosts
 # the gantry PC has its own copy (its lab file's [gantry] height_map).
