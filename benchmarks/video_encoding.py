@@ -27,8 +27,8 @@ from services.args import Parser
 from services.recording.typed import LabScene
 from services.sim.camera_server import SimCamera
 from services.sim.lab import Lab
+from services.sim.observation import observation_camera
 from services.sim.scene import GroundView
-from services.sim.service import observation_camera
 from services.sim.settings import SimSettings
 
 GOAL_CORE = 0.25
@@ -67,7 +67,7 @@ def streams(lab: Lab, settings: SimSettings, seconds: float
                                         width_px=704, height_px=576, encoding="jpeg",
                                         data=_jpeg(sim.snapshot(704, 576))))
         out[f"{cam.name}, 704×576 colour JPEG"] = (keys.VIDEO, 5.0, frames)
-    observation = observation_camera(lab, settings, lambda: t[0])
+    observation = observation_camera(lab, settings, lambda: t[0], lab.crane_world_at)
     frames = []
     for i in range(int(5 * seconds)):
         t[0] = 10.0 + i / 5

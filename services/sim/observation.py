@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import cv2
 import numpy as np
@@ -25,6 +25,10 @@ from common.camera import Intrinsics, Pose, project, rot_z
 from common.crane_frame import CraneFrame
 from services.sim.render import MARKER_RADIUS_MM
 from services.sim.scene import ROBOT_GAP_MM, ROBOT_SIZE_MM, GroundView, chassis_outline
+
+if TYPE_CHECKING:
+    from services.sim.lab import Lab
+    from services.sim.settings import SimSettings
 
 REGOLITH_BGR = (150.0, 172.0, 188.0, 0.0)  # a grey, slightly warm ground
 CHASSIS_BGR = (92, 70, 56)
@@ -145,3 +149,23 @@ class ObservationCamera:
         if self._phase_at is not None and speed_mm_s > MOVING_MM_S:
             self._phase += 2 * math.pi * STEP_HZ * max(0.0, now - self._phase_at)
         self._phase_at = now
+
+
+def observation_camera(lab: Lab, settings: SimSettings, clock: Callable[[], float],
+                       crane: Callable[[float], np.ndarray],
+                       robot_started: Callable[[float], None] = lambda _t: None
+                       ) -> ObservationCamera:
+    """The lab's observation camera as ``[sim.observation_camera]`` sets it up: ``crane`` is
+    where the crane's reported point is in the world at a sim time; ``robot_started(t)`` is
+    asked before the robot is looked at (a process of its own learns the start that way)."""
+    o = settings.observation_camera
+
+    def robot(now: float) -> tuple[np.ndarray, float, float, float]:
+        robot_started(now)
+        return (*lab.robot_pose(now), float(np.linalg.norm(lab.robot_velocity(now)[:2])))
+
+    return ObservationCamera(
+        o.name, ObservationView(o.focal_mm, o.chip_mm, o.offset_mm, o.height_mm),
+        GroundView.of(lab.crater, settings.seed), lab.crane_frame, crane, robot, clock,
+        np.random.default_rng((settings.seed, 29)), o.user, o.password, o.auth,
+        jpeg_quality=o.jpeg_quality, mjpeg_fps=o.mjpeg_fps)

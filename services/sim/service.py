@@ -1,7 +1,8 @@
 """Sim service: the Space Testbed's devices, served on their real protocols.
 
-Serves:     QTM RT on mocap.port (22223), VAPIX HTTP per camera (8081, 8082), the crane's
-            observation camera's pictures (VAPIX, 8083), Modbus/TCP crane controller on
+Serves:     QTM RT on mocap.port (22223) and the crane's observation camera's pictures
+            (VAPIX, 8083), each from a process of its own (services/sim/device_process.py);
+            VAPIX HTTP per PTZ camera (8081, 8082), Modbus/TCP crane controller on
             crane.port (5020)
 Publishes:  stb/gantry/camera/frame (CameraFrame, 25 Hz) as the tracking camera's host would,
             each tracking_camera.delay_s after its exposure ended;
@@ -26,10 +27,9 @@ from common.node import Node, StartupError, run_every
 from services.sim.camera_server import CameraServer, ServedCamera, SimCamera
 from services.sim.clock import Clock
 from services.sim.crane_server import CraneServer
+from services.sim.device_process import DeviceProcess
 from services.sim.lab import Lab
 from services.sim.mocap_server import MocapServer, MocapSource
-from services.sim.observation import ObservationCamera, ObservationView
-from services.sim.qtm_process import QtmProcess
 from services.sim.scene import GroundView
 from services.sim.settings import SimSettings
 
@@ -41,31 +41,37 @@ def run(node: Node[SimSettings]) -> None:
     settings = node.settings
     lab = Lab.build(settings)
     clock = Clock()
-    qtm = QtmProcess(settings, clock)
+    qtm = DeviceProcess("qtm", settings, clock)
+    processes = [qtm]
     try:
+        if settings.observation_camera.enabled:
+            processes.append(DeviceProcess("observation", settings, clock))
         cameras = start_cameras(lab, settings, clock)
     except StartupError:
-        qtm.stop()
+        for process in processes:
+            process.stop()
         raise
     devices = DeviceLoop(lab, settings, clock, serve_mocap=False)
     try:
         devices.start()
         log.info("sim running scenario %s (seed %d)", settings.scenario, settings.seed)
         if settings.calibrate_first and settings.scenario != "calibration":
-            _start_robot_once_calibrated(node, lab, settings.calibrate_first, clock,
-                                         also=qtm.start_robot)
+            _start_robot_once_calibrated(
+                node, lab, settings.calibrate_first, clock,
+                also=lambda t: [process.start_robot(t) for process in processes])
         threads = [
             _every(1 / (4 * settings.tracking_camera.rate_hz), node.stop,  # on time ± 10 ms
                    _frame_publisher(node, lab, settings, clock)),
             _every(1 / settings.truth_rate_hz, node.stop, _truth_publisher(node, lab, clock)),
-            _every(CRANE_FEED_S, node.stop, _crane_feeder(lab, qtm, clock)),
+            _every(CRANE_FEED_S, node.stop, _crane_feeder(lab, processes, clock)),
         ]
         node.stop.wait()
         for thread in threads:
             thread.join(timeout=2)
     finally:
         devices.stop()
-        qtm.stop()
+        for process in processes:
+            process.stop()
         for server in cameras:
             server.close()
 
@@ -102,7 +108,7 @@ def _start_robot_once_calibrated(node: Node, lab: Lab, cameras: list[str], clock
 
 
 def start_cameras(lab: Lab, settings: SimSettings, clock: Clock) -> list[CameraServer]:
-    """The PTZ cameras' servers and the observation camera's."""
+    """The PTZ cameras' servers (the observation camera's runs in a process of its own)."""
     served: list[tuple[ServedCamera, str, int]] = []
     for i, cam in enumerate(settings.cameras):
         sim_camera = SimCamera(cam.name, lab.heads[cam.name], lambda: lab.bright_points(clock()),
@@ -111,9 +117,6 @@ def start_cameras(lab: Lab, settings: SimSettings, clock: Clock) -> list[CameraS
                                ground=GroundView.of(lab.crater, settings.seed),
                                robots=lambda: [lab.robot_pose(clock())])
         served.append((sim_camera, cam.host, cam.port))
-    o = settings.observation_camera
-    if o.enabled:
-        served.append((observation_camera(lab, settings, clock), o.host, o.port))
     servers: list[CameraServer] = []
     for camera, host, port in served:
         try:
@@ -125,20 +128,6 @@ def start_cameras(lab: Lab, settings: SimSettings, clock: Clock) -> list[CameraS
                                f"{err.strerror}") from err
         log.info("camera %s (VAPIX) on http://%s:%d", camera.name, host, servers[-1].port)
     return servers
-
-
-def observation_camera(lab: Lab, settings: SimSettings, clock: Clock) -> ObservationCamera:
-    o = settings.observation_camera
-
-    def robot(now: float) -> tuple[np.ndarray, float, float, float]:
-        return (*lab.robot_pose(now), float(np.linalg.norm(lab.robot_velocity(now)[:2])))
-
-    return ObservationCamera(
-        o.name, ObservationView(o.focal_mm, o.chip_mm, o.offset_mm, o.height_mm),
-        GroundView.of(lab.crater, settings.seed), lab.crane_frame,
-        lambda now: lab.crane_state(now)[0], robot, clock,
-        np.random.default_rng((settings.seed, 29)), o.user, o.password, o.auth,
-        jpeg_quality=o.jpeg_quality, mjpeg_fps=o.mjpeg_fps)
 
 
 class DeviceLoop:
@@ -241,10 +230,15 @@ def _frame_publisher(node: Node, lab: Lab, settings: SimSettings, clock: Clock
     return publish
 
 
-def _crane_feeder(lab: Lab, qtm: QtmProcess, clock: Clock) -> Callable[[], None]:
+def _crane_feeder(lab: Lab, processes: list[DeviceProcess], clock: Clock
+                  ) -> Callable[[], None]:
+    """The crane's position to the devices in processes of their own: the QTM server's
+    marker on the carriage, the observation camera looking down."""
     def feed() -> None:
         t = clock()
-        qtm.feed_crane(t, *lab.crane_state(t))
+        position, velocity = lab.crane_state(t)
+        for process in processes:
+            process.feed_crane(t, position, velocity)
 
     return feed
 

@@ -1,12 +1,16 @@
-"""The sim's QTM RT server in a process of its own.
+"""Devices of the sim that are machines of their own in a lab, each in a process of its own:
+the QTM RT server (``"qtm"``) and the crane's observation camera (``"observation"``).
 
 A real QTM is a machine of its own: the sim's camera rendering, HTTP servers and tracking
 camera must not hold its frames back (at 1000 Hz, sharing the sim's one interpreter delayed
-frames by up to 10 ms). The process builds the same Lab from the same settings on the same sim
-time (a shared monotonic origin); the one thing decided at run time, when the robot starts,
-comes over a shared value, and so does the crane, whose model the Modbus clients drive in the
-sim's own process: its position and velocity at a time (``feed_crane``, 100 a second), from
-which the process's motion capture places the crane's marker. It ends with the sim: when told
+frames by up to 10 ms). A real observation camera renders and encodes on its own processor:
+drawn in the sim's interpreter, its pictures delayed the PTZ cameras' snapshots enough to
+spoil a calibration under compose (1.7–2.1 px instead of 0.1–0.3). Each process builds the
+same Lab from the same settings on the same sim time (a shared monotonic origin); the one
+thing decided at run time, when the robot starts, comes over a shared value, and so does the
+crane, whose model the Modbus clients drive in the sim's own process: its position and
+velocity at a time (``feed_crane``, 100 a second), from which the motion capture places the
+crane's marker and the observation camera looks down. A process ends with the sim: when told
 to, or when its parent is gone.
 """
 
@@ -17,38 +21,43 @@ import logging
 import math
 import multiprocessing as mp
 import os
+import time
+from collections.abc import Callable
 from multiprocessing.connection import Connection
 from multiprocessing.sharedctypes import Synchronized, SynchronizedArray
 
 import numpy as np
 
 from common.node import StartupError
+from services.sim.camera_server import CameraServer
 from services.sim.clock import Clock
 from services.sim.lab import Lab
 from services.sim.mocap_server import MocapServer, MocapSource
+from services.sim.observation import observation_camera
 from services.sim.settings import SimSettings
 
 log = logging.getLogger(__name__)
 START_TIMEOUT_S = 60.0
 
 
-class QtmProcess:
-    """Starts the server (raising StartupError with the reason when it cannot listen)."""
+class DeviceProcess:
+    """Starts the device's server (raising StartupError with the reason when it cannot
+    listen); ``kind``: "qtm" or "observation"."""
 
-    def __init__(self, settings: SimSettings, clock: Clock) -> None:
+    def __init__(self, kind: str, settings: SimSettings, clock: Clock) -> None:
         context = mp.get_context("spawn")  # no copy of the sim's threads and sockets
         self._robot_start = context.Value("d", math.nan, lock=False)
         self._crane = context.Array("d", [math.nan] * 5)  # t, x, y, vx, vy (world)
         self._stop = context.Event()
         ours, theirs = context.Pipe()
         self._process = context.Process(
-            target=_serve, name="sim-qtm", daemon=True,
-            args=(settings.model_dump_json(), clock.t0_monotonic, self._robot_start,
+            target=_serve, name=f"sim-{kind}", daemon=True,
+            args=(kind, settings.model_dump_json(), clock.t0_monotonic, self._robot_start,
                   self._crane, self._stop, theirs, os.getpid()))
         self._process.start()
         if not ours.poll(START_TIMEOUT_S):
             self.stop()
-            raise StartupError(f"the QTM RT server did not start within {START_TIMEOUT_S:g} s")
+            raise StartupError(f"the sim's {kind} did not start within {START_TIMEOUT_S:g} s")
         self.port, error = ours.recv()
         if error:
             self.stop()
@@ -70,7 +79,7 @@ class QtmProcess:
             self._process.join(5)
 
 
-def _serve(settings_json: str, t0_monotonic: float, robot_start: Synchronized,
+def _serve(kind: str, settings_json: str, t0_monotonic: float, robot_start: Synchronized,
            crane: SynchronizedArray, stop: mp.synchronize.Event, conn: Connection,
            parent_pid: int) -> None:
     settings = SimSettings.model_validate_json(settings_json)
@@ -85,11 +94,26 @@ def _serve(settings_json: str, t0_monotonic: float, robot_start: Synchronized,
             return placed  # not fed yet: where the crane was put at the start
         return np.array([x, y]) + np.array([vx, vy]) * (t - t0)
 
-    lab.crane_feed = crane_at
-
-    def frame_at(number: int):  # noqa: ANN202 - a MocapFrame
+    def started(t: float) -> None:
+        """The robot's scenario has started by ``t``, once the sim says it did."""
         if lab.robot_start_s is None and not math.isnan(robot_start.value):
             lab.start_robot(robot_start.value)
+
+    lab.crane_feed = crane_at
+
+    def running() -> bool:
+        return not stop.is_set() and os.getppid() == parent_pid
+
+    if kind == "observation":
+        _serve_observation(lab, settings, clock, started, conn, running)
+    else:
+        _serve_qtm(lab, settings, clock, started, conn, running)
+
+
+def _serve_qtm(lab: Lab, settings: SimSettings, clock: Clock, started: Callable[[float], None],
+               conn: Connection, running: Callable[[], bool]) -> None:
+    def frame_at(number: int):  # noqa: ANN202 - a MocapFrame
+        started(number)
         return lab.mocap_frame(number)
 
     m = settings.mocap
@@ -103,8 +127,26 @@ def _serve(settings_json: str, t0_monotonic: float, robot_start: Synchronized,
             conn.send((m.port, f"QTM RT: cannot listen on {m.host}:{m.port}: {err.strerror}"))
             return
         conn.send((server.port, ""))
-        while not stop.is_set() and os.getppid() == parent_pid:
+        while running():
             await asyncio.sleep(0.2)
         await server.close()
 
     asyncio.run(main())
+
+
+def _serve_observation(lab: Lab, settings: SimSettings, clock: Clock,
+                       started: Callable[[float], None], conn: Connection,
+                       running: Callable[[], bool]) -> None:
+    o = settings.observation_camera
+    assert lab.crane_feed is not None
+    camera = observation_camera(lab, settings, clock, lab.crane_feed, started)
+    try:
+        server = CameraServer(camera, settings.host_of(o.host), o.port).start()
+    except OSError as err:
+        conn.send((o.port, f"camera {o.name}: cannot listen on {o.host}:{o.port}: "
+                           f"{err.strerror}"))
+        return
+    conn.send((server.port, ""))
+    while running():
+        time.sleep(0.2)
+    server.close()
