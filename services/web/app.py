@@ -21,7 +21,7 @@ import asyncio
 import json
 import logging
 import re
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable
 from importlib import resources
 from typing import Any
 
@@ -167,19 +167,16 @@ def build_app(gate: Gate, view: Callable[[], dict[str, Any]],
             return Response("no height map yet", 404)
         return Response(png, media_type="image/png", headers=NO_STORE)
 
-    async def preview_jpeg(request: Request) -> Response:
-        camera = request.path_params["camera"]
-        jpeg = preview(camera) if CAMERA.match(camera) else None
-        if jpeg is None:
-            return Response("no such preview", 404)
-        return Response(jpeg, media_type="image/jpeg", headers=NO_STORE)
-
-    async def video_jpeg(request: Request) -> Response:
-        camera = request.path_params["camera"]
-        jpeg = video(camera) if CAMERA.match(camera) else None
-        if jpeg is None:
-            return Response("no video from that camera", 404)
-        return Response(jpeg, media_type="image/jpeg", headers=NO_STORE)
+    def camera_jpeg(latest: Callable[[str], bytes | None], missing: str
+                    ) -> Callable[[Request], Awaitable[Response]]:
+        """A route answering a camera's latest JPEG (``latest(camera)``), 404 without."""
+        async def answer(request: Request) -> Response:
+            camera = request.path_params["camera"]
+            jpeg = latest(camera) if CAMERA.match(camera) else None
+            if jpeg is None:
+                return Response(missing, 404)
+            return Response(jpeg, media_type="image/jpeg", headers=NO_STORE)
+        return answer
 
     async def authorize(request: Request) -> Caller | Response:
         """The operator behind a command, or the refusal (401, 403) to answer with."""
@@ -213,8 +210,8 @@ def build_app(gate: Gate, view: Callable[[], dict[str, Any]],
         Route("/app.js", signed_in(static)), Route("/state.json", signed_in(state)),
         Route("/events", signed_in(events)), Route("/map.json", signed_in(map_info)),
         Route("/map.png", signed_in(map_png)),
-        Route("/preview/{camera}.jpg", signed_in(preview_jpeg)),
-        Route("/video/{camera}.jpg", signed_in(video_jpeg)),
+        Route("/preview/{camera}.jpg", signed_in(camera_jpeg(preview, "no such preview"))),
+        Route("/video/{camera}.jpg", signed_in(camera_jpeg(video, "no video from that camera"))),
         Route("/gantry/{command}", gantry_command, methods=["POST"]),
     ]
     if console is not None:
