@@ -5,7 +5,9 @@ A real QTM is a machine of its own: the sim's camera rendering, HTTP servers and
 camera must not hold its frames back (at 1000 Hz, sharing the sim's one interpreter delayed
 frames by up to 10 ms). A real observation camera renders and encodes on its own processor:
 drawn in the sim's interpreter, its pictures delayed the PTZ cameras' snapshots enough to
-spoil a calibration under compose (1.7–2.1 px instead of 0.1–0.3). Each process builds the
+spoil a calibration under compose (1.7–2.1 px instead of 0.1–0.3), and beside the lab's
+processes it must take only the processor time they leave (``SCHED_IDLE``): a real camera has
+a processor of its own. Each process builds the
 same Lab from the same settings on the same sim time (a shared monotonic origin); the one
 thing decided at run time, when the robot starts, comes over a shared value, and so does the
 crane, whose model the Modbus clients drive in the sim's own process: its position and
@@ -139,6 +141,9 @@ def _serve_observation(lab: Lab, settings: SimSettings, clock: Clock,
                        running: Callable[[], bool]) -> None:
     o = settings.observation_camera
     assert lab.crane_feed is not None
+    # A real camera renders on a processor of its own: here it takes only what the lab's
+    # processes leave (no privilege is needed to lower oneself).
+    os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
     camera = observation_camera(lab, settings, clock, lab.crane_feed, started)
     try:
         server = CameraServer(camera, settings.host_of(o.host), o.port).start()
