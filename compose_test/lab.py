@@ -37,8 +37,7 @@ LAB_FILE_IN_CONTAINERS = "/config/compose-sim.toml"
 # router publishes health, upstream eclipse/zenoh does not).
 ON_THE_BUS = {"tracker": ("tracker", "main"), "ptz-1": ("ptz", "ptz1"),
               "ptz-2": ("ptz", "ptz2"), "calib": ("calib", "main"),
-              "gantry": ("gantry", "main"), "web": ("web", "main"), "sim": ("sim", "main"),
-              "observation": ("observation", "main")}
+              "gantry": ("gantry", "main"), "web": ("web", "main"), "sim": ("sim", "main")}
 REALTIME_SERVICES = ("tracker", "ptz-1", "ptz-2")  # compose gives them ulimits: {rtprio: 10}
 CAMERAS = ("ptz1", "ptz2")
 ROBOT = "locomotive"  # config/compose-sim.toml's scenario (the sim's default)

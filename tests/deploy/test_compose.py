@@ -24,7 +24,8 @@ def _config(path: Path, *args: str) -> subprocess.CompletedProcess:
 def _config_with_sim(*args: str, **env: str) -> subprocess.CompletedProcess:
     environ = {k: v for k, v in os.environ.items() if k != "STB_ROUTER"}
     return subprocess.run([str(COMPOSE), "-f", str(ROOT / "docker-compose.yml"), "--profile",
-                           "sim", "--profile", "camera", "config", *args], cwd=ROOT,
+                           "sim", "--profile", "camera", "--profile", "observation", "config",
+                           *args], cwd=ROOT,
                           capture_output=True, text=True, timeout=60, env={**environ, **env})
 
 
@@ -40,6 +41,7 @@ def test_compose_file_is_valid_and_every_service_restarts() -> None:
                              "web", "sim", "camera", "observation"}
     assert services["sim"]["profiles"] == ["sim"], "the sim only with --profile sim"
     assert services["camera"]["profiles"] == ["camera"], "a camera only where there is one"
+    assert services["observation"]["profiles"] == ["observation"], "asked for by name"
     for name, service in services.items():
         assert service["restart"] == "unless-stopped", name
 
