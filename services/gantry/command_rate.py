@@ -48,8 +48,9 @@ class CommandRate:
         if self._total is None:
             self._total = _Bucket(self.total_burst, now_s)
         self._total.refill(now_s, self.total_per_s, self.total_burst)
-        if self._total.tokens >= self.total_burst:
-            self._refused.clear()  # every flood is over
+        if self._total.tokens >= self.total_burst:  # forget the floods that are over
+            for name in [n for n in self._refused if self._full(n, now_s)]:
+                del self._refused[name]
         bucket = self._bucket(sender, now_s)
         bucket.refill(now_s, self.per_s, self.burst)
         if bucket.tokens >= self.burst:
@@ -62,6 +63,14 @@ class CommandRate:
             return Admission(False)  # a flood of names: logged for the first ones
         count = self._refused[sender] = self._refused.get(sender, 0) + 1
         return Admission(False, report=count == 1, refused_in_flood=count)
+
+    def _full(self, sender: str, now_s: float) -> bool:
+        """Whether ``sender``'s bucket is full again by ``now_s`` (its flood is over)."""
+        bucket = self._senders.get(sender)
+        if bucket is None:
+            return True
+        bucket.refill(now_s, self.per_s, self.burst)
+        return bucket.tokens >= self.burst
 
     def _bucket(self, sender: str, now_s: float) -> _Bucket:
         bucket = self._senders.get(sender)

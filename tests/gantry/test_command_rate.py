@@ -32,6 +32,17 @@ def test_the_first_refusal_of_a_flood_is_reported_once() -> None:
     assert [a.report for a in flood if not a.admitted] == [True, False]
 
 
+def test_a_long_flood_is_reported_once_though_the_total_bucket_fills_again() -> None:
+    """One sender flooding for 10 s at 100 a second: the total bucket refills faster than its
+    2 a second spend it, but the flood is over only when the sender's own bucket is full."""
+    rate = CommandRate(per_s=2.0, burst=5, total_per_s=10, total_burst=20)
+    reports = sum(rate.admit("flood", i / 100).report for i in range(1000))
+    assert reports == 1
+    assert not rate.admit("flood", 10.0 + 3.0).report, "3 s quiet: its bucket is full, taken"
+    assert sum(rate.admit("flood", 13.0 + i / 100).report for i in range(100)) == 1, \
+        "a new flood after the quiet is reported again"
+
+
 def test_a_stop_is_always_taken_and_spends_tokens() -> None:
     rate = CommandRate(per_s=1.0, burst=2, total_per_s=100, total_burst=100)
     assert all(rate.admit("eve", 0.0, always=True).admitted for _ in range(50))
