@@ -36,6 +36,10 @@ def rig(request: pytest.FixtureRequest, flat_map: Path, make_bus: Callable[..., 
     if "crane" in extra:  # the lab's register map, in the world's frame
         extra["crane"] = CraneConnection(**extra["crane"].model_dump())
     crane = CraneRig(extra["crane"]) if "crane" in extra else CraneRig()
+    # The tests' operator sends as fast as a test runs (reset, arm, … in a row): the lab's
+    # command rate (5 at once, 2 a second) is the subject of test_command_rate.py, which sets
+    # it; elsewhere it would only make a busy machine's run fail.
+    extra = {"command_burst": 100, "command_per_s": 100.0, **extra}
     settings = GantrySettings(crane_port=crane.port, height_map=flat_map,
                               marker_height_mm=MARKER_MM, stale_after_s=0.6, **extra)
     node = Node("gantry", settings, make_bus())

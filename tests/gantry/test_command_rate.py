@@ -59,6 +59,7 @@ def test_many_names_share_the_total() -> None:
 
 
 @pytest.mark.timeout(60)
+@pytest.mark.parametrize("rig", [{"command_burst": 5, "command_per_s": 2.0}], indirect=True)
 def test_a_flood_of_commands_is_answered_too_many_and_obeyed_at_the_rate(
         rig: dict, caplog: pytest.LogCaptureFixture) -> None:
     """3,000 disarms from one sender in about a second: at most its burst and rate are
