@@ -12,8 +12,7 @@ from tests.calib.test_demo_calibration import MOUNTS
 from tests.ports import free_port
 from tests.sim.test_sim_service import write_lab
 
-SERVICES = ["router", "sim", "tracker", "calib", "ptz:ptz1", "ptz:ptz2", "gantry", "observation",
-            "web"]
+SERVICES = ["router", "sim", "tracker", "calib", "ptz:ptz1", "ptz:ptz2", "gantry", "web"]
 """Every service: the whole lab."""
 
 

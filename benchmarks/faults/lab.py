@@ -21,7 +21,7 @@ from tests.uplab import SERVICES, write_up_lab
 ROOT = Path(__file__).resolve().parents[2]
 ALIVE = {"sim": "sim/main", "tracker": "tracker/main", "calib": "calib/main",
          "ptz:ptz1": "ptz/ptz1", "ptz:ptz2": "ptz/ptz2", "gantry": "gantry/main",
-         "observation": "observation/main", "web": "web/main"}
+         "web": "web/main"}
 
 
 @contextmanager

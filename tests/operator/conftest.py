@@ -21,6 +21,9 @@ from tests.gantry.rig import Operator
 from tests.services.test_processes import _open_when_up, _stop
 from tests.uplab import SERVICES, write_up_lab
 
+LIVE_SERVICES = [*SERVICES, "observation"]
+"""The lab the operator's tools are tried on: every service and the bird's-eye view."""
+
 
 @dataclass
 class LiveLab:
@@ -35,7 +38,7 @@ class LiveLab:
 @pytest.fixture(scope="package")
 def live_lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveLab]:
     tmp = tmp_path_factory.mktemp("live")
-    lab, endpoint, web_port = write_up_lab(tmp, SERVICES, users=True)
+    lab, endpoint, web_port = write_up_lab(tmp, LIVE_SERVICES, users=True)
     up = stb_process("up", "--lab", str(lab), "--no-view")
     session = None
     try:

@@ -91,8 +91,9 @@ def test_the_recording_opens_in_foxglove_with_typed_channels(recording: Path) ->
         "/ptz1/image": "foxglove.CompressedImage", "/ptz2/image": "foxglove.CompressedImage",
         "/ptz1/annotations": "foxglove.ImageAnnotations",
         "/ptz2/annotations": "foxglove.ImageAnnotations",
-        "/ptz1/video": "foxglove.CompressedVideo", "/ptz2/video": "foxglove.CompressedVideo"}
-    for topic in ("/gantry/image", "/ptz1/video", "/ptz2/video"):  # each plays (PyAV)
+        "/ptz1/video": "foxglove.CompressedVideo", "/ptz2/video": "foxglove.CompressedVideo",
+        "/observation/video": "foxglove.CompressedVideo"}  # the bird's-eye view
+    for topic in ("/gantry/image", "/ptz1/video", "/ptz2/video", "/observation/video"):
         decoder = av.CodecContext.create("h264", "r")
         units = decoded_typed(recording, topic)
         frames = [f for u in units for f in decoder.decode(av.Packet(u.data))]

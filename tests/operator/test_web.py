@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import wait_for
-from tests.operator.conftest import SERVICES, LiveLab
+from tests.operator.conftest import LIVE_SERVICES, LiveLab
 from tests.uplab import OPERATOR, VIEWER
 from tests.webpage import basic
 
@@ -77,7 +77,7 @@ def page(live_lab: LiveLab, browser_: object) -> Iterator[object]:
 
 def _expected_services() -> set[str]:
     out = set()
-    for spec in SERVICES:
+    for spec in LIVE_SERVICES:
         service, _, instance = spec.partition(":")
         out.add(f"{service}/{instance or 'main'}")
     return out

@@ -4,7 +4,6 @@ both stream through the files."""
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 from collections.abc import Callable
@@ -21,16 +20,23 @@ from tests.recording.long_run import GANTRY_HZ, write_long_run
 MINUTES, PARTS, MEMORY_MB = 30, 3, 500
 
 
+MEASURE = """
+import os, subprocess, sys
+proc = subprocess.Popen(sys.argv[1:])
+_, status, usage = os.wait4(proc.pid, 0)
+print(os.waitstatus_to_exitcode(status), usage.ru_maxrss)
+"""
+"""Runs a command and prints its exit code and peak resident memory (kB). From a small Python
+of its own: a process forked from pytest counts pytest's pages until it has exec'd (676 MB
+in CI, for any command)."""
+
+
 def _peak_mb(*args: str) -> tuple[int, float, str]:
     """Run ``stb ARGS``; (exit code, its peak resident memory in MB, its stderr)."""
-    proc = subprocess.Popen([sys.executable, "-m", "services.cli", *args], cwd=ROOT,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    try:
-        _, status, usage = os.wait4(proc.pid, 0)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    return os.waitstatus_to_exitcode(status), usage.ru_maxrss / 1024, proc.stderr.read()
+    done = subprocess.run([sys.executable, "-c", MEASURE, sys.executable, "-m", "services.cli",
+                           *args], cwd=ROOT, capture_output=True, text=True, timeout=540)
+    code, peak_kb = done.stdout.strip().splitlines()[-1].split()
+    return int(code), int(peak_kb) / 1024, done.stderr
 
 
 @pytest.fixture(scope="module")
