@@ -3,11 +3,11 @@ the QTM RT server (``"qtm"``) and the crane's observation camera (``"observation
 
 A real QTM is a machine of its own: the sim's camera rendering, HTTP servers and tracking
 camera must not hold its frames back (at 1000 Hz, sharing the sim's one interpreter delayed
-frames by up to 10 ms). A real observation camera renders and encodes on its own processor:
-drawn in the sim's interpreter, its pictures delayed the PTZ cameras' snapshots enough to
-spoil a calibration under compose (1.7–2.1 px instead of 0.1–0.3), and beside the lab's
-processes it must take only the processor time they leave (``SCHED_IDLE``): a real camera has
-a processor of its own. Each process builds the
+frames by up to 10 ms). A real observation camera renders and encodes on its own processor,
+so the sim's does so in a process of its own that takes only the processor time the lab's
+processes leave (``SCHED_IDLE``). (Under compose on two cores, ptz1's calibration measured
+1.7–2.1 px with the observation camera drawn in the sim's interpreter, 1.2–1.5 px with it
+here, 0.1–0.3 px with nobody asking for its pictures: docs/deployment.md.) Each process builds the
 same Lab from the same settings on the same sim time (a shared monotonic origin); the one
 thing decided at run time, when the robot starts, comes over a shared value, and so does the
 crane, whose model the Modbus clients drive in the sim's own process: its position and
