@@ -24,7 +24,7 @@ import numpy as np
 from common import keys
 from common import messages as m
 from common.node import Node, StartupError, run_every
-from services.sim.camera_server import CameraServer, ServedCamera, SimCamera
+from services.sim.camera_server import CameraServer, SimCamera
 from services.sim.clock import Clock
 from services.sim.crane_server import CraneServer
 from services.sim.device_process import DeviceProcess
@@ -109,24 +109,21 @@ def _start_robot_once_calibrated(node: Node, lab: Lab, cameras: list[str], clock
 
 def start_cameras(lab: Lab, settings: SimSettings, clock: Clock) -> list[CameraServer]:
     """The PTZ cameras' servers (the observation camera's runs in a process of its own)."""
-    served: list[tuple[ServedCamera, str, int]] = []
+    servers: list[CameraServer] = []
     for i, cam in enumerate(settings.cameras):
         sim_camera = SimCamera(cam.name, lab.heads[cam.name], lambda: lab.bright_points(clock()),
                                lab.ptz_glints, clock, np.random.default_rng((settings.seed, 3, i)),
                                cam.user, cam.password, cam.auth, mjpeg_fps=cam.mjpeg_fps,
                                ground=GroundView.of(lab.crater, settings.seed),
                                robots=lambda: [lab.robot_pose(clock())])
-        served.append((sim_camera, cam.host, cam.port))
-    servers: list[CameraServer] = []
-    for camera, host, port in served:
         try:
-            servers.append(CameraServer(camera, settings.host_of(host), port).start())
+            servers.append(CameraServer(sim_camera, settings.host_of(cam.host), cam.port).start())
         except OSError as err:
             for server in servers:
                 server.close()
-            raise StartupError(f"camera {camera.name}: cannot listen on {host}:{port}: "
+            raise StartupError(f"camera {cam.name}: cannot listen on {cam.host}:{cam.port}: "
                                f"{err.strerror}") from err
-        log.info("camera %s (VAPIX) on http://%s:%d", camera.name, host, servers[-1].port)
+        log.info("camera %s (VAPIX) on http://%s:%d", cam.name, cam.host, servers[-1].port)
     return servers
 
 

@@ -68,7 +68,9 @@ def test_the_parts_are_complete_recordings_that_read_as_one_run(
             measured_s=now, camera="tracking", seq=sent + 1, width_px=160, height_px=120,
             encoding="mono8", data=draw([Blob(80, 60, 5, 5)], 160, 120, rng).tobytes()))
         sent += 1
-        time.sleep(0.04)  # a camera's pace: 25 frames a second
+        # paces the publisher, it waits for nothing: parts are cut by receive time, so the
+        # samples must span 3.6 s of it, at a camera's 25 frames a second
+        time.sleep(0.04)
     wait_for(lambda: recorder.stats.samples["stb/tracker/robot"] == sent, timeout=10,
              why=lambda: f"{recorder.stats.samples['stb/tracker/robot']} of {sent}")
     recorder.close()
