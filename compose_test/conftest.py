@@ -23,7 +23,7 @@ from compose_test.engine import (
     install_when_missing,
     why_no_engine,
 )
-from compose_test.lab import Client, FollowMeter, lab_folder, up
+from compose_test.lab import EVERY_PROFILE, Client, FollowMeter, lab_folder, up
 from tests.conftest import stb_process
 from tests.ports import free_port
 from tests.sim.test_sim_service import write_lab
@@ -103,7 +103,7 @@ def lab(engine: Engine, images: dict, reference_follow_mm: float) -> Iterator[di
             logs = engine.compose(folder, files, "--profile", "sim", "logs", "--no-color",
                                   check=False, timeout=60)
             (OUT / "containers.log").write_text(logs.stdout + logs.stderr)
-            engine.compose(folder, files, "--profile", "sim", "down", "-v", "--remove-orphans",
+            engine.compose(folder, files, *EVERY_PROFILE, "down", "-v", "--remove-orphans",
                            "-t", "5", check=False, timeout=180)
 
 

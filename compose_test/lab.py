@@ -33,6 +33,8 @@ from tests.uplab import write_users
 
 PROJECT = "stb-compose-test"
 LAB_FILE_IN_CONTAINERS = "/config/compose-sim.toml"
+# `down` leaves a profile's containers (and so their network) unless the profile is named
+EVERY_PROFILE = ("--profile", "sim", "--profile", "observation")
 # compose service -> (service, instance) on the bus; the router only when it is ours (stb
 # router publishes health, upstream eclipse/zenoh does not).
 ON_THE_BUS = {"tracker": ("tracker", "main"), "ptz-1": ("ptz", "ptz1"),

@@ -7,12 +7,14 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
 from compose_test.conftest import FOLLOW_WINDOW_S, figure
 from compose_test.engine import Engine
 from compose_test.lab import (
+    EVERY_PROFILE,
     HEALTHY_BOUND_S,
     ON_THE_BUS,
     FollowMeter,
@@ -52,6 +54,7 @@ volumes:
     name: {CRATER_VOLUME}
 """)
         files.append("compose.lan.yml")
+        _take_down(engine, folder, files)  # what a run killed before its teardown left behind
         engine.docker("network", "create", LAN)
         try:
             started = time.monotonic()
@@ -61,11 +64,16 @@ volumes:
             yield {"engine": engine, "folder": folder, "files": files, "client": client,
                    "up_at": started, "reference_mm": reference_follow_mm}
         finally:
-            for host in reversed(HOSTS):
-                engine.compose(folder, files, "--profile", "sim", "down", "-v", "-t", "5",
-                               project=_project(host), check=False, timeout=180)
-            engine.docker("volume", "rm", "-f", CRATER_VOLUME, check=False)
-            engine.docker("network", "rm", LAN, check=False)
+            _take_down(engine, folder, files)
+
+
+def _take_down(engine: Engine, folder: Path, files: list[str]) -> None:
+    """Every host's project, the shared volume and the LAN gone, whether or not they exist."""
+    for host in reversed(HOSTS):
+        engine.compose(folder, files, *EVERY_PROFILE, "down", "-v", "--remove-orphans", "-t",
+                       "5", project=_project(host), check=False, timeout=180)
+    engine.docker("volume", "rm", "-f", CRATER_VOLUME, check=False)
+    engine.docker("network", "rm", "--force", LAN, check=False)
 
 
 def test_each_host_runs_only_its_own_services_on_the_lan(hosts: dict) -> None:
