@@ -46,7 +46,7 @@ import numpy as np
 from common import keys
 from common import messages as m
 from common.bus import Bus, BusUnreachable, open_session
-from common.camera import Intrinsics, Pose, focal_mm_for_zoom, head_pose, project
+from common.camera import Pose, head_pose, project
 from common.markers import closest, detect
 from common.settings import BusSettings, ZenohSettings
 from services.args import Parser
@@ -215,7 +215,7 @@ def _pointing_errors(lab: Lab, settings: SimSettings, clients: dict[str, httpx.C
             pose = head_pose(mounts[name], position.pan_deg, position.tilt_deg)
             robot = lab.robot(asked - t0_wall)
             predicted = project(robot[None, :], pose,
-                                Intrinsics(focal_mm_for_zoom(position.zoom)))[0]
+                                lab.heads[name].lens.intrinsics(position.zoom))[0]
             found = _marker_near(image, predicted) if np.all(np.isfinite(predicted)) else None
             errors[name].append(float("inf") if found is None else float(
                 np.hypot(found[0] - CENTRE[0], found[1] - CENTRE[1])))

@@ -1,4 +1,5 @@
-"""The paper's camera model (eq. 1–3) and the AXIS 215 PTZ intrinsics (Table 1).
+"""The paper's camera model (eq. 1–3) and the AXIS 215 PTZ intrinsics (Table 1), with the
+lens's distortion (OpenCV's model, ``common.lens``) where it was measured.
 
 Frames. The camera frame has its x axis along the optical axis, y to the image's right and z
 to the image's bottom (so u grows with y and v with z, eq. 3). The pose ``T_world_camera``
@@ -8,16 +9,14 @@ maps camera coordinates into the world frame (eq. 1): ``X_world = R @ x_cam + t`
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Protocol
 
 import numpy as np
 
+from common.lens import NO_DISTORTION, distort, undistort
 from common.volume import Box
-
-AXIS_215_FOCAL_MM = (3.8, 46.0)
-AXIS_215_ZOOM_STEPS = (1, 9999)
 
 
 def rot_x(angle_rad: float) -> np.ndarray:
@@ -145,13 +144,15 @@ class Pose:
 
 @dataclass(frozen=True)
 class Intrinsics:
-    """A pinhole camera from its data sheet: focal length, chip size, resolution (Table 1)."""
+    """A camera from its data sheet: focal length, chip size, resolution (Table 1); and its
+    lens's distortion (k1, k2, p1, p2, k3 on normalised coordinates; none by default)."""
 
     focal_mm: float
     chip_width_mm: float = 3.6
     chip_height_mm: float = 2.7
     width_px: int = 704
     height_px: int = 576
+    distortion: tuple[float, float, float, float, float] = NO_DISTORTION
 
     @property
     def fy_px(self) -> float:
@@ -170,19 +171,41 @@ class Intrinsics:
         return self.height_px / 2
 
     def with_focal(self, focal_mm: float) -> Intrinsics:
-        return Intrinsics(focal_mm, self.chip_width_mm, self.chip_height_mm, self.width_px,
-                          self.height_px)
+        return replace(self, focal_mm=focal_mm)
+
+    def pinhole(self) -> Intrinsics:
+        """The same camera without its lens's distortion."""
+        return replace(self, distortion=NO_DISTORTION)
 
 
 def project_camera(points_camera: np.ndarray, intr: Intrinsics) -> np.ndarray:
-    """Camera-frame points (N, 3) → pixels (N, 2) by eq. 3; rows with x ≤ 0 become NaN."""
+    """Camera-frame points (N, 3) → pixels (N, 2) by eq. 3, bent by the lens's distortion;
+    rows with x ≤ 0 become NaN."""
     p = np.atleast_2d(np.asarray(points_camera, dtype=float))
     with np.errstate(divide="ignore", invalid="ignore"):
-        u = intr.fy_px * p[:, 1] / p[:, 0] + intr.cy_px
-        v = intr.fz_px * p[:, 2] / p[:, 0] + intr.cz_px
-    uv = np.column_stack([u, v])
-    uv[p[:, 0] <= 0] = np.nan
+        normalised = np.column_stack([p[:, 1] / p[:, 0], p[:, 2] / p[:, 0]])
+    ahead = p[:, 0] > 0
+    if any(intr.distortion) and np.any(ahead):
+
+        normalised[ahead] = distort(normalised[ahead], intr.distortion)
+    uv = np.column_stack([intr.fy_px * normalised[:, 0] + intr.cy_px,
+                          intr.fz_px * normalised[:, 1] + intr.cz_px])
+    uv[~ahead] = np.nan
     return uv
+
+
+def undistort_pixels(uv: np.ndarray, intr: Intrinsics) -> np.ndarray:
+    """Pixels (N, 2) of a camera with ``intr``'s distortion → where a pinhole camera with the
+    same focal length would have seen them (what eq. 3's inverse, aiming, needs)."""
+    uv = np.atleast_2d(np.asarray(uv, dtype=float))
+    if not any(intr.distortion):
+        return uv.copy()
+
+    normalised = np.column_stack([(uv[:, 0] - intr.cy_px) / intr.fy_px,
+                                  (uv[:, 1] - intr.cz_px) / intr.fz_px])
+    straight = undistort(normalised, intr.distortion)
+    return np.column_stack([intr.fy_px * straight[:, 0] + intr.cy_px,
+                            intr.fz_px * straight[:, 1] + intr.cz_px])
 
 
 def project(points_world: np.ndarray, pose: Pose, intr: Intrinsics) -> np.ndarray:
@@ -211,23 +234,6 @@ def mount_pose(head: Pose, pan_deg: float, tilt_deg: float) -> Pose:
     (calibration may run at any fixed pan and tilt; the PTZ chain needs the mount)."""
     rotation = head.rotation @ rot_y(np.radians(-tilt_deg)) @ rot_z(np.radians(-pan_deg))
     return Pose.from_matrix(rotation, head.position)
-
-
-def focal_mm_for_zoom(zoom: float, *, focal_range_mm: tuple[float, float] = AXIS_215_FOCAL_MM,
-                      zoom_steps: tuple[int, int] = AXIS_215_ZOOM_STEPS) -> float:
-    """VAPIX zoom step → focal length, linear over the lens's range (documented assumption)."""
-    lo, hi = zoom_steps
-    fraction = (min(max(zoom, lo), hi) - lo) / (hi - lo)
-    return focal_range_mm[0] + fraction * (focal_range_mm[1] - focal_range_mm[0])
-
-
-def zoom_for_focal_mm(focal_mm: float, *,
-                      focal_range_mm: tuple[float, float] = AXIS_215_FOCAL_MM,
-                      zoom_steps: tuple[int, int] = AXIS_215_ZOOM_STEPS) -> int:
-    """Inverse of focal_mm_for_zoom, rounded to a whole step and clamped."""
-    lo, hi = zoom_steps
-    fraction = (focal_mm - focal_range_mm[0]) / (focal_range_mm[1] - focal_range_mm[0])
-    return int(round(min(max(lo + fraction * (hi - lo), lo), hi)))
 
 
 def thin_lens_image_distance_mm(focal_mm: float, object_distance_mm: float) -> float:

@@ -6,11 +6,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-import cv2
 import numpy as np
 
 NO_DISTORTION = (0.0, 0.0, 0.0, 0.0, 0.0)
-_UNDISTORT = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-12)
+_UNDISTORT_ITERATIONS, _UNDISTORT_EPS = 40, 1e-12
 
 
 def distort(xy: np.ndarray, distortion: Sequence[float]) -> np.ndarray:
@@ -18,6 +17,8 @@ def distort(xy: np.ndarray, distortion: Sequence[float]) -> np.ndarray:
     xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
     if not any(distortion):
         return xy.copy()
+    import cv2  # imported when a lens bends: a pinhole's users do without OpenCV
+
     rays = np.column_stack([xy, np.ones(len(xy))])
     out, _ = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), np.eye(3),
                                np.asarray(distortion, dtype=np.float64))
@@ -29,6 +30,10 @@ def undistort(xy_distorted: np.ndarray, distortion: Sequence[float]) -> np.ndarr
     xy = np.asarray(xy_distorted, dtype=np.float64).reshape(-1, 1, 2)
     if not any(distortion):
         return xy.reshape(-1, 2).copy()
+    import cv2
+
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, _UNDISTORT_ITERATIONS,
+                _UNDISTORT_EPS)
     out = cv2.undistortPoints(xy, np.eye(3), np.asarray(distortion, dtype=np.float64),
-                              R=None, P=None, criteria=_UNDISTORT)
+                              R=None, P=None, criteria=criteria)
     return out.reshape(-1, 2)

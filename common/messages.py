@@ -175,6 +175,19 @@ class PtzHand(Message):
 # --- calibration --------------------------------------------------------------------------------
 
 
+class LensAtZoom(BaseModel):
+    """The lens as a multi-zoom calibration measured it at one zoom step."""
+
+    model_config = Message.model_config
+
+    zoom: int = Field(ge=1, le=19999)
+    focal_mm: float = Field(gt=0, le=1000)
+    distortion: list[float] = Field(min_length=5, max_length=5, description="OpenCV's k1, k2, "
+                                    "p1, p2, k3 on normalised image coordinates")
+    passpoints: int = Field(ge=0, description="inliers at this zoom")
+    mean_error_px: float = Field(ge=0, description="mean reprojection error at this zoom")
+
+
 class CameraPose(Message):
     """A camera's calibrated pose T_world_camera (paper eq. 1: R = Rx·Ry·Rz; x = optical axis)."""
 
@@ -190,6 +203,10 @@ class CameraPose(Message):
     passpoints: int = Field(ge=0, description="passpoints used (inliers)")
     time_offset_s: float = Field(0.0, description="mocap clock minus camera clock (add it to a "
                                  "snapshot's time to get the mocap time), if fitted")
+    lens: list[LensAtZoom] = Field(default_factory=list, max_length=64, description="the "
+                                   "lens measured at two or more zoom steps, by zoom; empty: "
+                                   "calibrated at one zoom (the straight-line zoom curve of "
+                                   "the AXIS 215's data sheet, no distortion)")
     version: int = Field(0, ge=0, le=2**53, description="the calibration service's count for "
                          "this camera: a newer pose has a higher version (or the same version, "
                          "measured later); a PTZ service takes a pose only from the calibration "

@@ -11,9 +11,11 @@ import math
 
 import numpy as np
 
-from common.camera import Pose, PtzLimits, zoom_for_focal_mm
+from common.camera import Pose, PtzLimits
+from common.ptz_lens import PtzLens
 
 DEFAULT_LIMITS = PtzLimits()
+STRAIGHT_LENS = PtzLens()
 """The limits used where a camera has not reported its own (±170° pan, ±90° tilt, zoom 1–9999)."""
 
 
@@ -74,13 +76,15 @@ def aim_error_deg(target_world: np.ndarray, pose: Pose, pan_deg: float,
 
 
 def zoom_for_size(distance_mm: float, *, object_mm: float, image_fraction: float,
-                  chip_height_mm: float = 2.7, limits: PtzLimits = DEFAULT_LIMITS) -> int:
+                  chip_height_mm: float = 2.7, limits: PtzLimits = DEFAULT_LIMITS,
+                  lens: PtzLens = STRAIGHT_LENS) -> int:
     """Zoom step that makes an object of ``object_mm`` fill ``image_fraction`` of the image
-    height at ``distance_mm`` (beyond the paper: constant apparent size)."""
+    height at ``distance_mm`` (beyond the paper: constant apparent size), read off the
+    lens's zoom curve (measured, or the data sheet's straight line)."""
     if distance_mm <= 0 or object_mm <= 0 or not 0 < image_fraction <= 1:
         raise ValueError("distance, object size and image fraction must be positive")
     focal = image_fraction * chip_height_mm * distance_mm / object_mm
-    zoom = zoom_for_focal_mm(focal)
+    zoom = lens.zoom_for_focal(focal)
     return int(min(max(zoom, limits.min_zoom), limits.max_zoom))
 
 

@@ -12,13 +12,14 @@ are drivers beside it.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from common import messages as m
 from common.backoff import doubled
 from common.camera import Pose, PtzLimits
+from common.ptz_lens import PtzLens, measured_lens
 from services.ptz.aim import aim_error_deg
 from services.ptz.follow import Command, Follower
 from services.ptz.override import ManualOverride
@@ -50,6 +51,7 @@ class PtzControl:
     max_future_s: float = 1.0
     pose_msg: m.CameraPose | None = None
     pose: Pose | None = None  # converted once, when it arrives (robot samples come at 1 kHz)
+    lens: PtzLens = field(default_factory=PtzLens)  # the pose's measured lens, or the default
     robot: m.RobotPosition | None = None
     limits: PtzLimits | None = None
     retry_at: float = 0.0
@@ -70,6 +72,8 @@ class PtzControl:
             return "same"
         self.pointing.forget()
         self.pose_msg, self.pose = msg, Pose.of(msg)
+        self.lens = self.follower.lens = measured_lens(
+            [(p.zoom, p.focal_mm, p.distortion) for p in msg.lens])
         return "taken"
 
     def command(self, msg: m.RobotPosition, now: float, calibrating: bool) -> Command | None:

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from common.camera import Pose, PtzLimits
+from common.ptz_lens import PtzLens
 from common.volume import Volume
 from services.ptz.aim import aim_at, predict, zoom_for_size
 
@@ -37,6 +38,7 @@ class Follower:
     image_fraction: float = 0.3
     volume: Volume = Volume()
     max_age_s: float = 1.0
+    lens: PtzLens = PtzLens()  # the calibrated camera's, or the data sheet's straight line
     _last: Command | None = None
     _last_at: float = -math.inf
 
@@ -69,4 +71,5 @@ class Follower:
             return self.zoom
         distance = float(np.linalg.norm(target - pose.position))
         return zoom_for_size(distance, object_mm=self.target_size_mm,
-                             image_fraction=self.image_fraction, limits=self.limits)
+                             image_fraction=self.image_fraction, limits=self.limits,
+                             lens=self.lens)

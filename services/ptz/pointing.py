@@ -26,12 +26,12 @@ import math
 import numpy as np
 
 from common import messages as m
-from common.camera import Intrinsics
+from common.camera import Intrinsics, undistort_pixels
 
 NOT_SEEN = math.inf  # no marker in the picture where the robot should be
 
 
-def pointing_error_deg(preview: m.PtzPreview, focal_mm: float, min_radius_px: float = 0.0
+def pointing_error_deg(preview: m.PtzPreview, intr: Intrinsics, min_radius_px: float = 0.0
                        ) -> float | None:
     """The angle from where the robot marker should appear to the nearest marker found
     (``NOT_SEEN`` if none was found); None when there is nothing to judge: no pose or robot,
@@ -46,14 +46,15 @@ def pointing_error_deg(preview: m.PtzPreview, focal_mm: float, min_radius_px: fl
         return None
     if not preview.markers:
         return NOT_SEEN
-    intr = Intrinsics(focal_mm, width_px=preview.width_px, height_px=preview.height_px)
     nearest = min(preview.markers, key=lambda d: math.hypot(d.u_px - u, d.v_px - v))
     a, b = _ray(u, v, intr), _ray(nearest.u_px, nearest.v_px, intr)
     return math.degrees(math.acos(min(1.0, float(a @ b))))
 
 
 def _ray(u: float, v: float, intr: Intrinsics) -> np.ndarray:
-    """The unit ray of pixel (u, v) in the camera frame (x = optical axis, eq. 3 inverted)."""
+    """The unit ray of pixel (u, v) in the camera frame (x = optical axis, eq. 3 inverted,
+    the lens's distortion undone)."""
+    u, v = undistort_pixels(np.array([[u, v]]), intr)[0]
     ray = np.array([1.0, (u - intr.cy_px) / intr.fy_px, (v - intr.cz_px) / intr.fz_px])
     return ray / np.linalg.norm(ray)
 
@@ -72,10 +73,10 @@ class PointingCheck:
         self.error_deg: float | None = None  # of the latest judged preview
         self._misses = 0
 
-    def observe(self, preview: m.PtzPreview, focal_mm: float, infrared: bool) -> None:
+    def observe(self, preview: m.PtzPreview, intr: Intrinsics, infrared: bool) -> None:
         if not infrared and not self.daylight:
             return
-        error = pointing_error_deg(preview, focal_mm, self.min_radius_px)
+        error = pointing_error_deg(preview, intr, self.min_radius_px)
         if error is None or (error == NOT_SEEN and not infrared):
             return
         self.error_deg = error

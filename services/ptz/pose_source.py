@@ -16,15 +16,16 @@ from dataclasses import dataclass
 from common import messages as m
 
 
-def _solve(pose: m.CameraPose) -> dict:
-    return pose.model_dump(exclude={"sent_s"})
+def _solve(pose: m.CameraPose) -> str:
+    """What a pose says (its lens included), comparable between answers."""
+    return pose.model_dump_json(exclude={"sent_s"})
 
 
 def choose(answers: list[m.CameraPose], camera: str) -> tuple[m.CameraPose | None, str]:
     """The pose the answers agree on, or None and why not."""
     if not answers:
         return None, f"the calibration service did not answer for {camera}"
-    distinct = {tuple(sorted(_solve(a).items())) for a in answers}
+    distinct = {_solve(a) for a in answers}
     if len(distinct) > 1:
         return None, (f"{len(distinct)} different poses answered for {camera}: another "
                       "queryable on its key? the camera keeps the pose it has")

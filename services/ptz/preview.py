@@ -16,9 +16,10 @@ from collections.abc import Callable
 import numpy as np
 
 from common import messages as m
-from common.camera import Intrinsics, Pose, focal_mm_for_zoom, head_pose, project_camera
+from common.camera import Intrinsics, Pose, head_pose, project_camera
 from common.lab_views import PAPER_MARKER_MM
 from common.markers import detect, to_message
+from common.ptz_lens import PtzLens
 from services.ptz.aim import predict
 from services.ptz.camera import PtzCamera, PtzError, decode_jpeg
 
@@ -26,36 +27,21 @@ log = logging.getLogger(__name__)
 
 
 def robot_view(mount: Pose | None, robot: m.RobotPosition | None, pan_deg: float,
-               tilt_deg: float, focal_mm: float, width_px: int, height_px: int, at_s: float,
+               tilt_deg: float, intr: Intrinsics, at_s: float,
                marker_diameter_mm: float = PAPER_MARKER_MM
                ) -> tuple[list[float] | None, float | None]:
-    """Where the robot marker appears in an image taken at ``at_s`` and how large (radius,
-    px), from one prediction (pure); (None, None) without a pose or a robot, or when it is
-    behind the camera."""
+    """Where the robot marker appears in an image taken at ``at_s`` through the lens ``intr``
+    (its focal length at the image's zoom, its distortion) and how large (radius, px), from
+    one prediction (pure); (None, None) without a pose or a robot, or when it is behind the
+    camera."""
     if mount is None or robot is None:
         return None, None
     in_camera = head_pose(mount, pan_deg, tilt_deg).to_camera(_robot_at(robot, at_s)[None, :])
-    intr = Intrinsics(focal_mm, width_px=width_px, height_px=height_px)
     u, v = project_camera(in_camera, intr)[0]
     if not (np.isfinite(u) and np.isfinite(v)):  # behind the camera
         return None, None
     radius = intr.fy_px * marker_diameter_mm / 2 / in_camera[0, 0]
     return [round(float(u), 1), round(float(v), 1)], round(float(radius), 2)
-
-
-def robot_pixel(mount: Pose | None, robot: m.RobotPosition | None, pan_deg: float,
-                tilt_deg: float, focal_mm: float, width_px: int, height_px: int,
-                at_s: float) -> list[float] | None:
-    """Where the robot marker appears in that image (``robot_view``'s pixel)."""
-    return robot_view(mount, robot, pan_deg, tilt_deg, focal_mm, width_px, height_px, at_s)[0]
-
-
-def robot_radius_px(mount: Pose | None, robot: m.RobotPosition | None, pan_deg: float,
-                    tilt_deg: float, focal_mm: float, width_px: int, height_px: int,
-                    at_s: float, marker_diameter_mm: float) -> float | None:
-    """How large (radius, px) the robot marker appears in that image (``robot_view``'s)."""
-    return robot_view(mount, robot, pan_deg, tilt_deg, focal_mm, width_px, height_px, at_s,
-                      marker_diameter_mm)[1]
 
 
 def _robot_at(robot: m.RobotPosition, at_s: float) -> np.ndarray:
@@ -70,20 +56,22 @@ class PreviewLoop:
     camera then); camera errors are logged once per outage and retried next period."""
 
     def __init__(self, camera: PtzCamera, period_s: float,
-                 publish: Callable[[m.PtzPreview, float, bool], None],
+                 publish: Callable[[m.PtzPreview, Intrinsics, bool], None],
                  mount: Callable[[], Pose | None], robot: Callable[[], m.RobotPosition | None],
+                 lens: Callable[[], PtzLens],
                  paused: Callable[[], bool], stop: threading.Event,
                  infrared_every_s: float = 0.0,
                  marker_diameter_mm: float = PAPER_MARKER_MM) -> None:
-        """``publish(preview, focal_mm, infrared)``: the preview, the focal length it was taken
-        at, and whether the IR-cut filter was off for it (the markers bright). Every
-        ``infrared_every_s`` (0: never) a preview is taken with the filter off, for the
-        pointing check, and the filter is set back to auto right after. ``marker_diameter_mm``:
-        the robot marker's, for how large it should appear."""
+        """``publish(preview, intrinsics, infrared)``: the preview, the lens it was taken
+        through (``lens()`` at its zoom), and whether the IR-cut filter was off for it (the
+        markers bright). Every ``infrared_every_s`` (0: never) a preview is taken with the
+        filter off, for the pointing check, and the filter is set back to auto right after.
+        ``marker_diameter_mm``: the robot marker's, for how large it should appear."""
         self.camera, self.period_s, self.publish = camera, period_s, publish
         self.infrared_every_s, self._infrared_due = infrared_every_s, 0.0
         self.marker_diameter_mm = marker_diameter_mm
         self.mount, self.robot, self.paused, self.stop = mount, robot, paused, stop
+        self.lens = lens
         self._seq = 0
         self._failing = False
         self._thread = threading.Thread(target=self._run, name="ptz-preview", daemon=True)
@@ -109,7 +97,7 @@ class PreviewLoop:
                     log.warning("%s: no preview: %s", self.camera.name, err)
                 self._failing = True
 
-    def _take_maybe_in_infrared(self) -> tuple[m.PtzPreview, float, bool]:
+    def _take_maybe_in_infrared(self) -> tuple[m.PtzPreview, Intrinsics, bool]:
         now = time.monotonic()
         if self.infrared_every_s <= 0 or now < self._infrared_due:
             return *self.take(), False
@@ -121,7 +109,7 @@ class PreviewLoop:
             if not self.paused():  # calibration mode keeps the filter off (it says so again)
                 self.camera.set_ir_cut_filter("auto")
 
-    def take(self) -> tuple[m.PtzPreview, float]:
+    def take(self) -> tuple[m.PtzPreview, Intrinsics]:
         captured = time.time()
         jpeg = self.camera.snapshot_jpeg()
         position = self.camera.position()
@@ -130,13 +118,13 @@ class PreviewLoop:
         found = to_message(detect(image, max_markers=8), self.camera.name, captured, width,
                            height)
         self._seq += 1
-        focal_mm = focal_mm_for_zoom(position.zoom)
+        intr = self.lens().intrinsics(position.zoom, width, height)
         robot_px, radius_px = robot_view(self.mount(), self.robot(), position.pan_deg,
-                                         position.tilt_deg, focal_mm, width, height, captured,
+                                         position.tilt_deg, intr, captured,
                                          self.marker_diameter_mm)
         return m.PtzPreview(
             measured_s=captured, camera=self.camera.name, seq=self._seq, width_px=width,
             height_px=height, jpeg=jpeg, pan_deg=min(max(position.pan_deg, -180.0), 180.0),
             tilt_deg=min(max(position.tilt_deg, -90.0), 90.0), markers=found.markers,
             robot_px=robot_px, robot_radius_px=radius_px
-        ), focal_mm
+        ), intr

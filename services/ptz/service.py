@@ -22,7 +22,7 @@ import time
 
 from common import codec, keys
 from common import messages as m
-from common.camera import PtzLimits, focal_mm_for_zoom
+from common.camera import Intrinsics, PtzLimits
 from common.markers import warm_up
 from common.node import Node, run_every
 from services.ptz.calibration import CalibrationHold
@@ -73,6 +73,7 @@ def run(node: Node[PtzSettings], camera: PtzCamera | None = None) -> None:
             make_camera(settings), 1 / settings.preview_hz,  # its own client: never in the way
             loop.on_preview,
             mount=lambda: loop.control.pose, robot=lambda: loop.control.robot,
+            lens=lambda: loop.control.lens,
             paused=lambda: loop.calibration.active(time.time()), stop=node.stop,
             infrared_every_s=settings.pointing_infrared_s,
             marker_diameter_mm=settings.robot_marker_mm)
@@ -116,11 +117,11 @@ class _Loop:
         self.presets_due = 0.0
         self.asking = PoseAsking()
 
-    def on_preview(self, preview: m.PtzPreview, focal_mm: float, infrared: bool) -> None:
+    def on_preview(self, preview: m.PtzPreview, intr: Intrinsics, infrared: bool) -> None:
         """Publish it, and judge from it how well the camera points (services/ptz/pointing)."""
         self.node.bus.publish(keys.PTZ_PREVIEW, preview, camera=self.settings.instance)
         with self.lock:
-            self.control.pointing.observe(preview, focal_mm, infrared)
+            self.control.pointing.observe(preview, intr, infrared)
 
     def ask_pose(self) -> None:
         """Ask the calibration service for the camera's pose when it is due; take its answer
@@ -258,7 +259,7 @@ class _Loop:
         self.node.bus.publish(keys.PTZ_STATE, m.PtzState(
             measured_s=now, camera=self.settings.instance, status=status,
             pan_deg=min(max(pan, -180.0), 180.0), tilt_deg=min(max(tilt, -90.0), 90.0),
-            zoom=min(max(zoom, 1), 19999), focal_mm=focal_mm_for_zoom(zoom),
+            zoom=min(max(zoom, 1), 19999), focal_mm=self.control.lens.focal_mm(zoom),
             aim_error_deg=error, pointing_error_deg=pointing_error, pointing_problem=problem,
             held_by=held_by, presets=[p[:64] for p in self.presets]),
             camera=self.settings.instance)

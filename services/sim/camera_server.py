@@ -25,7 +25,6 @@ from urllib.parse import parse_qsl, urlsplit
 import cv2
 import numpy as np
 
-from common.camera import Intrinsics
 from common.trace import TRACE_HEADER
 from services.sim import vapix
 from services.sim.arrival import StampedReader
@@ -86,7 +85,7 @@ class SimCamera:
         plain field), the markers — bright with the IR cut filter off — and the reflections."""
         now = self.clock()
         pose = self.head.pose(now)
-        intr = Intrinsics(self.head.focal_mm(now), width_px=width, height_px=height)
+        intr = self.head.intrinsics(now, width, height)
         ir_visible = self.head.ir_cut_filter == "off"
         background: float | np.ndarray
         if self.ground is not None:

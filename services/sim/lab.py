@@ -119,7 +119,7 @@ class Lab:
             ptz_glints=_glints(crater, rng, 8, 2500.0),
             ground_glints=_glints(crater, rng, int(round(t.reflections_per_m2 * area_m2)),
                                   max(c.x_max_mm, c.y_max_mm, -c.x_min_mm, -c.y_min_mm)),
-            heads={cam.name: PtzHead(Pose.of(cam), latency_s=cam.latency_s,
+            heads={cam.name: PtzHead(Pose.of(cam), lens=cam.lens(), latency_s=cam.latency_s,
                                      pan_speed_deg_s=cam.pan_speed_deg_s,
                                      tilt_speed_deg_s=cam.tilt_speed_deg_s)
                    for cam in settings.cameras},

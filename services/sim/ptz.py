@@ -11,7 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from common.camera import Pose, PtzLimits, focal_mm_for_zoom, head_pose
+from common.camera import Intrinsics, Pose, PtzLimits, head_pose
+from common.ptz_lens import PtzLens
 
 
 @dataclass
@@ -36,6 +37,7 @@ class PtzHead:
     """The moving part of a simulated PTZ camera; ``mount`` is its pose at pan = tilt = 0."""
 
     mount: Pose
+    lens: PtzLens = PtzLens()  # its truth: zoom curve and distortion
     limits: PtzLimits = PtzLimits()
     pan_speed_deg_s: float = 100.0
     tilt_speed_deg_s: float = 90.0
@@ -83,7 +85,11 @@ class PtzHead:
         return head_pose(self.mount, pan, tilt)
 
     def focal_mm(self, now: float) -> float:
-        return focal_mm_for_zoom(self.state(now)[2])
+        return self.lens.focal_mm(self.state(now)[2])
+
+    def intrinsics(self, now: float, width_px: int, height_px: int) -> Intrinsics:
+        """Its lens at the zoom of ``now``, for a picture of this size."""
+        return self.lens.intrinsics(self.state(now)[2], width_px, height_px)
 
     def advance_to(self, now: float) -> None:
         if now < self._time:

@@ -13,12 +13,14 @@ resolution and scaled up; a camera that has not moved since the last picture reu
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import cv2
 import numpy as np
 
 from common.camera import Intrinsics, Pose, project, rot_z
 from common.heightmap import HeightMap
+from common.lens import undistort
 
 LIGHT = np.array([0.35, -0.45, 0.82]) / np.linalg.norm([0.35, -0.45, 0.82])
 HALL = 0.12  # brightness of what is not the crater (walls, the hall above)
@@ -79,18 +81,15 @@ class GroundView:
         return self._last
 
     def _render(self, pose: Pose, intr: Intrinsics) -> np.ndarray:
-        w, h = (intr.width_px + 1) // 2, (intr.height_px + 1) // 2
-        u = (np.arange(w, dtype=np.float32) + 0.5) * intr.width_px / w - 0.5
-        v = (np.arange(h, dtype=np.float32) + 0.5) * intr.height_px / h - 0.5
-        uu, vv = np.meshgrid(u, v)
-        rays = np.dstack([np.ones_like(uu), (uu - intr.cy_px) / intr.fy_px,
-                          (vv - intr.cz_px) / intr.fz_px]) @ pose.rotation.T.astype(np.float32)
+        across, down_the_image = _directions(intr)
+        rays = np.dstack([np.ones_like(across), across, down_the_image]) \
+            @ pose.rotation.T.astype(np.float32)
         origin = pose.position.astype(np.float32)
         down = rays[..., 2] < -1e-3
         dz = np.where(down, rays[..., 2], -1.0)
         c = self.crater
         floor = float(np.min(c.heights_mm))
-        height = np.full(uu.shape, floor, np.float32)
+        height = np.full(across.shape, floor, np.float32)
         for _ in range(STEPS):
             s = (height - origin[2]) / dz
             col = (origin[0] + s * rays[..., 0] - c.origin_x_mm) / c.resolution_mm
@@ -102,6 +101,21 @@ class GroundView:
         bright[~down] = HALL
         return cv2.resize(bright, (intr.width_px, intr.height_px),
                           interpolation=cv2.INTER_LINEAR)
+
+
+@lru_cache(maxsize=32)
+def _directions(intr: Intrinsics) -> tuple[np.ndarray, np.ndarray]:
+    """The normalised direction (y/x, z/x in the camera frame) each pixel of a half-size
+    picture looks along: through the lens's distortion, undone (zooming changes it)."""
+    w, h = (intr.width_px + 1) // 2, (intr.height_px + 1) // 2
+    u = (np.arange(w, dtype=np.float64) + 0.5) * intr.width_px / w - 0.5
+    v = (np.arange(h, dtype=np.float64) + 0.5) * intr.height_px / h - 0.5
+    uu, vv = np.meshgrid(u, v)
+    straight = undistort(np.column_stack([((uu - intr.cy_px) / intr.fy_px).ravel(),
+                                          ((vv - intr.cz_px) / intr.fz_px).ravel()]),
+                         intr.distortion)
+    return (straight[:, 0].reshape(uu.shape).astype(np.float32),
+            straight[:, 1].reshape(uu.shape).astype(np.float32))
 
 
 def chassis_outline(marker_mm: np.ndarray, heading_rad: float, ground_mm: float, pose: Pose,

@@ -14,6 +14,8 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from common.crane_frame import CraneFrame
 from common.crane_registers import RegisterMap
 from common.lab_paths import DEFAULT_HEIGHT_MAP
+from common.lens import NO_DISTORTION
+from common.ptz_lens import STRAIGHT_LINE, PtzLens, ZoomCurve
 from common.settings import ServiceSettings, above_its_minimum
 from common.tracking_camera import TrackingCameraModel
 from services.sim.crane import CraneParams
@@ -61,6 +63,30 @@ class PtzCameraSettings(_Section):
     tilt_speed_deg_s: float = Field(90.0, gt=0)
     mjpeg_fps: float = Field(2.0, gt=0, le=30, description="the MJPEG stream's frame rate "
                              "(mjpg/video.cgi) when the request names none")
+    zoom_focal_mm: list[tuple[float, float]] = Field(
+        default_factory=STRAIGHT_LINE.points, min_length=2,
+        max_length=64, description="the lens's truth: [zoom step, focal length mm] points, "
+        "interpolated monotonically (PCHIP); default the AXIS 215's 3.8–46 mm spread evenly "
+        "over steps 1–9999")
+    distortion: tuple[float, float, float, float, float] = Field(
+        NO_DISTORTION, description="OpenCV's k1, k2, p1, p2, k3 at the shortest focal length")
+    distortion_long: tuple[float, float, float, float, float] | None = Field(
+        None, description="… at the longest focal length (linear in focal length between "
+        "them); none: the same as at the shortest")
+
+    @field_validator("zoom_focal_mm")
+    @classmethod
+    def _a_zoom_curve(cls, points: list[tuple[float, float]]) -> list[tuple[float, float]]:
+        ZoomCurve.of(points)  # raises, naming the points, when they do not make a curve
+        return points
+
+    def lens(self) -> PtzLens:
+        """The camera's true lens (only the sim knows it: calibration measures it)."""
+        curve = ZoomCurve.of(self.zoom_focal_mm)
+        if not any(self.distortion) and not any(self.distortion_long or ()):
+            return PtzLens(curve)
+        ends = (curve.focals_mm[0], curve.focals_mm[-1])
+        return PtzLens(curve, ends, (self.distortion, self.distortion_long or self.distortion))
 
 
 def _default_cameras() -> list[PtzCameraSettings]:

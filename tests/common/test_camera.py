@@ -9,11 +9,9 @@ from common.camera import (
     Intrinsics,
     Pose,
     euler_xyz_deg,
-    focal_mm_for_zoom,
     project,
     rotation_xyz,
     thin_lens_image_distance_mm,
-    zoom_for_focal_mm,
 )
 
 
@@ -62,13 +60,6 @@ def test_points_behind_the_camera_do_not_project() -> None:
 def test_euler_angles_round_trip(angles: tuple[float, float, float]) -> None:
     r = rotation_xyz(*angles)
     np.testing.assert_allclose(rotation_xyz(*euler_xyz_deg(r)), r, atol=1e-12)
-
-
-def test_zoom_steps_map_onto_the_lens_range() -> None:
-    assert focal_mm_for_zoom(1) == 3.8 and focal_mm_for_zoom(9999) == 46.0
-    assert focal_mm_for_zoom(0) == 3.8 and focal_mm_for_zoom(20000) == 46.0
-    for zoom in (1, 2500, 5000, 9999):
-        assert zoom_for_focal_mm(focal_mm_for_zoom(zoom)) == zoom
 
 
 def test_thin_lens_equation_5() -> None:

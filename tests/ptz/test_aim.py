@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from common import messages as m
-from common.camera import Pose, focal_mm_for_zoom
+from common.camera import Pose
+from common.ptz_lens import STRAIGHT_LINE, PtzLens, ZoomCurve
 from services.ptz.aim import (
     PtzLimits,
     aim_at,
@@ -81,8 +82,17 @@ def test_zoom_keeps_the_apparent_size() -> None:
     near = zoom_for_size(2000, object_mm=500, image_fraction=0.5)
     far = zoom_for_size(6000, object_mm=500, image_fraction=0.5)
     assert far > near
-    assert focal_mm_for_zoom(far) == pytest.approx(0.5 * 2.7 * 6000 / 500, rel=1e-3)
+    assert STRAIGHT_LINE.focal_mm(far) == pytest.approx(0.5 * 2.7 * 6000 / 500, rel=1e-3)
     assert zoom_for_size(100, object_mm=500, image_fraction=0.5) == 1  # clamped to wide
+
+
+def test_zoom_for_size_follows_the_measured_curve() -> None:
+    """A lens whose focal length grows slowly, then steeply: the step for a focal length is
+    read off its own curve, not the straight line."""
+    lens = PtzLens(ZoomCurve((1, 5000, 8000, 9999), (3.8, 8.0, 18.0, 46.0)))
+    zoom = zoom_for_size(6000, object_mm=500, image_fraction=0.5, lens=lens)
+    assert lens.focal_mm(zoom) == pytest.approx(0.5 * 2.7 * 6000 / 500, rel=1e-3)
+    assert zoom != zoom_for_size(6000, object_mm=500, image_fraction=0.5)
 
 
 def test_prediction_is_bounded() -> None:

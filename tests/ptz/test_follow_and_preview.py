@@ -10,11 +10,12 @@ from common.camera import Intrinsics, Pose, PtzLimits, head_pose, project
 from common.volume import Volume
 from services.ptz.aim import aim_at, predict
 from services.ptz.follow import Follower
-from services.ptz.preview import robot_pixel, robot_radius_px
+from services.ptz.preview import robot_view
 
 MOUNT = Pose(3550.0, 1090.0, 2190.0, 180.0, 30.0, 165.0)
 ROBOT = np.array([0.0, -900.0, 80.0])
 STILL = np.zeros(3)
+WIDE = Intrinsics(3.8, width_px=704, height_px=576)
 
 
 def test_the_follower_aims_where_the_robot_will_be_after_the_cameras_latency() -> None:
@@ -55,21 +56,21 @@ def _robot(at_s: float, velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
 def test_a_preview_puts_the_robot_where_it_will_be_when_the_picture_is_taken() -> None:
     pan, tilt = aim_at(ROBOT, MOUNT)
     robot = _robot(100.0, (290.0, 0.0, 0.0))
-    found = robot_pixel(MOUNT, robot, pan, tilt, 3.8, 704, 576, at_s=100.5)
+    found = robot_view(MOUNT, robot, pan, tilt, WIDE, at_s=100.5)[0]
     expected = project((ROBOT + [145.0, 0.0, 0.0])[None, :], head_pose(MOUNT, pan, tilt),
                        Intrinsics(3.8, width_px=704, height_px=576))[0]
     assert found == pytest.approx(expected.tolist(), abs=0.06)  # rounded to 0.1 px
-    capped = robot_pixel(MOUNT, robot, pan, tilt, 3.8, 704, 576, at_s=160.0)
-    assert capped == robot_pixel(MOUNT, robot, pan, tilt, 3.8, 704, 576, at_s=101.0)
-    centre = robot_pixel(MOUNT, _robot(100.0), pan, tilt, 3.8, 704, 576, at_s=100.0)
+    capped = robot_view(MOUNT, robot, pan, tilt, WIDE, at_s=160.0)[0]
+    assert capped == robot_view(MOUNT, robot, pan, tilt, WIDE, at_s=101.0)[0]
+    centre = robot_view(MOUNT, _robot(100.0), pan, tilt, WIDE, at_s=100.0)[0]
     assert centre == pytest.approx([352.0, 288.0], abs=0.2)  # aimed at it: the image centre
 
 
 def test_no_robot_pixel_without_a_pose_a_robot_or_with_the_robot_behind_the_camera() -> None:
-    assert robot_pixel(None, _robot(1.0), 0.0, 0.0, 3.8, 704, 576, 1.0) is None
-    assert robot_pixel(MOUNT, None, 0.0, 0.0, 3.8, 704, 576, 1.0) is None
+    assert robot_view(None, _robot(1.0), 0.0, 0.0, WIDE, 1.0)[0] is None
+    assert robot_view(MOUNT, None, 0.0, 0.0, WIDE, 1.0)[0] is None
     pan, tilt = aim_at(ROBOT, MOUNT)
-    assert robot_pixel(MOUNT, _robot(1.0), pan + 180.0, tilt, 3.8, 704, 576, 1.0) is None
+    assert robot_view(MOUNT, _robot(1.0), pan + 180.0, tilt, WIDE, 1.0)[0] is None
 
 
 def test_a_preview_says_how_large_the_robot_marker_appears() -> None:
@@ -78,10 +79,9 @@ def test_a_preview_says_how_large_the_robot_marker_appears() -> None:
     pan, tilt = aim_at(ROBOT, MOUNT)
     distance = float(np.linalg.norm(ROBOT - MOUNT.position))
     fy = Intrinsics(3.8, width_px=704, height_px=576).fy_px
-    radius = robot_radius_px(MOUNT, _robot(100.0), pan, tilt, 3.8, 704, 576, 100.0, 19.0)
+    radius = robot_view(MOUNT, _robot(100.0), pan, tilt, WIDE, 100.0, 19.0)[1]
     assert radius == pytest.approx(fy * 9.5 / distance, abs=0.01)
-    twice = robot_radius_px(MOUNT, _robot(100.0), pan, tilt, 7.6, 704, 576, 100.0, 19.0)
+    twice = robot_view(MOUNT, _robot(100.0), pan, tilt, WIDE.with_focal(7.6), 100.0, 19.0)[1]
     assert twice == pytest.approx(2 * radius, abs=0.02)
-    assert robot_radius_px(None, _robot(1.0), pan, tilt, 3.8, 704, 576, 1.0, 19.0) is None
-    assert robot_radius_px(MOUNT, _robot(1.0), pan + 180.0, tilt, 3.8, 704, 576, 1.0,
-                           19.0) is None
+    assert robot_view(None, _robot(1.0), pan, tilt, WIDE, 1.0, 19.0)[1] is None
+    assert robot_view(MOUNT, _robot(1.0), pan + 180.0, tilt, WIDE, 1.0, 19.0)[1] is None

@@ -12,8 +12,7 @@ from common import messages as m
 from common.camera import Intrinsics
 from services.ptz.pointing import NOT_SEEN, PointingCheck, pointing_error_deg
 
-FOCAL_MM = 3.8
-INTR = Intrinsics(FOCAL_MM)
+INTR = Intrinsics(3.8)
 
 
 def _marker(u: float, v: float) -> m.DetectedMarker:
@@ -31,29 +30,29 @@ def test_the_error_is_the_angle_to_the_nearest_marker() -> None:
     centre = [INTR.cy_px, INTR.cz_px]
     # one degree to the side of the optical axis: fy · tan(1°) pixels
     one_degree = INTR.cy_px + INTR.fy_px * math.tan(math.radians(1.0))
-    error = pointing_error_deg(_preview(centre, (one_degree, INTR.cz_px), (10, 10)), FOCAL_MM)
+    error = pointing_error_deg(_preview(centre, (one_degree, INTR.cz_px), (10, 10)), INTR)
     assert error == pytest.approx(1.0, abs=1e-6)
 
 
 def test_nothing_to_judge_without_a_robot_pixel_or_with_the_robot_outside_the_picture() -> None:
-    assert pointing_error_deg(_preview(None, (300, 300)), FOCAL_MM) is None
-    assert pointing_error_deg(_preview([-5.0, 300.0], (300, 300)), FOCAL_MM) is None
-    assert pointing_error_deg(_preview([300.0, 600.0], (300, 300)), FOCAL_MM) is None
-    assert pointing_error_deg(_preview([300.0, 300.0]), FOCAL_MM) == NOT_SEEN
+    assert pointing_error_deg(_preview(None, (300, 300)), INTR) is None
+    assert pointing_error_deg(_preview([-5.0, 300.0], (300, 300)), INTR) is None
+    assert pointing_error_deg(_preview([300.0, 600.0], (300, 300)), INTR) is None
+    assert pointing_error_deg(_preview([300.0, 300.0]), INTR) == NOT_SEEN
 
 
 def test_a_problem_only_after_disagreeing_previews_in_a_row() -> None:
     check = PointingCheck(tolerance_deg=3.0, persist=3)
     far, near = _preview([352.0, 288.0], (600, 100)), _preview([352.0, 288.0], (353, 289))
     for preview in (far, far, near, far, far):  # one agreeing preview resets the count
-        check.observe(preview, FOCAL_MM, infrared=False)
+        check.observe(preview, INTR, infrared=False)
         assert check.problem() is None
-    check.observe(_preview(None), FOCAL_MM, infrared=True)  # nothing to judge
-    check.observe(_preview([352.0, 288.0]), FOCAL_MM, infrared=False)  # markers dim: no proof
+    check.observe(_preview(None), INTR, infrared=True)  # nothing to judge
+    check.observe(_preview([352.0, 288.0]), INTR, infrared=False)  # markers dim: no proof
     assert check.problem() is None
-    check.observe(far, FOCAL_MM, infrared=False)
+    check.observe(far, INTR, infrared=False)
     assert check.problem() is not None and "seen 2" in check.problem()
-    check.observe(_preview([352.0, 288.0]), FOCAL_MM, infrared=True)
+    check.observe(_preview([352.0, 288.0]), INTR, infrared=True)
     assert "not seen" in check.problem()
     check.forget()
     assert check.problem() is None and check.error_deg is None
@@ -65,12 +64,12 @@ def test_while_infrared_previews_are_taken_daylight_ones_are_not_judged() -> Non
     check = PointingCheck(tolerance_deg=3.0, persist=2, daylight=False)
     reflection = _preview([352.0, 288.0], (600, 100))
     for _ in range(3):
-        check.observe(reflection, FOCAL_MM, infrared=False)
+        check.observe(reflection, INTR, infrared=False)
     assert check.problem() is None and check.error_deg is None
-    check.observe(_preview([352.0, 288.0], (353, 289)), FOCAL_MM, infrared=True)
+    check.observe(_preview([352.0, 288.0], (353, 289)), INTR, infrared=True)
     assert check.error_deg == pytest.approx(0.1, abs=0.1) and check.problem() is None
     for _ in range(2):
-        check.observe(reflection, FOCAL_MM, infrared=True)  # infrared: the robot's marker
+        check.observe(reflection, INTR, infrared=True)  # infrared: the robot's marker
     assert check.problem() is not None
 
 
@@ -80,12 +79,12 @@ def test_a_marker_too_small_to_be_found_is_not_judged() -> None:
     nothing about the pose (in the demo they made 'wrong pose?' problems every lap)."""
     far = _preview([300.0, 300.0]).model_copy(update={"robot_radius_px": 1.3})
     near = _preview([300.0, 300.0]).model_copy(update={"robot_radius_px": 2.0})
-    assert pointing_error_deg(far, FOCAL_MM, min_radius_px=1.4) is None
-    assert pointing_error_deg(near, FOCAL_MM, min_radius_px=1.4) == NOT_SEEN
+    assert pointing_error_deg(far, INTR, min_radius_px=1.4) is None
+    assert pointing_error_deg(near, INTR, min_radius_px=1.4) == NOT_SEEN
     check = PointingCheck(tolerance_deg=3.0, persist=2, min_radius_px=1.4)
     for _ in range(5):
-        check.observe(far, FOCAL_MM, infrared=True)
+        check.observe(far, INTR, infrared=True)
     assert check.problem() is None and check.error_deg is None
     for _ in range(2):
-        check.observe(near, FOCAL_MM, infrared=True)
+        check.observe(near, INTR, infrared=True)
     assert check.problem() is not None and "not seen" in check.problem()

@@ -9,12 +9,16 @@ import cv2
 import httpx
 import numpy as np
 import pytest
+from pydantic import ValidationError
 
-from common.camera import Intrinsics, project
+from common.camera import Intrinsics, Pose, project
 from common.markers import detect
+from common.ptz_lens import STRAIGHT_LINE
 from services.sim.camera_server import CameraServer, SimCamera
 from services.sim.lab import Lab
+from services.sim.ptz import PtzHead
 from services.sim.scene import DAY, GroundView
+from services.sim.settings import PtzCameraSettings
 
 PTZ = "/axis-cgi/com/ptz.cgi"
 IMAGE = "/axis-cgi/jpg/image.cgi"
@@ -227,3 +231,55 @@ def test_relative_moves_add_up_and_home_returns(servers: dict) -> None:
     client.get(PTZ, params={"move": "home"})
     time.sleep(0.5)
     assert _position(client)["pan"] == 0.0 and _position(client)["tilt"] == 0.0
+
+
+def _grid_in_view(head_pose_: Pose, intr: Intrinsics, depth_mm: float) -> np.ndarray:
+    """World points that a pinhole camera would see on a 7×5 grid reaching the picture's
+    corners, at one depth."""
+    u, v = np.meshgrid(np.linspace(40, intr.width_px - 40, 7),
+                       np.linspace(40, intr.height_px - 40, 5))
+    rays = np.column_stack([np.ones(u.size), (u.ravel() - intr.cy_px) / intr.fy_px,
+                            (v.ravel() - intr.cz_px) / intr.fz_px])
+    return head_pose_.to_world(rays * depth_mm)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_sim_camera_draws_through_its_own_lens(seed: int) -> None:
+    """A lens drawn at random (zoom curve and barrel distortion, as `[[sim.cameras]]` sets
+    them): markers appear where OpenCV's model of that lens puts them, up to the corners —
+    several pixels from where the straight-line pinhole would."""
+    rng = np.random.default_rng(seed)
+    table = [(1.0, 3.8), (3000.0, rng.uniform(4.6, 5.4)), (7000.0, rng.uniform(9.0, 12.0)),
+             (9999.0, rng.uniform(40.0, 48.0))]
+    wide = (rng.uniform(-0.35, -0.2), rng.uniform(0.05, 0.15), rng.uniform(-2e-3, 2e-3),
+            rng.uniform(-2e-3, 2e-3), 0.0)
+    settings = PtzCameraSettings(name="ptz1", port=0, x_mm=0, y_mm=0, z_mm=2000, rx_deg=180,
+                                 ry_deg=30, rz_deg=0, zoom_focal_mm=table, distortion=wide)
+    head = PtzHead(Pose.of(settings), lens=settings.lens())
+    head.ir_cut_filter = "off"
+    zoom = int(rng.integers(1, 800))
+    head.absolute(0.0, 0.0, 0.0, zoom)
+    truth = head.intrinsics(10.0, 704, 576)
+    assert truth.focal_mm == pytest.approx(settings.lens().focal_mm(zoom))
+    points = _grid_in_view(head.pose(10.0), truth.pinhole(), 3000.0)
+    camera = SimCamera("ptz1", head, lambda: points, [], lambda: 10.0,
+                       np.random.default_rng(seed))
+    spots = _bright_spots(camera.snapshot(704, 576))
+    expected = project(points, head.pose(10.0), truth)
+    straight = project(points, head.pose(10.0), Intrinsics(STRAIGHT_LINE.focal_mm(zoom)))
+    inside = [(u, v) for u, v in expected if 4 < u < 700 and 4 < v < 572]
+    assert len(inside) >= 20
+    worst_pinhole = 0.0
+    for (u, v), (us, vs) in zip(expected, straight, strict=True):
+        if not (4 < u < 700 and 4 < v < 572):
+            continue
+        nearest = min(spots, key=lambda s: np.hypot(s[0] - u, s[1] - v))
+        assert np.hypot(nearest[0] - u, nearest[1] - v) < 0.5
+        worst_pinhole = max(worst_pinhole, float(np.hypot(us - u, vs - v)))
+    assert worst_pinhole > 5.0
+
+
+def test_a_lens_table_that_is_no_curve_stops_the_lab_file_naming_the_field() -> None:
+    with pytest.raises(ValidationError, match="zoom_focal_mm"):
+        PtzCameraSettings(name="ptz1", port=0, x_mm=0, y_mm=0, z_mm=0, rx_deg=0, ry_deg=0,
+                          rz_deg=0, zoom_focal_mm=[(1, 3.8), (5000, 3.0), (9999, 46.0)])
