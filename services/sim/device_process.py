@@ -50,12 +50,13 @@ class DeviceProcess:
         context = mp.get_context("spawn")  # no copy of the sim's threads and sockets
         self._robot_start = context.Value("d", math.nan, lock=False)
         self._crane = context.Array("d", [math.nan] * 5)  # t, x, y, vx, vy (world)
+        self._wand = context.Array("d", [math.nan] * 7)  # t, x, y, z, vx, vy, vz (world)
         self._stop = context.Event()
         ours, theirs = context.Pipe()
         self._process = context.Process(
             target=_serve, name=f"sim-{kind}", daemon=True,
             args=(kind, settings.model_dump_json(), clock.t0_monotonic, self._robot_start,
-                  self._crane, self._stop, theirs, os.getpid()))
+                  self._crane, self._wand, self._stop, theirs, os.getpid()))
         self._process.start()
         if not ours.poll(START_TIMEOUT_S):
             self.stop()
@@ -73,6 +74,13 @@ class DeviceProcess:
         with self._crane.get_lock():
             self._crane[:] = [t, *map(float, position[:2]), *map(float, velocity[:2])]
 
+    def feed_wand(self, t: float, position: np.ndarray | None, velocity: np.ndarray) -> None:
+        """Where the calibration wand is (world, mm; None: gone) and how fast it goes at sim
+        time ``t``: its carrier watches the cameras, which are in the sim's process."""
+        at = [math.nan] * 3 if position is None else [float(v) for v in position]
+        with self._wand.get_lock():
+            self._wand[:] = [t, *at, *map(float, velocity)]
+
     def stop(self) -> None:
         self._stop.set()
         self._process.join(5)
@@ -82,7 +90,8 @@ class DeviceProcess:
 
 
 def _serve(kind: str, settings_json: str, t0_monotonic: float, robot_start: Synchronized,
-           crane: SynchronizedArray, stop: mp.synchronize.Event, conn: Connection,
+           crane: SynchronizedArray, wand: SynchronizedArray, stop: mp.synchronize.Event,
+           conn: Connection,
            parent_pid: int) -> None:
     settings = SimSettings.model_validate_json(settings_json)
     lab = Lab.build(settings)
@@ -101,7 +110,15 @@ def _serve(kind: str, settings_json: str, t0_monotonic: float, robot_start: Sync
         if lab.robot_start_s is None and not math.isnan(robot_start.value):
             lab.start_robot(robot_start.value)
 
+    def wand_at(t: float) -> np.ndarray | None:
+        with wand.get_lock():
+            t0, *fed = wand[:]
+        if math.isnan(t0) or math.isnan(fed[0]):
+            return None  # not fed yet, or gone
+        return np.array(fed[:3]) + np.array(fed[3:]) * (t - t0)
+
     lab.crane_feed = crane_at
+    lab.wand_feed = wand_at
 
     def running() -> bool:
         return not stop.is_set() and os.getppid() == parent_pid

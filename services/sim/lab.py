@@ -36,14 +36,16 @@ from services.sim.render import (
     NoiseBank,
     draw,
 )
-from services.sim.robots import Trajectory, calibration, make_trajectory, railway_keep_clear
+from services.sim.robots import Trajectory, make_trajectory, railway_keep_clear, wand_point
 from services.sim.settings import SimSettings
+from services.sim.wand import View, WandCarrier
 from services.sim.world import CraterMap, CraterShape, generate_crater
 
 log = logging.getLogger(__name__)
 
 LOOP_PAUSE_S = 5.0
 WAND_LABEL = "wand"
+PICTURE_PX = (704, 576)  # the PTZ cameras' full picture (VAPIX 704x576), where the wand is aimed
 """The calibration marker on a pole: its own labelled marker, moving while the robot waits."""
 OCCLUSION_WINDOW_S = 2.0
 
@@ -72,6 +74,16 @@ def load_or_make_crater(settings: SimSettings) -> CraterMap:
     return crater
 
 
+def calibration_views(heads: dict[str, PtzHead], t: float) -> list[View]:
+    """The cameras a person carrying the wand waves it for at ``t``: those in calibration mode
+    (IR-cut filter off, standing still), each seen through its own lens at its zoom."""
+    views = []
+    for head in heads.values():
+        if head.ir_cut_filter == "off" and not head.state(t)[3]:
+            views.append((head.pose(t), head.intrinsics(t, *PICTURE_PX)))
+    return views
+
+
 @dataclass
 class Lab:
     settings: SimSettings
@@ -86,11 +98,14 @@ class Lab:
     crane: CraneModel
     crane_lock: threading.Lock
     tracking: TrackingCameraModel
-    wand: Trajectory
+    wand: WandCarrier
     noise: NoiseBank
     robot_start_s: float | None = 0.0
     """Sim time the robot's scenario starts; None: the robot waits at its start while the
     calibration wand is carried through the cameras' view."""
+    wand_feed: Callable[[float], np.ndarray | None] | None = None
+    """Where the wand is at a sim time, for a lab whose wand is carried elsewhere (the QTM
+    process's: the carrier watches the cameras, which live in the sim's own process)."""
     crane_feed: Callable[[float], np.ndarray] | None = None
     """Where the crane's reported point is in the world at a sim time, for a lab whose crane
     model runs elsewhere (the QTM process's); None: this lab's own crane."""
@@ -102,7 +117,15 @@ class Lab:
         trajectory = make_trajectory(settings.scenario, crater, rng,
                                      railway=settings.locomotive.railway(),
                                      walk=settings.walker.walk())
-        wand = calibration(crater, np.random.default_rng((settings.seed, 11)),
+        heads = {cam.name: PtzHead(Pose.of(cam), lens=cam.lens(), latency_s=cam.latency_s,
+                                   pan_speed_deg_s=cam.pan_speed_deg_s,
+                                   tilt_speed_deg_s=cam.tilt_speed_deg_s)
+                 for cam in settings.cameras}
+        wand_rng = np.random.default_rng((settings.seed, 11))
+        wand = WandCarrier(wand_rng, lambda r: wand_point(crater, r),
+                           lambda t: calibration_views(heads, t),
+                           lambda x, y: float(crater.height_at(x, y)),
+                           start_mm=wand_point(crater, wand_rng),
                            speed_mm_s=settings.wand_speed_mm_s, dwell_s=settings.wand_dwell_s)
         waiting = settings.scenario == "calibration" or bool(settings.calibrate_first)
         c = settings.crane
@@ -119,10 +142,7 @@ class Lab:
             ptz_glints=_glints(crater, rng, 8, 2500.0),
             ground_glints=_glints(crater, rng, int(round(t.reflections_per_m2 * area_m2)),
                                   max(c.x_max_mm, c.y_max_mm, -c.x_min_mm, -c.y_min_mm)),
-            heads={cam.name: PtzHead(Pose.of(cam), lens=cam.lens(), latency_s=cam.latency_s,
-                                     pan_speed_deg_s=cam.pan_speed_deg_s,
-                                     tilt_speed_deg_s=cam.tilt_speed_deg_s)
-                   for cam in settings.cameras},
+            heads=heads,
             crane=crane, crane_lock=threading.Lock(),
             tracking=t.lens(),
             wand=wand, noise=NoiseBank(t.noise, t.width_px, t.height_px,
@@ -166,10 +186,12 @@ class Lab:
                 float(self.crater.height_at(marker[0], marker[1])))
 
     def wand_position(self, t: float) -> np.ndarray | None:
-        """The calibration wand's marker while the robot waits (looping), else None."""
+        """The calibration wand's marker while the robot waits, else None."""
         if self.robot_start_s is not None and t >= self.robot_start_s:
             return None
-        return self.wand.position(t % self.wand.duration_s)
+        if self.wand_feed is not None:
+            return self.wand_feed(t)
+        return self.wand.position(t)
 
     def bright_points(self, t: float) -> np.ndarray:
         """Every IR marker a PTZ camera can see at ``t``: robot, wand and static ones."""

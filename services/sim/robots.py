@@ -196,15 +196,21 @@ def _walk_path(world: CraterMap, rng: np.random.Generator, walk: Walk, samples: 
 # --- calibration: a marker carried through the cameras' view -----------------------------------
 
 
+def wand_point(world: CraterMap, rng: np.random.Generator, *, region_mm: float = 1600.0,
+               height_mm: tuple[float, float] = (200.0, 1400.0)) -> np.ndarray:
+    """A point over the crater floor where the calibration wand may be held."""
+    x, y = rng.uniform(-region_mm, region_mm, size=2)
+    return np.array([x, y, float(world.height_at(x, y)) + rng.uniform(*height_mm)])
+
+
 def calibration(world: CraterMap, rng: np.random.Generator, *, points: int = 150,
                 region_mm: float = 1600.0, height_mm: tuple[float, float] = (200.0, 1400.0),
                 speed_mm_s: float = 400.0, dwell_s: float = 1.5) -> Trajectory:
     """A marker on a pole, carried from point to point over the crater floor and held still
     at each for ``dwell_s`` (so that snapshots see it sharp): passpoint collection (§2.2)."""
     samples_t, samples = [0.0], []
-    xy = rng.uniform(-region_mm, region_mm, size=(points, 2))
-    z = world.height_at(xy[:, 0], xy[:, 1]) + rng.uniform(*height_mm, size=points)
-    targets = np.column_stack([xy, z])
+    targets = np.array([wand_point(world, rng, region_mm=region_mm, height_mm=height_mm)
+                        for _ in range(points)])
     samples.append(targets[0])
     t = 0.0
     for a, b in zip(targets[:-1], targets[1:], strict=True):

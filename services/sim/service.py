@@ -229,13 +229,17 @@ def _frame_publisher(node: Node, lab: Lab, settings: SimSettings, clock: Clock
 
 def _crane_feeder(lab: Lab, processes: list[DeviceProcess], clock: Clock
                   ) -> Callable[[], None]:
-    """The crane's position to the devices in processes of their own: the QTM server's
-    marker on the carriage, the observation camera looking down."""
+    """The crane's and the wand's positions to the devices in processes of their own: the
+    QTM server's markers on the carriage and the wand, the observation camera looking
+    down."""
     def feed() -> None:
         t = clock()
         position, velocity = lab.crane_state(t)
+        wand = lab.wand_position(t)
+        wand_velocity = lab.wand.velocity(t) if wand is not None else np.zeros(3)
         for process in processes:
             process.feed_crane(t, position, velocity)
+            process.feed_wand(t, wand, wand_velocity)
 
     return feed
 
