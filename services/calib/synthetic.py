@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from common.camera import Intrinsics, Pose, project
+from common.camera import Intrinsics, Pose, project, undistort_pixels
 from common.passpoints import Passpoints, Track
+from common.ptz_lens import PtzLens
+from services.calib.zoom_fit import AtZoom
 
 PAPER_POSE = Pose(3413.0, 1093.0, 2163.0, 197.0, 27.0, 159.0)
 """Near the paper's optimum for its camera (Table 2)."""
@@ -63,3 +65,20 @@ def moving_marker(pose: Pose, rng: np.random.Generator, *, count: int = 100,
     world = np.column_stack([np.interp(image_t, key_t, waypoints[:, i]) for i in range(3)])
     pixels = project(world, pose, intr) + rng.normal(0.0, noise_px, (count, 2))
     return Passpoints(world, pixels, image_t + mocap_t0 - offset_s), track
+
+
+def zoom_passpoints(pose: Pose, lens: PtzLens, zooms: list[int], rng: np.random.Generator,
+                    count: int = 40, noise_px: float = 0.3,
+                    depth_mm: tuple[float, float] = (2000.0, 7000.0)) -> list[AtZoom]:
+    """``count`` passpoints at each zoom step, seen through ``lens`` (its focal length at the
+    step and its distortion) anywhere in the picture, corners included."""
+    sets = []
+    for zoom in zooms:
+        intr = lens.intrinsics(zoom)
+        seen = rng.uniform([1.0, 1.0], [intr.width_px - 1.0, intr.height_px - 1.0], (count, 2))
+        straight = undistort_pixels(seen, intr)
+        d = rng.uniform(*depth_mm, count)
+        world = pose.to_world(np.column_stack([d, (straight[:, 0] - intr.cy_px) / intr.fy_px * d,
+                                               (straight[:, 1] - intr.cz_px) / intr.fz_px * d]))
+        sets.append(AtZoom(zoom, world, seen + rng.normal(0.0, noise_px, (count, 2))))
+    return sets
