@@ -236,6 +236,18 @@ class CollectRequest(Message):
     timeout_s: float = Field(600.0, gt=0, description="give up after this long")
     review: bool = Field(False, description="hold the solved pose (state review) until an "
                          "operator accepts or discards it; else it is taken at once")
+    zooms: list[int] = Field(default_factory=list, max_length=16, description="zoom steps to "
+                             "collect at, ``count`` passpoints each, for one fit of the pose "
+                             "and the lens across the zoom range; empty: one zoom (the hold's)")
+
+    @model_validator(mode="after")
+    def _zooms_distinct(self) -> CollectRequest:
+        if len(set(self.zooms)) != len(self.zooms) or any(not 1 <= z <= 19999
+                                                          for z in self.zooms):
+            raise ValueError(f"zooms must be distinct steps 1–19999, not {self.zooms}")
+        if len(self.zooms) == 1:
+            raise ValueError("one zoom is no zoom curve: name two or more, or none")
+        return self
 
 
 CollectState = Literal["collecting", "solving", "review", "done", "failed", "cancelled",
@@ -255,6 +267,10 @@ class CollectProgress(Message):
     message: str = Field("", max_length=500)
     mean_error_px: float | None = Field(None, ge=0, description="of the solved pose (review, "
                                         "done)")
+    zoom: int | None = Field(None, ge=1, le=19999, description="the zoom step being collected "
+                             "at, in a collection at several")
+    zooms_done: int = Field(0, ge=0, description="zoom steps with all their passpoints")
+    zooms: int = Field(0, ge=0, description="zoom steps to collect at (0: one, the hold's)")
 
 
 class PtzPreview(Message):

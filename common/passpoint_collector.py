@@ -1,6 +1,10 @@
 """Passpoint collection (paper §2.1–2.2), pure: mocap frames and a camera's detections in,
 passpoints out.
 
+Passpoints are spread over the picture: one closer than ``min_spacing_px`` to any taken
+before is skipped ("seen there"), so that a wand carried back and forth through the middle
+does not fill the count there (the lens's distortion is measured at the edges).
+
 The calibration marker is followed in the mocap stream (by label, or as the unlabelled marker
 that moves) and kept as a track. A snapshot's detections become a passpoint when exactly one
 detected spot can be the marker: spots that stay put while the marker moves (static markers,
@@ -32,6 +36,7 @@ class Collector:
     target: int
     marker_label: str = "wand"
     min_spacing_mm: float = 50.0
+    min_spacing_px: float = 0.0
     picker: RobotPicker = field(init=False)
     track_t: list[float] = field(default_factory=list)
     track_xyz: list[np.ndarray] = field(default_factory=list)
@@ -95,6 +100,9 @@ class Collector:
             return "too many"
         if self.world and np.linalg.norm(xyz - self.world[-1]) < self.min_spacing_mm:
             return "not moved"
+        if self.pixels and self.min_spacing_px > 0 and np.min(np.hypot(
+                *(np.array(self.pixels) - moving[0]).T)) < self.min_spacing_px:
+            return "seen there"
         self.times.append(msg.measured_s)
         self.world.append(xyz)
         self.pixels.append(moving[0])

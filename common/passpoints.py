@@ -1,7 +1,8 @@
 """Passpoints (a marker's world position and its pixel, paper §2.1) and mocap tracks, as CSV.
 
 PASSPOINTS.csv: header ``X,Y,Z,u,v`` (mm, px), optionally ``t`` (the image's time, s, camera
-clock). TRACK.csv: header ``t,X,Y,Z`` (s on the mocap clock, mm). Every problem is reported
+clock) and ``zoom`` (the VAPIX zoom step the image was taken at: a multi-zoom collection).
+TRACK.csv: header ``t,X,Y,Z`` (s on the mocap clock, mm). Every problem is reported
 with the file and the row, and nothing is guessed.
 """
 
@@ -29,16 +30,36 @@ class Passpoints:
     world_mm: np.ndarray  # (N, 3)
     pixels: np.ndarray  # (N, 2) u, v
     times_s: np.ndarray | None = None  # (N,) image times on the camera clock
+    zooms: np.ndarray | None = None  # (N,) zoom steps, for passpoints taken at several
 
     def __len__(self) -> int:
         return len(self.world_mm)
 
     def subset(self, index: np.ndarray) -> Passpoints:
         times = None if self.times_s is None else self.times_s[index]
-        return Passpoints(self.world_mm[index], self.pixels[index], times)
+        zooms = None if self.zooms is None else self.zooms[index]
+        return Passpoints(self.world_mm[index], self.pixels[index], times, zooms)
 
     def with_world(self, world_mm: np.ndarray) -> Passpoints:
-        return Passpoints(np.asarray(world_mm, dtype=float), self.pixels, self.times_s)
+        return Passpoints(np.asarray(world_mm, dtype=float), self.pixels, self.times_s,
+                          self.zooms)
+
+    def by_zoom(self) -> dict[int, Passpoints]:
+        """The passpoints of each zoom step (one entry, zoom 0, without a zoom column)."""
+        if self.zooms is None:
+            return {0: self}
+        return {int(z): self.subset(np.flatnonzero(self.zooms == z))
+                for z in np.unique(self.zooms)}
+
+    @classmethod
+    def joined(cls, by_zoom: dict[int, Passpoints]) -> Passpoints:
+        """The passpoints of several zoom steps in one, each row with its zoom."""
+        parts = list(by_zoom.items())
+        times = [p.times_s for _, p in parts]
+        return cls(np.vstack([p.world_mm for _, p in parts]).reshape(-1, 3),
+                   np.vstack([p.pixels for _, p in parts]).reshape(-1, 2),
+                   None if any(t is None for t in times) else np.concatenate(times),
+                   np.concatenate([np.full(len(p), z, dtype=float) for z, p in parts]))
 
 
 @dataclass(frozen=True)
@@ -58,10 +79,15 @@ class Track:
 
 
 def read_passpoints(path: Path) -> Passpoints:
-    rows = _read_table(path, PASSPOINT_COLUMNS, optional=("t",))
-    data = rows["values"]
-    times = data[:, 5] if rows["has_optional"] else None
-    return Passpoints(data[:, 0:3], data[:, 3:5], times)
+    rows = _read_table(path, PASSPOINT_COLUMNS, optional=("t", "zoom"))
+    data, present = rows["values"], rows["optional"]
+    times = data[:, 5 + present.index("t")] if "t" in present else None
+    zooms = data[:, 5 + present.index("zoom")] if "zoom" in present else None
+    if zooms is not None and np.any((zooms < 1) | (zooms != np.round(zooms))):
+        bad = np.flatnonzero((zooms < 1) | (zooms != np.round(zooms)))
+        raise CalibrationError(f"{path}: rows {', '.join(str(i + 2) for i in bad[:10])} have "
+                               "a zoom that is not a whole step ≥ 1")
+    return Passpoints(data[:, 0:3], data[:, 3:5], times, zooms)
 
 
 def read_track(path: Path) -> Track:
@@ -82,12 +108,15 @@ def write_passpoints(path: Path, points: Passpoints) -> None:
 def format_passpoints(points: Passpoints) -> str:
     out = io.StringIO()
     writer = csv.writer(out, lineterminator="\n")
-    header = [*PASSPOINT_COLUMNS] + (["t"] if points.times_s is not None else [])
+    header = [*PASSPOINT_COLUMNS] + (["t"] if points.times_s is not None else []) + (
+        ["zoom"] if points.zooms is not None else [])
     writer.writerow(header)
     for i in range(len(points)):
         row = [*(f"{v:.3f}" for v in points.world_mm[i]), *(f"{v:.3f}" for v in points.pixels[i])]
         if points.times_s is not None:
             row.append(f"{points.times_s[i]:.6f}")
+        if points.zooms is not None:
+            row.append(f"{int(points.zooms[i])}")
         writer.writerow(row)
     return out.getvalue()
 
@@ -122,4 +151,4 @@ def _read_table(path: Path, columns: tuple[str, ...], optional: tuple[str, ...] 
     if len(bad):
         raise CalibrationError(f"{path}: rows {', '.join(str(i + 2) for i in bad[:10])} hold NaN "
                                "or infinite values")
-    return {"values": array, "has_optional": bool(present_optional)}
+    return {"values": array, "optional": present_optional}

@@ -1,5 +1,8 @@
-"""``stb calib collect --camera ptz1 [--count 100]``: collect passpoints for a camera, solve
-and publish its pose — done by the calib service; this command starts it and shows progress.
+"""``stb calib collect --camera ptz1 [--count 100] [--zooms 1,3000,6000,8000,9999]``: collect
+passpoints for a camera, solve and publish its pose — done by the calib service; this command
+starts it and shows progress. With ``--zooms``, ``--count`` passpoints at each zoom step (wave
+the wand through the view at each) and one fit of the pose and the lens: the zoom → focal
+length curve and the distortion (docs/calibration.md, "The lens across the zoom range").
 
 Ctrl-C cancels the collection. Exit status: 0 solved, 2 bad arguments, 3 no calib service or
 no router, 4 the collection failed or was cancelled.
@@ -7,6 +10,7 @@ no router, 4 the collection failed or was cancelled.
 
 from __future__ import annotations
 
+import argparse
 import queue
 import sys
 import threading
@@ -30,7 +34,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = base_parser("stb calib collect", __doc__ or "")
     parser.add_argument("--camera", required=True)
     parser.add_argument("--count", type=int, help="passpoints (default: calib.count)")
-    parser.add_argument("--timeout", type=float, help="seconds (default: calib.timeout_s)")
+    parser.add_argument("--timeout", type=float, help="seconds (default: calib.timeout_s; "
+                        "with --zooms, that many times the number of zooms)")
+    parser.add_argument("--zooms", type=_zoom_list, default=[],
+                        help="comma-separated zoom steps, two or more, e.g. 1,3000,6000,9999")
     args = parser.parse_args(argv)
     from common import messages as m
     from common.bus import Bus, BusUnreachable, open_session
@@ -42,7 +49,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         settings = load_settings(CalibSettings, args.lab, overrides_from(args))
         request = m.CollectRequest(measured_s=time.time(), camera=args.camera,
                                    count=args.count or settings.count,
-                                   timeout_s=args.timeout or settings.timeout_s)
+                                   timeout_s=args.timeout or settings.timeout_s
+                                   * max(len(args.zooms), 1), zooms=args.zooms)
     except (ConfigError, ValueError) as err:
         print(f"stb calib collect: {err}", file=sys.stderr)
         return EXIT_CONFIG
@@ -96,15 +104,34 @@ def _collect(bus: Bus, request: m.CollectRequest, stop: threading.Event) -> int:
             return 0 if progress.state == "done" else EXIT_FAILED
 
 
+def _zoom_list(text: str) -> list[int]:
+    try:
+        zooms = [int(z) for z in text.split(",") if z.strip()]
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f"not zoom steps: {text!r} (e.g. 1,3000,9999)"
+                                         ) from err
+    if len(zooms) < 2 or len(set(zooms)) != len(zooms) or not all(1 <= z <= 19999
+                                                                  for z in zooms):
+        raise argparse.ArgumentTypeError(f"two or more distinct zoom steps 1–19999, not {text!r}")
+    return sorted(zooms)
+
+
 def _line(p: m.CollectProgress) -> str:
+    if p.state == "collecting" and p.zoom is not None:
+        return (f"{p.camera}: zoom {p.zoom} ({p.zooms_done + 1} of {p.zooms}): "
+                + _bar(p))
     if p.state == "collecting":
-        width = 30
-        filled = int(width * p.passpoints / max(p.target, 1))
-        skipped = ", ".join(f"{n} {why}" for why, n in sorted(p.skipped.items())) or "none"
-        return (f"{p.camera}: [{'#' * filled}{'.' * (width - filled)}] {p.passpoints}/{p.target}"
-                f" passpoints from {p.snapshots} snapshots (skipped: {skipped})")
+        return f"{p.camera}: " + _bar(p)
     if p.state == "solving":
         return f"{p.camera}: solving from {p.passpoints} passpoints…"
     if p.state == "done":
         return f"{p.camera}: done — {p.mean_error_px:.2f} px mean error; {p.message}"
     return f"{p.camera}: {p.state} — {p.message}"
+
+
+def _bar(p: m.CollectProgress) -> str:
+    width = 30
+    filled = int(width * p.passpoints / max(p.target, 1))
+    skipped = ", ".join(f"{n} {why}" for why, n in sorted(p.skipped.items())) or "none"
+    return (f"[{'#' * filled}{'.' * (width - filled)}] {p.passpoints}/{p.target} passpoints "
+            f"from {p.snapshots} snapshots (skipped: {skipped})")

@@ -11,9 +11,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from common.camera import Intrinsics, project  # noqa: E402
+from common.camera import Intrinsics, project, project_camera  # noqa: E402
 from common.passpoints import Passpoints  # noqa: E402
+from common.ptz_lens import PtzLens  # noqa: E402
 from services.calib.solve import Solution  # noqa: E402
+from services.calib.zoom_fit import ZoomFit  # noqa: E402
 
 
 def write_plots(solution: Solution, points: Passpoints, out_dir: Path) -> list[Path]:
@@ -68,5 +70,59 @@ def _residual_plot(solution: Solution, points: Passpoints, path: Path) -> Path:
     bars.set_title(f"mean over inliers {solution.mean_error_px:.2f} px, "
                    f"{len(solution.inliers)}/{len(points)} kept")
     fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def write_lens_plot(fit: ZoomFit, path: Path) -> Path:
+    """The lens as measured: the zoom → focal curve through the fitted points, how the
+    distortion at the widest zoom bends a grid of straight lines, and every passpoint's
+    residual per zoom."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    lens = fit.lens()
+    fig, (curve, grid, spread) = plt.subplots(1, 3, figsize=(15.0, 4.4), layout="constrained")
+    steps = np.linspace(fit.zooms[0], fit.zooms[-1], 400)
+    curve.plot(steps, [lens.focal_mm(z) for z in steps], color="tab:blue", label="PCHIP curve")
+    line = PtzLens()
+    curve.plot(steps, [line.focal_mm(z) for z in steps], color="tab:gray", ls="--",
+               label="data sheet's straight line")
+    curve.plot(fit.zooms, fit.focals_mm, "o", color="tab:red", label="fitted at the step")
+    curve.set_xlabel("zoom step (VAPIX)")
+    curve.set_ylabel("focal length, mm")
+    curve.set_yscale("log")
+    curve.legend()
+    curve.grid(True, which="both", alpha=0.3)
+    curve.set_title("zoom → focal length")
+    intr = lens.intrinsics(fit.zooms[0])
+    for along in np.linspace(0, 1, 9):
+        for horizontal in (True, False):
+            t = np.linspace(-0.1, 1.1, 60)
+            u = (t if horizontal else np.full_like(t, along)) * intr.width_px
+            v = (np.full_like(t, along) if horizontal else t) * intr.height_px
+            rays = np.column_stack([np.ones(len(t)), (u - intr.cy_px) / intr.fy_px,
+                                    (v - intr.cz_px) / intr.fz_px])
+            bent = project_camera(rays, intr)
+            grid.plot(u, v, color="tab:gray", lw=0.6)
+            grid.plot(bent[:, 0], bent[:, 1], color="tab:blue", lw=1.0)
+    grid.set_xlim(0, intr.width_px)
+    grid.set_ylim(intr.height_px, 0)
+    grid.set_aspect("equal")
+    k1, k2, p1, p2, k3 = intr.distortion
+    grid.set_title(f"zoom {fit.zooms[0]}: straight lines (gray) as the lens shows them\n"
+                   f"k1 {k1:+.3f}, k2 {k2:+.3f}, p1 {p1:+.4f}, p2 {p2:+.4f}, k3 {k3:+.3f}",
+                   fontsize=9)
+    for i in range(len(fit.zooms)):
+        errors = fit.residuals_px[i]
+        kept = np.zeros(len(errors), bool)
+        kept[fit.inliers[i]] = True
+        spread.plot(np.full(kept.sum(), i), errors[kept], ".", color="tab:blue", alpha=0.5)
+        spread.plot(np.full((~kept).sum(), i), np.minimum(errors[~kept], 50), "x",
+                    color="tab:red")
+    spread.set_xticks(range(len(fit.zooms)), [str(z) for z in fit.zooms])
+    spread.set_xlabel("zoom step")
+    spread.set_ylabel("reprojection error, px (× rejected)")
+    spread.set_title(f"passpoints: {fit.mean_error_px():.2f} px mean over the inliers")
+    spread.grid(True, alpha=0.3)
+    fig.savefig(path, dpi=100)
     plt.close(fig)
     return path

@@ -92,7 +92,7 @@ class Calib:
             log.info("%s: a collection is already running", msg.camera)
             session.publish_progress()
             return
-        self._start(msg.camera, msg.count, msg.timeout_s, msg.review)
+        self._start(msg.camera, msg.count, msg.timeout_s, msg.review, msg.zooms)
 
     def solved(self, pose: m.CameraPose, report: dict) -> None:
         with self.lock:
@@ -121,9 +121,10 @@ class Calib:
                         f", up to {_rotation_gap_deg(msg, own):.1f}° from its own")
         self._report_status()
 
-    def _start(self, camera: str, count: int, timeout_s: float, review: bool = False) -> None:
+    def _start(self, camera: str, count: int, timeout_s: float, review: bool = False,
+               zooms: list[int] | None = None) -> None:
         session = Session(self.node, self.settings, self.store, camera, count, timeout_s,
-                          on_pose=self.solved, review=review)
+                          on_pose=self.solved, review=review, zooms=zooms or [])
         with self.lock:
             self.sessions[camera] = session
         threading.Thread(target=session.run, name=f"collect-{camera}", daemon=True).start()

@@ -1,5 +1,9 @@
 """One passpoint collection for one camera: calibration mode on, passpoints in, pose out.
 
+At several zoom steps (``zooms``), the camera is held at each in turn and ``count`` passpoints
+are taken at each; a zoom's passpoints count only from the camera's first state at that zoom
+(the zoom has arrived); one fit then gives the pose and the lens (``zoom_fit.py``).
+
 Runs in its own thread; the bus handlers hand it mocap frames, detections, snapshots and
 camera states. Detections wait until the mocap stream has passed their capture time, so that
 the marker's position is interpolated, never extrapolated.
@@ -23,7 +27,7 @@ from common.jpeg import JpegError, decode_gray
 from common.markers import Detection, annotate, marker_of
 from common.node import Node
 from common.passpoint_collector import Collector
-from common.passpoints import CalibrationError
+from common.passpoints import CalibrationError, Passpoints
 from services.calib.settings import CalibSettings
 from services.calib.store import PoseStore
 
@@ -36,6 +40,8 @@ STALL_HINTS = {  # why snapshots gave no passpoint → what to check
     "no marker": "the wand is not in the camera's view (or the IR cut filter is on)",
     "too many": "more bright spots than the wand (reflections, markers)",
     "not moved": "the wand does not move",
+    "seen there": "the wand stays where passpoints were taken: carry it to the rest of the "
+                  "picture (edges and corners)",
     "marker not in mocap": "the motion capture does not see the wand (is the tracker "
                            "streaming? is the marker label right?)",
 }
@@ -44,12 +50,22 @@ STALL_HINTS = {  # why snapshots gave no passpoint → what to check
 class Session:
     def __init__(self, node: Node, settings: CalibSettings, store: PoseStore, camera: str,
                  count: int, timeout_s: float,
-                 on_pose: Callable[[m.CameraPose, dict], None], review: bool = False) -> None:
+                 on_pose: Callable[[m.CameraPose, dict], None], review: bool = False,
+                 zooms: list[int] | None = None) -> None:
         self.node, self.settings, self.store, self.camera = node, settings, store, camera
         self.timeout_s, self.on_pose, self.review = timeout_s, on_pose, review
         self._decided = threading.Event()
         self._accepted = False
-        self.collector = Collector(count, settings.marker_label, settings.min_spacing_mm)
+        self.zooms = list(zooms or [])
+        track_t: list[float] = []  # one mocap track for every zoom's collector
+        track_xyz: list[np.ndarray] = []
+        self.collectors = [Collector(count, settings.marker_label, settings.min_spacing_mm,
+                                     settings.min_spacing_px, track_t=track_t,
+                                     track_xyz=track_xyz)
+                           for _ in self.zooms or [None]]
+        self.collector = self.collectors[0]
+        self._zoom_index = 0
+        self._zoom_since: float | None = None  # the camera's first state at the present zoom
         self.lock = threading.Lock()
         self.running = True
         self.state: m.CollectState = "collecting"
@@ -81,7 +97,16 @@ class Session:
 
     def on_state(self, msg: m.PtzState) -> None:
         if self._holding and msg.status == "calibrating" and msg.measured_s >= self._started:
+            if self.zoom is not None and msg.zoom != self.zoom:
+                return  # still zooming to the step (or not there yet)
+            if self._zoom_since is None:
+                self._zoom_since = msg.measured_s
             self._camera_state = msg
+
+    @property
+    def zoom(self) -> int | None:
+        """The zoom step being collected at (None: one zoom, the hold's)."""
+        return self.zooms[self._zoom_index] if self.zooms else None
 
     @property
     def camera_state(self) -> m.PtzState | None:
@@ -140,7 +165,7 @@ class Session:
             if now > deadline:
                 self._finish("failed", f"timed out after {self.timeout_s:g} s with "
                              f"{len(self.collector.times)} of {self.collector.target} "
-                             f"passpoints ({self._skipped_text()})")
+                             f"passpoints{self._zoom_text()} ({self._skipped_text()})")
                 return False
             if len(self.collector.times) != gained[0]:
                 gained = (len(self.collector.times), now, Counter(self.collector.skipped))
@@ -152,17 +177,36 @@ class Session:
                 renew_at = now + self.settings.lease_s / 3
             self._take_pending(now)
             if self.collector.done:
-                return True
+                if self._zoom_index + 1 >= len(self.collectors):
+                    return True
+                self._next_zoom()
+                renew_at, gained = 0.0, (0, now, Counter(self.collector.skipped))
+                held = False
             if now >= progress_at:
                 self.publish_progress()
                 progress_at = now + PROGRESS_S
             time.sleep(TICK_S)
         return False
 
+    def _next_zoom(self) -> None:
+        """The present zoom has its passpoints: on to the next step (the camera is held there
+        by the next renewal; its passpoints count once it reports that zoom)."""
+        with self.lock:
+            self._zoom_index += 1
+            self.collector = self.collectors[self._zoom_index]
+            self._camera_state, self._zoom_since = None, None
+            self._pending.clear()
+        log.info("%s: passpoints at zoom %d (%d of %d)", self.camera, self.zoom,
+                 self._zoom_index + 1, len(self.zooms))
+
     def _take_pending(self, now: float) -> None:
         with self.lock:
             while self._pending:
                 msg = self._pending[0]
+                if self.zooms and (self._zoom_since is None
+                                   or msg.measured_s < self._zoom_since):
+                    self._pending.popleft()  # taken before the camera stood at this zoom
+                    continue
                 if not self.collector.track_covers(msg.measured_s) and \
                         now - msg.measured_s < MOCAP_WAIT_S:
                     break
@@ -170,7 +214,7 @@ class Session:
                 if self.collector.done:
                     continue
                 if self.collector.on_detections(msg) is None:
-                    self._keep_image(msg, len(self.collector.times) - 1)
+                    self._keep_image(msg, sum(len(c.times) for c in self.collectors) - 1)
 
     def _keep_image(self, msg: m.MarkerDetections, index: int) -> None:
         jpeg = self._snapshots.get(msg.measured_s)
@@ -180,7 +224,7 @@ class Session:
             image = decode_gray(jpeg)
         except JpegError:  # an image that does not decode is just not kept
             return
-        u, v = self.collector.pixels[index]
+        u, v = self.collector.pixels[-1]  # the passpoint just taken; ``index`` over all zooms
         markers = tuple(marker_of(d) for d in msg.markers)
         chosen = tuple(mk for mk in markers if mk.u == u and mk.v == v)
         drawn = annotate(image, Detection(msg.status, msg.threshold, chosen, markers))
@@ -193,6 +237,9 @@ class Session:
             return
         self.state = "solving"
         self.publish_progress()
+        if self.zooms:
+            self._solve_zooms(state)
+            return
         with self.lock:
             points, track = self.collector.passpoints(), self.collector.track()
         self.store.save_inputs(self.camera, points, track)
@@ -214,19 +261,55 @@ class Session:
             passpoints=len(solution.inliers), time_offset_s=solution.time_offset_s or 0.0)
         report = solution.report() | {"pan_deg": state.pan_deg, "tilt_deg": state.tilt_deg,
                                       "zoom": state.zoom}
-        self.mean_error_px = solution.mean_error_px
         rejected = report["rejected"]
         spread = float(np.max(solution.position_std_mm))
-        summary = (f"{len(solution.inliers)} passpoints, {len(rejected)} rejected, position "
-                   f"±{spread:.1f} mm (1σ), clock offset "
-                   f"{1e3 * (solution.time_offset_s or 0.0):.1f} ms")
+        self._take(pose, report, f"{len(solution.inliers)} passpoints, {len(rejected)} rejected, "
+                   f"position ±{spread:.1f} mm (1σ), clock offset "
+                   f"{1e3 * (solution.time_offset_s or 0.0):.1f} ms; one zoom: the zoom curve "
+                   "is the data sheet's straight line")
+
+    def _solve_zooms(self, state: m.PtzState) -> None:
+        """One fit over every zoom's passpoints: the pose and the lens."""
+        with self.lock:
+            by_zoom = {z: c.passpoints() for z, c in zip(self.zooms, self.collectors,
+                                                          strict=True)}
+            track = self.collector.track()
+        self.store.save_inputs(self.camera, Passpoints.joined(by_zoom), track)
+        from services.calib.solve import Options
+        from services.calib.zoom_fit import solve_zooms  # scipy: only to solve
+
+        s = self.settings
+        options = Options(track=track, max_time_offset_s=s.max_time_offset_s,
+                          inlier_px=s.inlier_px, max_mean_error_px=s.max_mean_error_px)
+        try:
+            fit, first = solve_zooms(by_zoom, options)
+        except CalibrationError as err:
+            self._finish("failed", str(err))
+            return
+        mount = mount_pose(fit.pose, state.pan_deg, state.tilt_deg)
+        lens = [m.LensAtZoom.model_validate(at) for at in fit.at_zoom()]
+        used = sum(len(k) for k in fit.inliers)
+        pose = m.CameraPose(
+            measured_s=time.time(), camera=self.camera, **mount.fields(),
+            focal_mm=fit.focals_mm[0], mean_error_px=fit.mean_error_px(), passpoints=used,
+            time_offset_s=first.time_offset_s or 0.0, lens=lens)
+        report = fit.report() | {"pan_deg": state.pan_deg, "tilt_deg": state.tilt_deg,
+                                 "time_offset_s": round(first.time_offset_s or 0.0, 5)}
+        self._take(pose, report, f"{used} passpoints at {len(fit.zooms)} zoom steps, focal "
+                   f"{fit.focals_mm[0]:.2f}–{fit.focals_mm[-1]:.2f} mm, clock offset "
+                   f"{1e3 * (first.time_offset_s or 0.0):.1f} ms")
+
+    def _take(self, pose: m.CameraPose, report: dict, summary: str) -> None:
+        """The solved pose: held for review if asked, then versioned, stored and published
+        by the service."""
+        self.mean_error_px = pose.mean_error_px
         if self.review and not self._reviewed(summary):
             return
-        self.on_pose(pose, report)  # versioned, stored and published by the service
+        self.on_pose(pose, report)
         self._finish("done", summary)
         log.info("%s: pose (%.0f, %.0f, %.0f) mm, (%.2f, %.2f, %.2f)°, %.2f px", self.camera,
-                 mount.x_mm, mount.y_mm, mount.z_mm, mount.rx_deg, mount.ry_deg, mount.rz_deg,
-                 solution.mean_error_px)
+                 pose.x_mm, pose.y_mm, pose.z_mm, pose.rx_deg, pose.ry_deg, pose.rz_deg,
+                 pose.mean_error_px)
 
     def _reviewed(self, summary: str) -> bool:
         """Hold the solved pose for an operator's accept (True) or discard, at most
@@ -247,10 +330,11 @@ class Session:
 
     def _calibration_mode(self, active: bool) -> None:
         hold = self.settings.hold.get(self.camera)
+        zoom = self.zoom if self.zoom is not None else hold.zoom if hold else None
         self.node.bus.publish(keys.PTZ_CALIBRATION, m.CalibrationMode(
             measured_s=time.time(), camera=self.camera, active=active,
             pan_deg=hold.pan_deg if hold else None, tilt_deg=hold.tilt_deg if hold else None,
-            zoom=hold.zoom if hold else None, lease_s=self.settings.lease_s),
+            zoom=zoom, lease_s=self.settings.lease_s),
             camera=self.camera)
 
     def _finish(self, state: m.CollectState, message: str) -> None:
@@ -263,9 +347,12 @@ class Session:
         c = self.collector
         self.node.bus.publish(keys.CALIB_PROGRESS, m.CollectProgress(
             measured_s=time.time(), camera=self.camera, state=self.state,
-            passpoints=len(c.times), target=c.target, snapshots=c.snapshots,
+            passpoints=sum(len(k.times) for k in self.collectors),
+            target=sum(k.target for k in self.collectors), snapshots=c.snapshots,
             skipped=dict(c.skipped), message=self.message[:500],
-            mean_error_px=self.mean_error_px), camera=self.camera)
+            mean_error_px=self.mean_error_px, zoom=self.zoom,
+            zooms_done=sum(k.done for k in self.collectors), zooms=len(self.zooms)),
+            camera=self.camera)
 
     def _stalled_text(self, skipped_before: Counter[str]) -> str:
         since = self.collector.skipped - skipped_before
@@ -280,6 +367,11 @@ class Session:
         return (f"no passpoint for {self.settings.stall_s:g} s ({len(self.collector.times)} of "
                 f"{self.collector.target}; since the last: {seen})"
                 + (f": {'; '.join(hints)}" if hints else ""))
+
+    def _zoom_text(self) -> str:
+        if not self.zooms:
+            return ""
+        return f" at zoom {self.zoom} (step {self._zoom_index + 1} of {len(self.zooms)})"
 
     def _skipped_text(self) -> str:
         skipped = self.collector.skipped

@@ -36,6 +36,9 @@ class CalibSettings(ServiceSettings):
                            "snapshots showed")
     min_spacing_mm: float = Field(50.0, ge=0, description="a passpoint needs the marker this "
                                   "far from the previous one")
+    min_spacing_px: float = Field(20.0, ge=0, le=200, description="a passpoint needs the "
+                                  "marker this far in the picture from every one taken before "
+                                  "at the same zoom: spread over the picture")
     hold: dict[str, Hold] = Field(default_factory=dict, description="per camera: pan, tilt, "
                                   "zoom during collection")
     fit_focal: bool = False

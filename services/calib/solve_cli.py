@@ -1,8 +1,10 @@
 """``stb calib solve PASSPOINTS.csv``: a camera's pose from passpoints (paper §2.2).
 
 PASSPOINTS.csv has the header X,Y,Z,u,v (mm, px) and optionally t (the image's time in s on
-the camera clock). With --mocap-track TRACK.csv (header t,X,Y,Z on the mocap clock) a
-passpoint's marker position is the track at t + time_offset_s, and the offset is fitted.
+the camera clock) and zoom (the zoom step). With --mocap-track TRACK.csv (header t,X,Y,Z on
+the mocap clock) a passpoint's marker position is the track at t + time_offset_s, and the
+offset is fitted. Passpoints at two or more zoom steps (what ``stb calib collect --zooms``
+stores) give the lens too: a focal length and the distortion per zoom, one pose.
 Exit status: 0 solved, 2 bad arguments or input, 3 no trustworthy pose.
 """
 
@@ -19,6 +21,8 @@ from services.args import Parser, plain
 
 if TYPE_CHECKING:  # imported once the flags are parsed: --help answers at once
     from common.camera import Pose
+    from common.passpoints import Passpoints
+    from services.calib.solve import Options
 
 EXIT_BAD_INPUT = 2
 EXIT_NO_POSE = 3
@@ -27,7 +31,7 @@ EXIT_NO_POSE = 3
 def main(argv: Sequence[str] | None = None) -> int:
     parser = Parser(prog="stb calib solve", description=plain(__doc__ or ""),
                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("passpoints", type=Path, help="CSV: X,Y,Z,u,v[,t]")
+    parser.add_argument("passpoints", type=Path, help="CSV: X,Y,Z,u,v[,t][,zoom]")
     parser.add_argument("--initial", help="rough pose tx,ty,tz,rx,ry,rz (mm, deg) for the "
                         "paper's searches; method auto needs none")
     parser.add_argument("--method", choices=["auto", "cmaes", "simplex"], default="auto",
@@ -60,6 +64,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (CalibrationError, ValueError) as err:
         print(f"stb calib solve: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    if len(points.by_zoom()) > 1:
+        return _solve_zooms(points, options, args)
     try:
         solution = solve(points, options)
     except CalibrationError as err:
@@ -72,6 +78,41 @@ def main(argv: Sequence[str] | None = None) -> int:
         report["plots"] = [str(p) for p in write_plots(solution, points, args.plot)]
     print(json.dumps(report) if args.json else _human(report))
     return 0
+
+
+def _solve_zooms(points: Passpoints, options: Options, args: argparse.Namespace) -> int:
+    from common.passpoints import CalibrationError
+    from services.calib.zoom_fit import solve_zooms
+
+    try:
+        fit, first = solve_zooms(points.by_zoom(), options)
+    except CalibrationError as err:
+        print(f"stb calib solve: {err}", file=sys.stderr)
+        return EXIT_NO_POSE
+    report = fit.report() | {"time_offset_s": round(first.time_offset_s or 0.0, 5)}
+    if args.plot:
+        from services.calib.plot import write_lens_plot
+
+        report["plots"] = [str(write_lens_plot(fit, args.plot / "lens.png"))]
+    print(json.dumps(report) if args.json else _human_zooms(report))
+    return 0
+
+
+def _human_zooms(report: dict) -> str:
+    x, y, z = report["position_mm"]
+    rx, ry, rz = report["orientation_deg"]
+    lines = [f"position    {x:9.1f} {y:9.1f} {z:9.1f} mm",
+             f"orientation {rx:9.3f} {ry:9.3f} {rz:9.3f} deg (R = Rx·Ry·Rz)",
+             f"error       {report['mean_error_px']:.2f} px mean over every zoom's inliers",
+             "zoom    focal mm  k1       k2       p1        p2        k3       px   points"]
+    for at in report["lens"]:
+        k1, k2, p1, p2, k3 = at["distortion"]
+        lines.append(f"{at['zoom']:<7d} {at['focal_mm']:8.3f}  {k1:+.4f} {k2:+.4f} {p1:+.5f} "
+                     f"{p2:+.5f} {k3:+.4f} {at['mean_error_px']:5.2f} {at['passpoints']:4d}")
+    if "time_offset_s" in report:
+        lines.append(f"clock       mocap = camera + {report['time_offset_s'] * 1e3:.1f} ms")
+    lines += [f"plot        {p}" for p in report.get("plots", [])]
+    return "\n".join(lines)
 
 
 def _parse_pose(text: str | None) -> Pose | None:

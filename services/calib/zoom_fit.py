@@ -53,6 +53,24 @@ class ZoomFit:
         return measured_lens(list(zip(self.zooms, self.focals_mm, self.distortions,
                                       strict=True)))
 
+    def at_zoom(self) -> list[dict]:
+        """Per zoom: the step, focal length, distortion, inliers and their mean error."""
+        return [{"zoom": z, "focal_mm": round(f, 4), "distortion": [round(c, 6) for c in d],
+                 "passpoints": len(self.inliers[i]), "mean_error_px": round(
+                     self.mean_error_px(i), 4)}
+                for i, (z, f, d) in enumerate(zip(self.zooms, self.focals_mm, self.distortions,
+                                                  strict=True))]
+
+    def report(self) -> dict:
+        """What ``stb calib solve`` prints (JSON) and the calib service stores."""
+        return {"position_mm": [round(v, 3) for v in self.pose.position.tolist()],
+                "orientation_deg": [round(v, 5) for v in (self.pose.rx_deg, self.pose.ry_deg,
+                                                          self.pose.rz_deg)],
+                "mean_error_px": round(self.mean_error_px(), 4), "method": "zooms",
+                "evaluations": self.evaluations, "lens": self.at_zoom(),
+                "residuals_px": {str(z): [round(float(r), 3) for r in self.residuals_px[i]]
+                                 for i, z in enumerate(self.zooms)}}
+
     def mean_error_px(self, i: int | None = None) -> float:
         """Over the inliers of zoom ``i``, or of every zoom."""
         picked = range(len(self.zooms)) if i is None else [i]

@@ -130,9 +130,12 @@ class PtzControl:
         self.follower.forget()
     # --- what goes out --------------------------------------------------------------------
 
-    def status(self, now: float, pan_deg: float, tilt_deg: float, calibrating: bool) -> Status:
+    def status(self, now: float, pan_deg: float, tilt_deg: float, calibrating: bool,
+               zoom: int | None = None) -> Status:
         """The status from where the camera is now (this also watches for someone else's
-        hand on it)."""
+        hand on it, and tells the follower where the camera looks)."""
+        if zoom is not None:
+            self.follower.seen(pan_deg, tilt_deg, zoom)
         manual = not self.held_by and self._watch_hands(now, pan_deg, tilt_deg, calibrating)
         problem = self.pointing.problem() or ""
         pointing = self.pointing.error_deg

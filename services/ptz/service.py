@@ -248,7 +248,7 @@ class _Loop:
         position = self.queries.position()
         with self.lock:
             state = self.control.status(now, position.pan_deg, position.tilt_deg,
-                                        self.calibration.active(now))
+                                        self.calibration.active(now), position.zoom)
         self.node.set_status(state.health, state.health_why)
         self._publish(state.status, position.pan_deg, position.tilt_deg, position.zoom,
                       state.aim_error_deg, now, state.pointing_error_deg, state.problem)

@@ -25,7 +25,7 @@ import numpy as np
 
 from common.camera import Intrinsics, Pose, undistort_pixels
 
-EDGE_MARGIN = 0.04  # of the picture's width and height kept clear of the border
+EDGE_MARGIN = 0.015  # of the picture's width and height kept clear of the border (≈ 10 px)
 NEAREST_MM = 1500.0  # no nearer to the camera than this
 ABOVE_GROUND_MM = 150.0  # a point on the wand's pole stays this high over the floor
 FARTHEST_MM = 9000.0

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -11,13 +13,20 @@ import numpy as np
 import pytest
 
 from common import messages as m
-from common.camera import Intrinsics, project
+from common.camera import Intrinsics, Pose, project
 from common.passpoint_collector import Collector
-from common.passpoints import Passpoints, format_passpoints, write_passpoints
+from common.passpoints import Passpoints, format_passpoints, read_passpoints, write_passpoints
 from services.calib.solve_cli import main
-from services.calib.synthetic import PAPER_GUESS, PAPER_POSE, moving_marker, passpoints
+from services.calib.synthetic import (
+    PAPER_GUESS,
+    PAPER_POSE,
+    moving_marker,
+    passpoints,
+    zoom_passpoints,
+)
 from tests.calib.test_solve import errors
-from tests.conftest import wait_for
+from tests.calib.test_zoom_fit import drawn_lens
+from tests.conftest import ROOT, wait_for
 
 
 def _write_track(path: Path, times: np.ndarray, xyz: np.ndarray) -> None:
@@ -76,6 +85,44 @@ def test_solve_cli_errors_name_the_problem(tmp_path: Path, capsys, content: str,
     assert message in err and "Traceback" not in err
 
 
+def test_solve_cli_measures_the_lens_from_a_file_of_several_zooms(tmp_path: Path,
+                                                                   capsys) -> None:  # noqa: ANN001
+    """The zoom column round-trips through the CSV; the file alone gives the lens."""
+    rng = np.random.default_rng(7)
+    truth = drawn_lens(rng)
+    sets = zoom_passpoints(PAPER_POSE, truth, [1, 5000, 8000, 9999], rng, count=50)
+    joined = Passpoints.joined({s.zoom: Passpoints(s.world_mm, s.pixels) for s in sets})
+    csv = tmp_path / "passpoints.csv"
+    write_passpoints(csv, joined)
+    again = read_passpoints(csv)
+    assert again.zooms is not None and sorted(again.by_zoom()) == [1, 5000, 8000, 9999]
+    np.testing.assert_allclose(again.pixels, joined.pixels, atol=1e-3)
+    assert main([str(csv), "--json", "--plot", str(tmp_path / "plots")]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert [at["zoom"] for at in report["lens"]] == [1, 5000, 8000, 9999]
+    for at in report["lens"]:
+        assert at["focal_mm"] == pytest.approx(truth.focal_mm(at["zoom"]), rel=0.01)
+    assert errors(Pose(*report["position_mm"], *report["orientation_deg"]),
+                  PAPER_POSE)[0] < 10.0
+    assert (tmp_path / "plots" / "lens.png").stat().st_size > 10_000
+    assert main([str(csv)]) == 0 and "9999" in capsys.readouterr().out  # the table
+
+
+def test_a_zoom_that_is_no_step_is_named(tmp_path: Path, capsys) -> None:  # noqa: ANN001
+    csv = tmp_path / "pp.csv"
+    csv.write_text("X,Y,Z,u,v,zoom\n1,2,3,4,5,1\n1,2,3,4,5,2.5\n")
+    assert main([str(csv)]) == 2
+    assert "rows 3" in capsys.readouterr().err
+
+
+def test_collect_names_bad_zooms_before_asking_anyone() -> None:
+    for bad in ("1", "1,x", "1,1", "0,500", "1,20000"):
+        done = subprocess.run([sys.executable, "-m", "services.cli", "calib", "collect",
+                               "--camera", "ptz1", "--zooms", bad], cwd=ROOT,
+                              capture_output=True, text=True, timeout=30)
+        assert done.returncode == 2 and "--zooms" in done.stderr, (bad, done.stderr)
+
+
 # --- the collector -----------------------------------------------------------------------------
 
 STATIC_PX = (120.0, 80.0)
@@ -131,6 +178,20 @@ def test_collector_skips_a_marker_that_has_not_moved() -> None:
     assert collector.on_detections(_detections(1.5, [(300.0, 300.0)])) == "not moved"
     assert collector.on_detections(_detections(2.5, [(300.0, 310.0)])) is None
     assert collector.skipped == {"not moved": 1}
+
+
+def test_collector_spreads_passpoints_over_the_picture() -> None:
+    """A wand that moved in the world but shows where a passpoint was already taken is
+    skipped: the count is not filled in one part of the picture."""
+    collector = Collector(target=10, marker_label="wand", min_spacing_mm=50.0,
+                          min_spacing_px=20.0)
+    for i in range(400):
+        collector.on_frame(_frame(i / 100, np.array([100.0 + i, 200.0, 300.0])))
+    assert collector.on_detections(_detections(0.5, [(300.0, 300.0)])) is None
+    assert collector.on_detections(_detections(1.5, [(330.0, 300.0)])) is None
+    assert collector.on_detections(_detections(2.5, [(305.0, 310.0)])) == "seen there"
+    assert collector.on_detections(_detections(3.5, [(300.0, 340.0)])) is None
+    assert collector.skipped == {"seen there": 1}
 
 
 def test_a_binary_passpoint_file_is_named(tmp_path: Path, capsys) -> None:  # noqa: ANN001

@@ -21,14 +21,15 @@ STEPS = np.arange(1, 10000, 7)
 def drawn_lens(rng: np.random.Generator) -> PtzLens:
     """A table of twelve points of a smooth, bent curve (no line, no power law the code knows
     of), and distortion at both ends, all drawn."""
-    zooms = np.linspace(1, 9999, 12)
+    zooms = np.round(np.linspace(1, 9999, 12))  # whole steps, as a lab file would list them
     bend = rng.uniform(1.5, 3.0)
     long_mm = rng.uniform(40.0, 50.0)
     focal = 3.8 * (long_mm / 3.8) ** ((zooms / 9999) ** bend)
     wide = (rng.uniform(-0.35, -0.15), rng.uniform(0.03, 0.15), rng.uniform(-2e-3, 2e-3),
             rng.uniform(-2e-3, 2e-3), rng.uniform(-0.02, 0.02))
-    long = tuple(rng.uniform(-0.05, 0.05, 5) * [1, 1, 0.01, 0.01, 0])
-    return PtzLens(ZoomCurve(tuple(zooms), tuple(focal)), (focal[0], focal[-1]),
+    long = [float(c) for c in rng.uniform(-0.05, 0.05, 5) * [1, 1, 0.01, 0.01, 0]]
+    return PtzLens(ZoomCurve(tuple(float(z) for z in zooms), tuple(float(f) for f in focal)),
+                   (float(focal[0]), float(focal[-1])),
                    (wide, (long[0], long[1], long[2], long[3], long[4])))
 
 

@@ -7,6 +7,7 @@ import pytest
 
 from common import messages as m
 from common.camera import Intrinsics, Pose, PtzLimits, head_pose, project
+from common.ptz_lens import PtzLens, ZoomCurve
 from common.volume import Volume
 from services.ptz.aim import aim_at, predict
 from services.ptz.follow import Follower
@@ -85,3 +86,31 @@ def test_a_preview_says_how_large_the_robot_marker_appears() -> None:
     assert twice == pytest.approx(2 * radius, abs=0.02)
     assert robot_view(None, _robot(1.0), pan, tilt, WIDE, 1.0, 19.0)[1] is None
     assert robot_view(MOUNT, _robot(1.0), pan + 180.0, tilt, WIDE, 1.0, 19.0)[1] is None
+
+
+def test_at_a_long_zoom_the_dead_band_shrinks_with_the_picture() -> None:
+    """0.1° is nothing in a 50° picture and 4 % of a 2.5° one."""
+    for zoom, moves in ((1, False), (9999, True)):
+        follower = Follower(deadband_deg=0.3, min_interval_s=0.0, zoom=zoom)
+        first = follower.command(100.0, ROBOT, STILL, 100.0, MOUNT)
+        assert first is not None
+        pan, tilt = aim_at(ROBOT, MOUNT)
+        distance = float(np.linalg.norm(ROBOT - MOUNT.position))
+        aside = ROBOT + np.array([0.0, distance * np.radians(0.1), 0.0])  # ≈ 0.1° away
+        again = follower.command(100.2, aside, STILL, 100.2, MOUNT)
+        assert (again is not None) == moves, (zoom, pan, tilt)
+
+
+def test_a_robot_off_the_centre_of_a_long_zoom_makes_the_camera_zoom_out_and_back() -> None:
+    lens = PtzLens(ZoomCurve((1, 6000, 9999), (3.8, 9.0, 46.0)))
+    follower = Follower(min_interval_s=0.0, zoom=9999, lens=lens)
+    pan, tilt = aim_at(ROBOT, MOUNT)
+    follower.seen(pan + 2.0, tilt, 9999)  # the camera is 2° behind: off a ±1.7° picture
+    out = follower.command(100.0, ROBOT, STILL, 100.0, MOUNT)
+    assert out is not None and out.zoom < 9999
+    assert follower.half_view_deg(out.zoom) >= 2.0 / follower.central
+    follower.seen(pan + 0.5, tilt, out.zoom)  # closer, not yet re-centred at 9999's scale
+    assert follower.command(100.1, ROBOT + [0, 0, 30.0], STILL, 100.1, MOUNT).zoom == out.zoom
+    follower.seen(pan, tilt, out.zoom)  # re-centred: back to the wanted zoom
+    back = follower.command(100.2, ROBOT, STILL, 100.2, MOUNT)
+    assert back is not None and back.zoom == 9999
