@@ -37,6 +37,10 @@ class Collector:
     marker_label: str = "wand"
     min_spacing_mm: float = 50.0
     min_spacing_px: float = 0.0
+    coverage: tuple[int, int, int] = (0, 0, 0)
+    """(columns, rows, passpoints per cell): done only once every cell of that grid over the
+    picture holds that many (the lens's distortion is measured in the corners); 0: none"""
+    cells: Counter[tuple[int, int]] = field(default_factory=Counter)
     picker: RobotPicker = field(init=False)
     track_t: list[float] = field(default_factory=list)
     track_xyz: list[np.ndarray] = field(default_factory=list)
@@ -52,7 +56,15 @@ class Collector:
 
     @property
     def done(self) -> bool:
-        return len(self.times) >= self.target
+        return len(self.times) >= self.target and not self.uncovered()
+
+    def uncovered(self) -> list[str]:
+        """The grid cells still short of passpoints, by name ("top left", "row 2, column 3")."""
+        columns, rows, need = self.coverage
+        if need == 0:
+            return []
+        return [_cell_name(c, r, columns, rows) for r in range(rows) for c in range(columns)
+                if self.cells[(c, r)] < need]
 
     def on_frame(self, frame: m.MarkerFrame) -> None:
         found = self.picker.update(frame.measured_s, frame.markers)
@@ -106,6 +118,11 @@ class Collector:
         self.times.append(msg.measured_s)
         self.world.append(xyz)
         self.pixels.append(moving[0])
+        columns, rows, _ = self.coverage
+        if columns and rows:
+            u, v = moving[0]
+            self.cells[(min(int(u / msg.width_px * columns), columns - 1),
+                        min(int(v / msg.height_px * rows), rows - 1))] += 1
         return None
 
     def _marker_at(self, t: float) -> np.ndarray | None:
@@ -132,3 +149,11 @@ class Collector:
             return False
         path = np.array(self.track_xyz[lo:hi])
         return float(np.max(np.ptp(path, axis=0))) >= MARKER_MOVED_MM
+
+
+def _cell_name(column: int, row: int, columns: int, rows: int) -> str:
+    vertical = "" if rows == 1 else {0: "top", rows - 1: "bottom"}.get(
+        row, "middle" if rows == 3 else f"row {row + 1}")
+    horizontal = "" if columns == 1 else {0: "left", columns - 1: "right"}.get(
+        column, "centre" if columns == 3 else f"column {column + 1}")
+    return f"{vertical} {horizontal}".strip()

@@ -134,4 +134,5 @@ def _bar(p: m.CollectProgress) -> str:
     filled = int(width * p.passpoints / max(p.target, 1))
     skipped = ", ".join(f"{n} {why}" for why, n in sorted(p.skipped.items())) or "none"
     return (f"[{'#' * filled}{'.' * (width - filled)}] {p.passpoints}/{p.target} passpoints "
-            f"from {p.snapshots} snapshots (skipped: {skipped})")
+            f"from {p.snapshots} snapshots (skipped: {skipped})"
+            + (f" — {p.message}" if p.message else ""))

@@ -36,6 +36,7 @@ TICK_S = 0.05
 PROGRESS_S = 0.5
 MOCAP_WAIT_S = 1.0
 SNAPSHOTS_KEPT = 30
+WIDE_COVERAGE = (4, 3, 2)  # at the widest of several zooms: every cell of a 4×3 grid, 2 each
 STALL_HINTS = {  # why snapshots gave no passpoint → what to check
     "no marker": "the wand is not in the camera's view (or the IR cut filter is on)",
     "too many": "more bright spots than the wand (reflections, markers)",
@@ -59,10 +60,12 @@ class Session:
         self.zooms = list(zooms or [])
         track_t: list[float] = []  # one mocap track for every zoom's collector
         track_xyz: list[np.ndarray] = []
+        widest = min(self.zooms) if self.zooms else None
         self.collectors = [Collector(count, settings.marker_label, settings.min_spacing_mm,
-                                     settings.min_spacing_px, track_t=track_t,
-                                     track_xyz=track_xyz)
-                           for _ in self.zooms or [None]]
+                                     settings.min_spacing_px,
+                                     WIDE_COVERAGE if zoom == widest else (0, 0, 0),
+                                     track_t=track_t, track_xyz=track_xyz)
+                           for zoom in self.zooms or [None]]
         self.collector = self.collectors[0]
         self._zoom_index = 0
         self._zoom_since: float | None = None  # the camera's first state at the present zoom
@@ -349,7 +352,7 @@ class Session:
             measured_s=time.time(), camera=self.camera, state=self.state,
             passpoints=sum(len(k.times) for k in self.collectors),
             target=sum(k.target for k in self.collectors), snapshots=c.snapshots,
-            skipped=dict(c.skipped), message=self.message[:500],
+            skipped=dict(c.skipped), message=(self.message or self._coverage_text())[:500],
             mean_error_px=self.mean_error_px, zoom=self.zoom,
             zooms_done=sum(k.done for k in self.collectors), zooms=len(self.zooms)),
             camera=self.camera)
@@ -367,6 +370,12 @@ class Session:
         return (f"no passpoint for {self.settings.stall_s:g} s ({len(self.collector.times)} of "
                 f"{self.collector.target}; since the last: {seen})"
                 + (f": {'; '.join(hints)}" if hints else ""))
+
+    def _coverage_text(self) -> str:
+        missing = self.collector.uncovered() if self.state == "collecting" else []
+        if not missing:
+            return ""
+        return f"carry the wand to the picture's {', '.join(missing)}"
 
     def _zoom_text(self) -> str:
         if not self.zooms:

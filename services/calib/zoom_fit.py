@@ -24,7 +24,7 @@ from common.passpoints import CalibrationError, Passpoints
 from common.ptz_lens import STRAIGHT_LINE, Distortion, PtzLens, measured_lens
 from services.calib.solve import Options, Solution, solve
 
-PRIOR_PX = np.array([0.5, 0.5, 0.5, 0.5, 20.0])
+PRIOR_PX = np.array([0.5, 0.5, 0.5, 0.5, 5.0])
 ROUNDS = 3
 MIN_PER_ZOOM = 6
 POSE_PARAMS, LENS_PARAMS = 6, 6  # rotation vector + position; focal + five coefficients

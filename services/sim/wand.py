@@ -7,7 +7,8 @@ about the crater at random would almost never cross. So the carrier walks the wa
 in the picture of a camera that is being calibrated — the IR-cut filter off and the head
 standing still, what calibration mode does to a camera — at that camera's present zoom, holds
 it still for ``dwell_s``, and on to the next; taking turns when several are. With no camera
-in calibration mode it walks to points over the crater (``wander``), as before.
+in calibration mode it walks to points over the crater (``wander``), as before. A share of the
+points is in the picture's corners, as lens calibration guides ask of a person.
 
 The picture is the camera's own (its true lens, ``views``): the carrier uses the sim's truth
 only as a person uses what they see. Points are spread over the whole picture, corners
@@ -26,7 +27,9 @@ import numpy as np
 from common.camera import Intrinsics, Pose, undistort_pixels
 
 EDGE_MARGIN = 0.015  # of the picture's width and height kept clear of the border (≈ 10 px)
-NEAREST_MM = 1500.0  # no nearer to the camera than this
+CORNERS = 0.4  # of the points: in a corner of the picture
+CORNER_SIZE = 0.2  # a corner: this share of the picture's width and of its height
+NEAREST_MM = 800.0  # no nearer to the camera than this (a person holds it at arm's length)
 ABOVE_GROUND_MM = 150.0  # a point on the wand's pole stays this high over the floor
 FARTHEST_MM = 9000.0
 SEGMENTS_KEPT = 64  # enough for any look back (exposure smear, a late mocap frame)
@@ -101,8 +104,7 @@ class WandCarrier:
         """A point the camera sees at a random place in its picture, between ``NEAREST_MM``
         and the floor; None when none was found (a camera looking at the sky)."""
         for _ in range(tries):
-            u = self.rng.uniform(EDGE_MARGIN, 1 - EDGE_MARGIN) * intr.width_px
-            v = self.rng.uniform(EDGE_MARGIN, 1 - EDGE_MARGIN) * intr.height_px
+            u, v = self._spot() * (intr.width_px, intr.height_px)
             straight = undistort_pixels(np.array([[u, v]]), intr)[0]
             ray = pose.rotation @ np.array([1.0, (straight[0] - intr.cy_px) / intr.fy_px,
                                             (straight[1] - intr.cz_px) / intr.fz_px])
@@ -111,6 +113,14 @@ class WandCarrier:
             if reach > NEAREST_MM:
                 return pose.position + ray * self.rng.uniform(NEAREST_MM, reach)
         return None
+
+    def _spot(self) -> np.ndarray:
+        """Where in the picture (fractions of its width and height): anywhere, or — as lens
+        calibration guides ask, the lens bending most there — in a corner (``CORNERS``)."""
+        if self.rng.random() >= CORNERS:
+            return self.rng.uniform(EDGE_MARGIN, 1 - EDGE_MARGIN, 2)
+        near = self.rng.uniform(EDGE_MARGIN, CORNER_SIZE, 2)
+        return np.where(self.rng.random(2) < 0.5, near, 1 - near)
 
     def _reach(self, origin: np.ndarray, ray: np.ndarray) -> float:
         """How far along the ray the wand may go before it comes too near the floor."""

@@ -194,6 +194,17 @@ def test_collector_spreads_passpoints_over_the_picture() -> None:
     assert collector.skipped == {"seen there": 1}
 
 
+def test_collector_with_coverage_is_done_only_when_every_cell_has_its_share() -> None:
+    collector = Collector(target=2, marker_label="wand", coverage=(2, 1, 1))
+    for i in range(400):
+        collector.on_frame(_frame(i / 100, np.array([100.0 + i, 200.0, 300.0])))
+    assert collector.on_detections(_detections(0.5, [(100.0, 300.0)])) is None
+    assert collector.on_detections(_detections(1.5, [(200.0, 300.0)])) is None
+    assert not collector.done and collector.uncovered() == ["right"]
+    assert collector.on_detections(_detections(2.5, [(600.0, 300.0)])) is None
+    assert collector.done and collector.uncovered() == []
+
+
 def test_a_binary_passpoint_file_is_named(tmp_path: Path, capsys) -> None:  # noqa: ANN001
     path = tmp_path / "pp.csv"
     path.write_bytes(b"\x89PNG\r\n\x1a\n\x00\xff\xfe")

@@ -9,6 +9,8 @@ import os
 import signal
 import subprocess
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +31,26 @@ def _pose_of(msg: m.CameraPose) -> Pose:
     return Pose(msg.x_mm, msg.y_mm, msg.z_mm, msg.rx_deg, msg.ry_deg, msg.rz_deg)
 
 
+@contextmanager
+def calibration_lab(lab: Path, endpoint: str, env: dict[str, str]) -> Iterator[Bus]:
+    """``stb up`` with the lab file, a bus client once the calibration's services are alive;
+    on leaving, ``stb up`` is stopped and must exit cleanly."""
+    up = stb_process("up", "--lab", str(lab), "--no-view", env=env)
+    session = None
+    try:
+        session = _open_when_up(endpoint)
+        bus = Bus(session, client_settings(endpoint))
+        alive = AliveWatcher(session)
+        for key in ("calib/main", "ptz/ptz1", "tracker/main", "sim/main"):
+            wait_for(lambda k=key: alive.alive(f"stb/alive/{k}"), timeout=30)
+        yield bus
+        bus.close()
+    finally:
+        if session is not None:
+            session.close()
+        assert _stop(up, signal.SIGINT, timeout=15) == 0
+
+
 @pytest.mark.system
 def test_collect_solve_publish_recovers_the_sim_camera(tmp_path: Path) -> None:
     lab, endpoint = _lab_for_up(tmp_path)
@@ -38,14 +60,7 @@ def test_collect_solve_publish_recovers_the_sim_camera(tmp_path: Path) -> None:
         "[up]\n", '[up]\nservices = ["router", "sim", "tracker", "calib", "ptz:ptz1"]\n', 1)
         + "[calib.hold.ptz1]\npan_deg = 6.0\ntilt_deg = -4.0\n")
     env = {"STB_SIM__SCENARIO": "calibration"}
-    up = stb_process("up", "--lab", str(lab), "--no-view", env=env)
-    session = None
-    try:
-        session = _open_when_up(endpoint)
-        bus = Bus(session, client_settings(endpoint))
-        alive = AliveWatcher(session)
-        for key in ("calib/main", "ptz/ptz1", "tracker/main", "sim/main"):
-            wait_for(lambda k=key: alive.alive(f"stb/alive/{k}"), timeout=20)
+    with calibration_lab(lab, endpoint, env) as bus:
         states: list[m.PtzState] = []
         bus.subscribe(keys.PTZ_STATE, states.append, latest=False, camera="ptz1")
         healths: list[m.ServiceHealth] = []
@@ -79,11 +94,6 @@ def test_collect_solve_publish_recovers_the_sim_camera(tmp_path: Path) -> None:
         wait_for(lambda: any(h.pid != pid for h in healths), timeout=10)
         (again,) = bus.query_latest(keys.CALIB_POSE, timeout_s=2.0, camera="ptz1")
         assert again.measured_s == published.measured_s, "the restarted service kept the pose"
-        bus.close()
-    finally:
-        if session is not None:
-            session.close()
-        assert _stop(up, signal.SIGINT, timeout=15) == 0
 
     solved = subprocess.run(
         [sys.executable, "-m", "services.cli", "calib", "solve", str(folder / "passpoints.csv"),

@@ -1,11 +1,12 @@
 """``stb calib collect --zooms`` against the sim, as processes under ``stb up``: the sim's ptz1
 has a lens drawn at random (a bent zoom curve and barrel distortion, set in its lab file, never
-read by a service); the calib service measures it from the camera's own pictures."""
+read by a service); the calib service measures it from the camera's own pictures. Then the
+locomotive starts and ptz1 follows it at the longest zoom for a minute, judged by the sim's
+truth: where the robot really is in the camera's picture."""
 
 from __future__ import annotations
 
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -17,18 +18,20 @@ import pytest
 from common import keys
 from common import messages as m
 from common.bus import Bus
-from common.camera import Pose
+from common.camera import Pose, head_pose, project
 from common.ptz_lens import PtzLens, measured_lens
+from tests.calib.test_collect_e2e import calibration_lab
 from tests.calib.test_solve import errors
 from tests.calib.test_zoom_fit import STEPS, distortion_error_px, drawn_lens
-from tests.conftest import ROOT, client_settings, stb_process, wait_for
-from tests.services.test_processes import AliveWatcher, _lab_for_up, _open_when_up, _stop
+from tests.conftest import ROOT, wait_for
+from tests.services.test_processes import _lab_for_up
 
 PTZ1_MOUNT = Pose(3550, 1090, 2190, 180, 30, 165)  # as write_lab configures the sim
 ZOOMS = [1, 3000, 5500, 7000, 8000, 9000, 9999]
+TRUTH_HZ = 20  # the sim's truth_rate_hz
 
 
-def _with_lens(lab: Path, lens: PtzLens) -> None:
+def with_lens(lab: Path, lens: PtzLens) -> None:
     """ptz1's lens in the sim's lab file, as a lab engineer would write it down."""
     table = ", ".join(f"[{z:.0f}, {f!r}]" for z, f in lens.curve.points())
     wide, long = lens.distortions
@@ -36,8 +39,62 @@ def _with_lens(lab: Path, lens: PtzLens) -> None:
                                    f"zoom_focal_mm = [{table}]\n"
                                    f"distortion = {list(wide)}\n"
                                    f"distortion_long = {list(long)}\n", 1)
+    text = text.replace("[sim]\n", '[sim]\nscenario = "locomotive"\ncalibrate_first = ["ptz1"]\n',
+                        1).replace("[ptz.cameras.ptz1]\n", f"[ptz]\nzoom = {ZOOMS[-1]}\n"
+                                   "[ptz.cameras.ptz1]\n", 1)
     lab.write_text(text.replace(
         "[up]\n", '[up]\nservices = ["router", "sim", "tracker", "calib", "ptz:ptz1"]\n', 1))
+
+
+def central_share(truths: list[tuple[m.PtzTruth, m.RobotTruth]], lens: PtzLens) -> float:
+    """The share of the camera's true views in which the robot's true marker is within the
+    central 40 % of the picture's width."""
+    inside = 0
+    for camera, robot in truths:
+        intr = lens.intrinsics(camera.zoom)
+        u, _ = project(np.array([[robot.x_mm, robot.y_mm, robot.z_mm]]),
+                       head_pose(PTZ1_MOUNT, camera.pan_deg, camera.tilt_deg), intr)[0]
+        inside += bool(0.3 * intr.width_px <= u <= 0.7 * intr.width_px)
+    return inside / len(truths)
+
+
+def collect(lab: Path, zooms: list[int], count: int) -> subprocess.CompletedProcess:
+    """``stb calib collect`` for ptz1 (at one zoom when ``zooms`` is empty)."""
+    at = ["--zooms", ",".join(map(str, zooms))] if zooms else []
+    started = time.monotonic()
+    done = subprocess.run(
+        [sys.executable, "-m", "services.cli", "calib", "collect", "--camera", "ptz1",
+         "--count", str(count), "--timeout", "600", *at, "--lab", str(lab)],
+        cwd=ROOT, capture_output=True, text=True, timeout=900, env=dict(os.environ))
+    print(done.stdout[-2000:], done.stderr[-3000:])
+    print(f"collected and solved in {time.monotonic() - started:.0f} s")
+    return done
+
+
+def follow(bus: Bus, seconds: float) -> list[tuple[m.PtzTruth, m.RobotTruth]]:
+    """ptz1's true pan, tilt and zoom beside the robot's true marker, 20 a second, for
+    ``seconds`` of following once the locomotive has moved for 5 s (the camera turned onto it
+    and zoomed in)."""
+    seen: dict[float, m.Message] = {}  # the sim sends both with one time stamp
+    truths: list[tuple[m.PtzTruth, m.RobotTruth]] = []
+
+    def paired(msg: m.Message) -> None:
+        other = seen.pop(msg.measured_s, None)
+        if other is None:
+            seen[msg.measured_s] = msg
+            return
+        camera, robot = (msg, other) if isinstance(msg, m.PtzTruth) else (other, msg)
+        if np.hypot(robot.vx_mm_s, robot.vy_mm_s) > 0:  # the locomotive has started
+            truths.append((camera, robot))
+
+    bus.subscribe(keys.TRUTH_PTZ, paired, latest=False, camera="ptz1")
+    bus.subscribe(keys.TRUTH_ROBOT, paired, latest=False, robot="*")
+    wait_for(lambda: len(truths) > 0, timeout=30, why=lambda: "the locomotive never moved")
+    settled = len(truths) + 5 * TRUTH_HZ
+    wanted = int(seconds * TRUTH_HZ)
+    wait_for(lambda: len(truths) >= settled + wanted, timeout=2 * seconds + 30,
+             why=lambda: f"{len(truths)} true views")
+    return truths[settled:settled + wanted]
 
 
 @pytest.mark.system
@@ -46,32 +103,13 @@ def test_collect_at_several_zooms_measures_the_sim_cameras_lens(tmp_path: Path,
                                                                  seed: int) -> None:
     truth = drawn_lens(np.random.default_rng(seed))
     lab, endpoint = _lab_for_up(tmp_path)
-    _with_lens(lab, truth)
-    env = {"STB_SIM__SCENARIO": "calibration"}
-    up = stb_process("up", "--lab", str(lab), "--no-view", env=env)
-    session = None
-    try:
-        session = _open_when_up(endpoint)
-        bus = Bus(session, client_settings(endpoint))
-        alive = AliveWatcher(session)
-        for key in ("calib/main", "ptz/ptz1", "tracker/main", "sim/main"):
-            wait_for(lambda k=key: alive.alive(f"stb/alive/{k}"), timeout=30)
-        started = time.monotonic()
-        collect = subprocess.run(
-            [sys.executable, "-m", "services.cli", "calib", "collect", "--camera", "ptz1",
-             "--count", "90", "--timeout", "600", "--zooms", ",".join(map(str, ZOOMS)),
-             "--lab", str(lab)],
-            cwd=ROOT, capture_output=True, text=True, timeout=900,
-            env={**os.environ, **env})
-        print(collect.stdout[-3000:], collect.stderr[-3000:])
-        print(f"collected and solved in {time.monotonic() - started:.0f} s")
-        assert collect.returncode == 0, collect.stderr
+    with_lens(lab, truth)
+    with calibration_lab(lab, endpoint, {}) as bus:
+        collected = collect(lab, ZOOMS, count=90)
+        assert collected.returncode == 0, collected.stderr
         (pose,) = bus.query_latest(keys.CALIB_POSE, timeout_s=2.0, camera="ptz1")
-        bus.close()
-    finally:
-        if session is not None:
-            session.close()
-        assert _stop(up, signal.SIGINT, timeout=15) == 0
+        # the pose is on the bus: the sim starts the locomotive, ptz1 follows at the long end
+        following = follow(bus, 60.0)
     assert isinstance(pose, m.CameraPose) and [p.zoom for p in pose.lens] == ZOOMS
     lens = measured_lens([(p.zoom, p.focal_mm, p.distortion) for p in pose.lens])
     focal_error = max(abs(lens.focal_mm(z) / truth.focal_mm(z) - 1) for z in STEPS)
@@ -83,3 +121,7 @@ def test_collect_at_several_zooms_measures_the_sim_cameras_lens(tmp_path: Path,
     assert focal_error < 0.02
     assert distortion_px <= 1.0
     assert position < 10.0 and angle < 0.2  # as the single-zoom collection (test_collect_e2e)
+    share = central_share(following, truth)
+    print(f"following at zoom {ZOOMS[-1]}: the robot within the central 40 % of the picture in "
+          f"{100 * share:.1f} % of {len(following)} true views over 60 s")
+    assert share >= 0.95

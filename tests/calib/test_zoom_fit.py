@@ -86,3 +86,22 @@ def test_one_zoom_or_too_few_passpoints_at_one_is_refused_saying_why() -> None:
     few = {1: sets[1], 9999: Passpoints(sets[9999].world_mm[:4], sets[9999].pixels[:4])}
     with pytest.raises(CalibrationError, match="zoom 9999: 4 passpoints"):
         solve_zooms(few, Options())
+
+
+def test_geometry_driven_zoom_keeps_the_robots_size_with_the_measured_lens() -> None:
+    """A 500 mm robot asked to fill 30 % of the picture's height anywhere in the crater (2.5–6
+    m from the camera): within 10 % through the measured curve; the straight line misses."""
+    from services.ptz.aim import zoom_for_size
+
+    rng = np.random.default_rng(21)
+    truth = drawn_lens(rng)
+    fit, _ = solve_zooms(_as_passpoints(zoom_passpoints(PAPER_POSE, truth, ZOOMS, rng, 60)),
+                         Options())
+    worst = {"measured": 0.0, "straight line": 0.0}
+    for distance in np.linspace(2500.0, 6000.0, 30):
+        for name, lens in (("measured", fit.lens()), ("straight line", PtzLens())):
+            zoom = zoom_for_size(distance, object_mm=500.0, image_fraction=0.3, lens=lens)
+            seen = 500.0 * truth.focal_mm(zoom) / distance / 2.7  # of the picture's height
+            worst[name] = max(worst[name], abs(seen / 0.3 - 1))
+    assert worst["measured"] <= 0.10, worst
+    assert worst["straight line"] > 0.25, worst

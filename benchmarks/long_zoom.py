@@ -1,0 +1,88 @@
+"""Following at the longest zoom: the measured lens against the data sheet's straight line.
+
+    .venv/bin/python -m benchmarks.long_zoom [--seed 11] [--seconds 60] [--count 90]
+
+The sim's ptz1 gets a lens drawn at random (``tests/calib/test_zoom_fit.drawn_lens``: a smooth
+zoom curve slow over most steps and steep at the end, barrel distortion at the wide end), set
+in its lab file only. Twice, each time in a fresh ``stb up`` lab (router, sim, tracker, calib,
+ptz1; ``[ptz] zoom = 9999``), as the system test does:
+
+* ``measured``: ``stb calib collect --zooms 1,3000,5500,7000,8000,9000,9999`` — the pose and
+  the lens from one fit;
+* ``straight``: ``stb calib collect`` at zoom 1 — the pose alone, through the pinhole model,
+  and the data sheet's straight line from 3.8 to 46 mm.
+
+Then the locomotive runs and ptz1 follows it at zoom 9999 for ``--seconds``: the share of the
+sim's true views (20 a second) in which the robot's true marker is within the central 40 % of
+the picture's width, and the median and 95th percentile of its distance from the centre.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from common import keys
+from common.camera import Pose, head_pose, pose_distance, project
+from common.ptz_lens import PtzLens
+from tests.calib.test_collect_e2e import calibration_lab
+from tests.calib.test_zoom_collect_e2e import (
+    PTZ1_MOUNT,
+    ZOOMS,
+    central_share,
+    collect,
+    follow,
+    with_lens,
+)
+from tests.calib.test_zoom_fit import drawn_lens
+from tests.services.test_processes import _lab_for_up
+
+
+def _offsets_px(following: list, truth: PtzLens) -> np.ndarray:
+    """The robot's true distance from the picture's centre in each true view, pixels."""
+    out = []
+    for camera, robot in following:
+        intr = truth.intrinsics(camera.zoom)
+        uv = project(np.array([[robot.x_mm, robot.y_mm, robot.z_mm]]),
+                     head_pose(PTZ1_MOUNT, camera.pan_deg, camera.tilt_deg), intr)[0]
+        out.append(float(np.hypot(uv[0] - intr.cy_px, uv[1] - intr.cz_px)))
+    return np.array(out)
+
+
+def run(model: str, truth: PtzLens, seconds: float, count: int) -> dict:
+    with tempfile.TemporaryDirectory(prefix=f"stb-long-zoom-{model}-") as folder:
+        lab, endpoint = _lab_for_up(Path(folder))
+        with_lens(lab, truth)
+        with calibration_lab(lab, endpoint, {}) as bus:
+            done = collect(lab, ZOOMS if model == "measured" else [], count)
+            if done.returncode != 0:
+                return {"model": model, "failed": done.stderr[-500:]}
+            (pose,) = bus.query_latest(keys.CALIB_POSE, timeout_s=2.0, camera="ptz1")
+            following = follow(bus, seconds)
+    offsets = _offsets_px(following, truth)
+    position, angle = pose_distance(Pose.of(pose), PTZ1_MOUNT)
+    return {"model": model, "views": len(following),
+            "central_40_percent_share": round(central_share(following, truth), 3),
+            "offset_px_median": round(float(np.median(offsets)), 1),
+            "offset_px_p95": round(float(np.percentile(offsets, 95)), 1),
+            "pose_error_mm": round(position, 1), "pose_error_deg": round(angle, 3),
+            "zooms_measured": [p.zoom for p in pose.lens]}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seed", type=int, default=11)
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--count", type=int, default=90, help="passpoints (per zoom)")
+    args = parser.parse_args()
+    truth = drawn_lens(np.random.default_rng(args.seed))
+    for model in ("measured", "straight"):
+        print(json.dumps(run(model, truth, args.seconds, args.count)), flush=True)
+
+
+if __name__ == "__main__":
+    main()
