@@ -16,6 +16,7 @@ import threading
 import time
 from collections import Counter, OrderedDict, deque
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -30,6 +31,9 @@ from common.passpoint_collector import Collector
 from common.passpoints import CalibrationError, Passpoints
 from services.calib.settings import CalibSettings
 from services.calib.store import PoseStore
+
+if TYPE_CHECKING:
+    from services.calib.zoom_fit import ZoomFit
 
 log = logging.getLogger(__name__)
 TICK_S = 0.05
@@ -290,6 +294,7 @@ class Session:
             self._finish("failed", str(err))
             return
         mount = mount_pose(fit.pose, state.pan_deg, state.tilt_deg)
+        self._plot_lens(fit)
         lens = [m.LensAtZoom.model_validate(at) for at in fit.at_zoom()]
         used = sum(len(k) for k in fit.inliers)
         pose = m.CameraPose(
@@ -301,6 +306,15 @@ class Session:
         self._take(pose, report, f"{used} passpoints at {len(fit.zooms)} zoom steps, focal "
                    f"{fit.focals_mm[0]:.2f}–{fit.focals_mm[-1]:.2f} mm, clock offset "
                    f"{1e3 * (first.time_offset_s or 0.0):.1f} ms")
+
+    def _plot_lens(self, fit: ZoomFit) -> None:
+        """``lens.png`` beside the stored pose: the curve, the distortion, the residuals."""
+        try:
+            from services.calib.plot import write_lens_plot  # matplotlib: only to draw
+
+            write_lens_plot(fit, self.store.camera_dir(self.camera) / "lens.png")
+        except (OSError, ValueError) as err:  # a picture that cannot be drawn is only missed
+            log.warning("%s: no lens.png: %s", self.camera, err)
 
     def _take(self, pose: m.CameraPose, report: dict, summary: str) -> None:
         """The solved pose: held for review if asked, then versioned, stored and published

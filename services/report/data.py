@@ -16,6 +16,7 @@ from common import messages as m
 from common.camera import Intrinsics, Pose, head_pose, reprojection_px
 from common.mcap_file import Sample, read_run
 from common.passpoint_collector import Collector
+from common.ptz_lens import measured_lens
 
 STATE_MATCH_S = 0.5
 """A crane state is compared with the robot only if a robot sample lies this close."""
@@ -137,7 +138,7 @@ def _take(rec: Recording, topic: keys.Topic, msg: m.Message) -> None:  # noqa: C
                                   f"{msg.warn_above_pct:g} %)"))
         rec._pulling = msg.warning
     elif isinstance(msg, m.PtzState):
-        rec.ptz_state[msg.camera].add(t, msg.pan_deg, msg.tilt_deg)
+        rec.ptz_state[msg.camera].add(t, msg.pan_deg, msg.tilt_deg, msg.zoom)
         if msg.status == "tracking":
             rec.aim[msg.camera].add(t, msg.aim_error_deg)
     elif isinstance(msg, m.CameraPose):
@@ -217,11 +218,14 @@ def calibration_residuals(rec: Recording, marker_label: str = "wand") -> dict[st
         track = collector.track()
         world = track.at(points.times_s + pose_msg.time_offset_s) if track.covers(
             points.times_s + pose_msg.time_offset_s) else points.world_mm
-        intr = Intrinsics(pose_msg.focal_mm)
+        lens = measured_lens([(p.zoom, p.focal_mm, p.distortion) for p in pose_msg.lens])
         residuals = []
         for time_s, xyz, pixel in zip(points.times_s, world, points.pixels, strict=True):
             i = int(np.clip(np.searchsorted(st, time_s), 0, len(st) - 1))
             head = head_pose(mount, pan_tilt[i, 0], pan_tilt[i, 1])
+            # through the measured lens at the zoom of the time; one zoom: the fitted focal
+            intr = lens.intrinsics(pan_tilt[i, 2]) if pose_msg.lens else \
+                Intrinsics(pose_msg.focal_mm)
             residuals.append(reprojection_px(head, xyz[None, :], pixel[None, :], intr)[0])
         out[camera] = np.array(residuals)
     return out

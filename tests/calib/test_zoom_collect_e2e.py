@@ -111,6 +111,7 @@ def test_collect_at_several_zooms_measures_the_sim_cameras_lens(tmp_path: Path,
         # the pose is on the bus: the sim starts the locomotive, ptz1 follows at the long end
         following = follow(bus, 60.0)
     assert isinstance(pose, m.CameraPose) and [p.zoom for p in pose.lens] == ZOOMS
+    assert (tmp_path / "calib" / "ptz1" / "lens.png").stat().st_size > 10_000
     lens = measured_lens([(p.zoom, p.focal_mm, p.distortion) for p in pose.lens])
     focal_error = max(abs(lens.focal_mm(z) / truth.focal_mm(z) - 1) for z in STEPS)
     distortion_px = distortion_error_px(lens.intrinsics(1), truth.intrinsics(1))

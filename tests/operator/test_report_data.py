@@ -32,7 +32,7 @@ def _calibration_run(pose_msg: m.CameraPose, rng: np.random.Generator) -> Record
                                                  radius_long_px=3, radius_short_px=3,
                                                  angle_deg=0, roundness=1, area_px=28)])
         for t, (u, v) in zip(points.times_s, points.pixels, strict=True)]
-    rec.ptz_state["ptz1"].add(float(track.times_s[0]), 0.0, 0.0)
+    rec.ptz_state["ptz1"].add(float(track.times_s[0]), 0.0, 0.0, 1)
     rec.poses["ptz1"] = pose_msg
     return rec
 
