@@ -98,7 +98,7 @@ def follow(bus: Bus, seconds: float) -> list[tuple[m.PtzTruth, m.RobotTruth]]:
 
 
 @pytest.mark.system
-@pytest.mark.parametrize("seed", [11])
+@pytest.mark.parametrize("seed", [11, 12])
 def test_collect_at_several_zooms_measures_the_sim_cameras_lens(tmp_path: Path,
                                                                  seed: int) -> None:
     truth = drawn_lens(np.random.default_rng(seed))

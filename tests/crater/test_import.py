@@ -69,6 +69,7 @@ def test_a_plane_with_a_hole_is_gridded_and_the_hole_filled_and_reported(
     assert "largest hole" in gridded.report()
 
 
+@pytest.mark.system  # 5 s of scanning: out of make test's quick loop
 def test_the_sims_scan_imports_within_5_mm_of_its_truth_outside_the_holes(
         crater: CraterMap) -> None:
     points = scan(crater, np.random.default_rng(3), ScanOptions(spacing_mm=4.0))
@@ -86,6 +87,7 @@ def test_the_sims_scan_imports_within_5_mm_of_its_truth_outside_the_holes(
     assert gridded.filled_cells > 50, "the stations do not see everything"
 
 
+@pytest.mark.system  # 4 s: out of make test's quick loop
 def test_stb_sim_scan_then_stb_crater_import(tmp_path: Path, crater_file: Path) -> None:
     scan_file, out = tmp_path / "crater.xyz", tmp_path / "imported.npz"
     made = stb_process("sim", "scan", "--out", str(scan_file), "--spacing-mm", "25",

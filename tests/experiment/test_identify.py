@@ -105,6 +105,7 @@ def test_seeds_are_read_as_ranges_or_lists() -> None:
         parse_seeds("one")
 
 
+@pytest.mark.system  # 11 s: out of make test's quick loop
 def test_the_command_evaluates_the_sim_against_the_tables(tmp_path: Path, crater_file: Path,
                                                           capsys) -> None:  # noqa: ANN001
     out = tmp_path / "fit.json"

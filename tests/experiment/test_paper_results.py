@@ -50,6 +50,7 @@ def _rms(r: Run) -> float:
     return float(np.sqrt(np.mean(np.sum(r.error_mm ** 2, axis=1))))
 
 
+@pytest.mark.system  # 19 s: out of make test's quick loop
 @pytest.mark.parametrize("scenario", ["locomotive", "walker"])
 def test_the_paper_is_reproduced_and_default_keeps_its_margin(scenario: str,
                                                               crater_file: Path) -> None:
