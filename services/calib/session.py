@@ -40,6 +40,7 @@ TICK_S = 0.05
 PROGRESS_S = 0.5
 MOCAP_WAIT_S = 1.0
 SNAPSHOTS_KEPT = 30
+HOLD_WAIT_S = 15.0  # the PTZ service may take this long to hold the camera (a busy PC)
 WIDE_COVERAGE = (4, 3, 2)  # at the widest of several zooms: every cell of a 4×3 grid, 2 each
 STALL_HINTS = {  # why snapshots gave no passpoint → what to check
     "no marker": "the wand is not in the camera's view (or the IR cut filter is on)",
@@ -67,7 +68,8 @@ class Session:
         widest = min(self.zooms) if self.zooms else None
         self.collectors = [Collector(count, settings.marker_label, settings.min_spacing_mm,
                                      settings.min_spacing_px,
-                                     WIDE_COVERAGE if zoom == widest else (0, 0, 0),
+                                     WIDE_COVERAGE if self.zooms and zoom == widest
+                                     else (0, 0, 0),
                                      track_t=track_t, track_xyz=track_xyz)
                            for zoom in self.zooms or [None]]
         self.collector = self.collectors[0]
@@ -176,8 +178,9 @@ class Session:
                 return False
             if len(self.collector.times) != gained[0]:
                 gained = (len(self.collector.times), now, Counter(self.collector.skipped))
-            elif now - gained[1] > self.settings.stall_s:
-                self._finish("failed", self._stalled_text(gained[2]))
+            elif now - gained[1] > (stall := self.settings.stall_s if held else
+                                    max(self.settings.stall_s, HOLD_WAIT_S)):
+                self._finish("failed", self._stalled_text(gained[2], stall))
                 return False
             if now >= renew_at:
                 self._calibration_mode(active=True)
@@ -371,7 +374,7 @@ class Session:
             zooms_done=sum(k.done for k in self.collectors), zooms=len(self.zooms)),
             camera=self.camera)
 
-    def _stalled_text(self, skipped_before: Counter[str]) -> str:
+    def _stalled_text(self, skipped_before: Counter[str], stall_s: float) -> str:
         since = self.collector.skipped - skipped_before
         seen = ", ".join(f"{n} {why}" for why, n in since.most_common()) or "no snapshot at all"
         # a hint for every reason seen, the most frequent first (a slow start can give more
@@ -381,7 +384,7 @@ class Session:
                            if self._camera_state is not None else
                            "the PTZ service has not taken the camera into calibration mode "
                            "(is it running?)"]
-        return (f"no passpoint for {self.settings.stall_s:g} s ({len(self.collector.times)} of "
+        return (f"no passpoint for {stall_s:g} s ({len(self.collector.times)} of "
                 f"{self.collector.target}; since the last: {seen})"
                 + (f": {'; '.join(hints)}" if hints else ""))
 

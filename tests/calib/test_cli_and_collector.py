@@ -247,17 +247,17 @@ def test_a_stalled_collection_names_what_to_check_for_every_reason_seen(tmp_path
     session = Session(None, CalibSettings(stall_s=4), PoseStore(tmp_path), "ptz1", 100,  # type: ignore[arg-type]
                       60.0, lambda pose, report: None)
     session.collector.skipped.update({"marker not in mocap": 4, "no marker": 2})
-    text = session._stalled_text(Counter())
+    text = session._stalled_text(Counter(), 4.0)
     assert text.startswith("no passpoint for 4 s (0 of 100; since the last: 4 marker not in "
                            "mocap, 2 no marker): the motion capture does not see the wand")
     assert text.index("motion capture") < text.index("not in the camera's view")
-    assert "no snapshot at all" in session._stalled_text(session.collector.skipped.copy())
+    assert "no snapshot at all" in session._stalled_text(session.collector.skipped.copy(), 15.0)
     assert "has not taken the camera into calibration mode" in session._stalled_text(
-        session.collector.skipped.copy())
+        session.collector.skipped.copy(), 15.0)
     session.on_state(m.PtzState(measured_s=session._started + 1, camera="ptz1",
                                 status="calibrating", pan_deg=0.0, tilt_deg=0.0, zoom=1,
                                 focal_mm=3.8, aim_error_deg=0.0))
-    assert "sends no detections" in session._stalled_text(session.collector.skipped.copy())
+    assert "sends no detections" in session._stalled_text(session.collector.skipped.copy(), 4.0)
 
 
 def _quiet_node() -> object:
