@@ -98,6 +98,7 @@ def follow(bus: Bus, seconds: float) -> list[tuple[m.PtzTruth, m.RobotTruth]]:
 
 
 @pytest.mark.system
+@pytest.mark.timeout(900)  # about 5 minutes of collection and one of following
 @pytest.mark.parametrize("seed", [11, 12])
 def test_collect_at_several_zooms_measures_the_sim_cameras_lens(tmp_path: Path,
                                                                  seed: int) -> None:
