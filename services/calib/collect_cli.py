@@ -5,7 +5,8 @@ the wand through the view at each) and one fit of the pose and the lens: the zoo
 length curve and the distortion (docs/calibration.md, "The lens across the zoom range").
 
 Ctrl-C cancels the collection. Exit status: 0 solved, 2 bad arguments, 3 no calib service or
-no router, 4 the collection failed or was cancelled.
+no router (at the start, or silent for 30 s on the way), 4 the collection failed or was
+cancelled.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ if TYPE_CHECKING:  # imported once the flags are parsed: --help answers at once
 
 EXIT_NO_SERVICE = 3
 EXIT_FAILED = 4
+SILENT_S = 30.0  # the service says how it goes twice a second; this long silent: it is gone
 FINAL = ("done", "failed", "cancelled")
 
 
@@ -86,6 +88,7 @@ def _collect(bus: Bus, request: m.CollectRequest, stop: threading.Event) -> int:
     bus.publish(keys.CALIB_COLLECT, request, camera=request.camera)
     interactive = sys.stdout.isatty()
     last = None
+    heard = time.monotonic()
     while True:
         if stop.is_set():
             bus.publish(keys.CALIB_COLLECT, request.model_copy(
@@ -94,7 +97,12 @@ def _collect(bus: Bus, request: m.CollectRequest, stop: threading.Event) -> int:
         try:
             progress = updates.get(timeout=0.5)
         except queue.Empty:
+            if time.monotonic() - heard > SILENT_S:
+                print(f"\nstb calib collect: no word from the calib service for {SILENT_S:g} s "
+                      "(stopped? the router gone?)", file=sys.stderr)
+                return EXIT_NO_SERVICE
             continue
+        heard = time.monotonic()
         line = _line(progress)
         if line != last:
             print(("\r" + line + "\x1b[K") if interactive else line, end="" if interactive
