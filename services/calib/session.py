@@ -41,7 +41,7 @@ PROGRESS_S = 0.5
 MOCAP_WAIT_S = 1.0
 SNAPSHOTS_KEPT = 30
 HOLD_WAIT_S = 15.0  # the PTZ service may take this long to hold the camera (a busy PC)
-WIDE_COVERAGE = (4, 3, 2)  # at the widest of several zooms: every cell of a 4×3 grid, 2 each
+WIDE_COVERAGE = (4, 3, 3)  # at the widest of several zooms: every cell of a 4×3 grid, 3 each
 STALL_HINTS = {  # why snapshots gave no passpoint → what to check
     "no marker": "the wand is not in the camera's view (or the IR cut filter is on)",
     "too many": "more bright spots than the wand (reflections, markers)",

@@ -28,7 +28,7 @@ from common.camera import Intrinsics, Pose, undistort_pixels
 
 EDGE_MARGIN = 0.015  # of the picture's width and height kept clear of the border (≈ 10 px)
 CORNERS = 0.4  # of the points: in a corner of the picture
-CORNER_SIZE = 0.2  # a corner: this share of the picture's width and of its height
+CORNER_SIZE = 0.12  # a corner: this share of the picture's width and of its height
 NEAREST_MM = 800.0  # no nearer to the camera than this (a person holds it at arm's length)
 ABOVE_GROUND_MM = 150.0  # a point on the wand's pole stays this high over the floor
 FARTHEST_MM = 9000.0
