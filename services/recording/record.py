@@ -103,8 +103,12 @@ class Recorder:
                  out: IO[bytes], *, exclude: Sequence[str] = (), with_json: bool = True,
                  scene: LabScene | None = None, raw_frames: bool = True,
                  metadata: dict[str, str] | None = None, split: SplitRule = NO_SPLIT,
-                 next_part: Callable[[], IO[bytes]] | None = None) -> None:
+                 next_part: Callable[[], IO[bytes]] | None = None,
+                 clock: Callable[[], float] = time.time) -> None:
+        """``clock``: the receive time stamped on every sample (UNIX seconds), by which the
+        parts are cut."""
         self.prefix, self.with_json, self._session = prefix, with_json, session
+        self._clock = clock
         self.raw_frames = raw_frames  # False: camera streams as the scene's video only
         self.write_error: OSError | None = None  # the disk is full: nothing more is written
         self.scene = scene
@@ -137,7 +141,7 @@ class Recorder:
         return replies
 
     def _on_sample(self, index: int, sample: zenoh.Sample) -> None:
-        received = time.time()
+        received = self._clock()
         key = sample.key_expr
         if sample.kind != zenoh.SampleKind.PUT or any(x.includes(key) for x in self._exclude):
             return

@@ -54,23 +54,25 @@ def test_the_parts_are_complete_recordings_that_read_as_one_run(
         return open(paths[-1], "wb")
 
     first = open(paths[0], "wb")  # noqa: SIM115 - the recorder's first part, closed below
+    t0 = time.time()
+    sent = 0
+    # the recorder's receive clock runs with the publisher: a camera's 25 frames a second
     recorder = Recorder(recorder_bus.session, "stb", ["stb/**"], first,  # type: ignore[arg-type]
                         scene=LabScene(video=True), raw_frames=False,
-                        split=SplitRule(max_s=1.0), next_part=next_part)
+                        split=SplitRule(max_s=1.0), next_part=next_part,
+                        clock=lambda: t0 + 0.04 * sent)
     wait_for(lambda: publisher.publish(keys.CALIB_POSE, POSE, camera="ptz1") and
              recorder.stats.samples["stb/calib/ptz1/pose"], why=lambda: "the pose is recorded")
-    rng, sent = np.random.default_rng(0), 0
-    t0 = time.time()
-    while time.time() - t0 < 3.6:  # three and a half parts of a second each
-        now = time.time()
+    rng = np.random.default_rng(0)
+    while 0.04 * sent < 3.6:  # three and a half parts of a second each
+        now = t0 + 0.04 * sent
         publisher.publish(keys.TRACKER_ROBOT, _robot(sent, now))
         publisher.publish(keys.GANTRY_FRAME, m.CameraFrame(
             measured_s=now, camera="tracking", seq=sent + 1, width_px=160, height_px=120,
             encoding="mono8", data=draw([Blob(80, 60, 5, 5)], 160, 120, rng).tobytes()))
+        wait_for(lambda n=sent + 1: recorder.stats.samples["stb/gantry/camera/frame"] == n,
+                 timeout=10, why=lambda: "the frame is recorded before the clock moves on")
         sent += 1
-        # paces the publisher, it waits for nothing: parts are cut by receive time, so the
-        # samples must span 3.6 s of it, at a camera's 25 frames a second
-        time.sleep(0.04)
     wait_for(lambda: recorder.stats.samples["stb/tracker/robot"] == sent, timeout=10,
              why=lambda: f"{recorder.stats.samples['stb/tracker/robot']} of {sent}")
     recorder.close()
