@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from common import keys
-from common.camera import Pose, head_pose, pose_distance, project
+from common.camera import Pose, pose_distance
 from common.ptz_lens import PtzLens
 from tests.calib.test_collect_e2e import calibration_lab
 from tests.calib.test_zoom_collect_e2e import (
@@ -36,6 +36,7 @@ from tests.calib.test_zoom_collect_e2e import (
     central_share,
     collect,
     follow,
+    true_pixels,
     with_lens,
 )
 from tests.calib.test_zoom_fit import drawn_lens
@@ -44,13 +45,9 @@ from tests.services.test_processes import _lab_for_up
 
 def _offsets_px(following: list, truth: PtzLens) -> np.ndarray:
     """The robot's true distance from the picture's centre in each true view, pixels."""
-    out = []
-    for camera, robot in following:
-        intr = truth.intrinsics(camera.zoom)
-        uv = project(np.array([[robot.x_mm, robot.y_mm, robot.z_mm]]),
-                     head_pose(PTZ1_MOUNT, camera.pan_deg, camera.tilt_deg), intr)[0]
-        out.append(float(np.hypot(uv[0] - intr.cy_px, uv[1] - intr.cz_px)))
-    return np.array(out)
+    uv, lenses = true_pixels(following, truth)
+    centres = np.array([(intr.cy_px, intr.cz_px) for intr in lenses]).reshape(-1, 2)
+    return np.linalg.norm(uv - centres, axis=1)
 
 
 def run(model: str, truth: PtzLens, seconds: float, count: int) -> dict:

@@ -14,7 +14,7 @@ focal lengths and interpolated linearly between them by focal length, holding th
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -28,7 +28,7 @@ AXIS_215_ZOOM_STEPS = (1, 9999)
 Distortion = tuple[float, float, float, float, float]
 
 
-def _monotone_cubic(x: np.ndarray, y: np.ndarray):  # noqa: ANN202 - scipy's callable
+def _monotone_cubic(x: np.ndarray, y: np.ndarray) -> Callable[[np.ndarray | float], np.ndarray]:
     from scipy.interpolate import PchipInterpolator  # only when a curve has 3 points or more
 
     return PchipInterpolator(x, y, extrapolate=False)
@@ -58,22 +58,22 @@ class ZoomCurve:
         return cls(tuple(z for z, _ in ordered), tuple(f for _, f in ordered))
 
     @cached_property
-    def _forward(self):  # noqa: ANN202
-        return _monotone_cubic(np.asarray(self.zooms), np.asarray(self.focals_mm))
+    def _forward(self) -> Callable[[np.ndarray | float], np.ndarray]:
+        """Zoom → focal length between the points: a line through two, PCHIP through more
+        (scipy only then: a camera on the data sheet's line does without it)."""
+        zooms, focals = np.asarray(self.zooms), np.asarray(self.focals_mm)
+        if len(zooms) == 2:
+            return lambda z: np.interp(z, zooms, focals)
+        return _monotone_cubic(zooms, focals)
 
     @cached_property
     def _steps(self) -> tuple[np.ndarray, np.ndarray]:
         """Every whole zoom step of the curve and its focal length (increasing both)."""
         steps = np.arange(np.ceil(self.zooms[0]), np.floor(self.zooms[-1]) + 1)
-        focal = np.interp(steps, self.zooms, self.focals_mm) if len(self.zooms) == 2 \
-            else self._forward(steps)
-        return steps, np.asarray(focal, dtype=float)
+        return steps, np.asarray(self._forward(steps), dtype=float)
 
     def focal_mm(self, zoom: float) -> float:
-        z = min(max(float(zoom), self.zooms[0]), self.zooms[-1])
-        if len(self.zooms) == 2:
-            return float(np.interp(z, self.zooms, self.focals_mm))
-        return float(self._forward(z))
+        return float(self._forward(min(max(float(zoom), self.zooms[0]), self.zooms[-1])))
 
     def zoom_for_focal(self, focal_mm: float) -> int:
         """The whole zoom step whose focal length is nearest to ``focal_mm`` (the curve's own

@@ -99,20 +99,14 @@ def _solve_zooms(points: Passpoints, options: Options, args: argparse.Namespace)
 
 
 def _human_zooms(report: dict) -> str:
-    x, y, z = report["position_mm"]
-    rx, ry, rz = report["orientation_deg"]
-    lines = [f"position    {x:9.1f} {y:9.1f} {z:9.1f} mm",
-             f"orientation {rx:9.3f} {ry:9.3f} {rz:9.3f} deg (R = Rx·Ry·Rz)",
+    lines = [*_pose_lines(report),
              f"error       {report['mean_error_px']:.2f} px mean over every zoom's inliers",
              "zoom    focal mm  k1       k2       p1        p2        k3       px   points"]
     for at in report["lens"]:
         k1, k2, p1, p2, k3 = at["distortion"]
         lines.append(f"{at['zoom']:<7d} {at['focal_mm']:8.3f}  {k1:+.4f} {k2:+.4f} {p1:+.5f} "
                      f"{p2:+.5f} {k3:+.4f} {at['mean_error_px']:5.2f} {at['passpoints']:4d}")
-    if "time_offset_s" in report:
-        lines.append(f"clock       mocap = camera + {report['time_offset_s'] * 1e3:.1f} ms")
-    lines += [f"plot        {p}" for p in report.get("plots", [])]
-    return "\n".join(lines)
+    return "\n".join(lines + _clock_and_plots(report))
 
 
 def _parse_pose(text: str | None) -> Pose | None:
@@ -129,11 +123,21 @@ def _parse_pose(text: str | None) -> Pose | None:
     return Pose(*values)
 
 
-def _human(report: dict) -> str:
+def _pose_lines(report: dict) -> list[str]:
     x, y, z = report["position_mm"]
     rx, ry, rz = report["orientation_deg"]
-    lines = [f"position    {x:9.1f} {y:9.1f} {z:9.1f} mm",
-             f"orientation {rx:9.3f} {ry:9.3f} {rz:9.3f} deg (R = Rx·Ry·Rz)",
+    return [f"position    {x:9.1f} {y:9.1f} {z:9.1f} mm",
+            f"orientation {rx:9.3f} {ry:9.3f} {rz:9.3f} deg (R = Rx·Ry·Rz)"]
+
+
+def _clock_and_plots(report: dict) -> list[str]:
+    lines = [f"clock       mocap = camera + {report['time_offset_s'] * 1e3:.1f} ms"] \
+        if "time_offset_s" in report else []
+    return lines + [f"plot        {p}" for p in report.get("plots", [])]
+
+
+def _human(report: dict) -> str:
+    lines = [*_pose_lines(report),
              "1σ          ±{:.1f} ±{:.1f} ±{:.1f} mm, ±{:.3f} ±{:.3f} ±{:.3f} deg".format(
                  *report["position_std_mm"], *report["orientation_std_deg"]),
              f"focal       {report['focal_mm']:.3f} mm",
@@ -141,7 +145,4 @@ def _human(report: dict) -> str:
              f"{len(report['inliers'])} inliers; rejected {report['rejected'] or 'none'}",
              f"method      {report['method']}, {report['evaluations']} evaluations, "
              f"{report['seconds'] * 1e3:.1f} ms"]
-    if "time_offset_s" in report:
-        lines.append(f"clock       mocap = camera + {report['time_offset_s'] * 1e3:.1f} ms")
-    lines += [f"plot        {p}" for p in report.get("plots", [])]
-    return "\n".join(lines)
+    return "\n".join(lines + _clock_and_plots(report))

@@ -12,7 +12,7 @@ are drivers beside it.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -51,7 +51,6 @@ class PtzControl:
     max_future_s: float = 1.0
     pose_msg: m.CameraPose | None = None
     pose: Pose | None = None  # converted once, when it arrives (robot samples come at 1 kHz)
-    lens: PtzLens = field(default_factory=PtzLens)  # the pose's measured lens, or the default
     robot: m.RobotPosition | None = None
     limits: PtzLimits | None = None
     retry_at: float = 0.0
@@ -59,6 +58,11 @@ class PtzControl:
     manual: bool = False  # following paused for someone else's move
     held_by: str = ""  # an operator holds the camera (the page): it does not follow
     pose_problem: str = ""  # the calibration service's answers disagreed, or none came
+
+    @property
+    def lens(self) -> PtzLens:
+        """The pose's measured lens, or the data sheet's straight line (the follower's)."""
+        return self.follower.lens
 
     # --- what comes in ----------------------------------------------------------------------
 
@@ -72,7 +76,7 @@ class PtzControl:
             return "same"
         self.pointing.forget()
         self.pose_msg, self.pose = msg, Pose.of(msg)
-        self.lens = self.follower.lens = measured_lens(
+        self.follower.lens = measured_lens(
             [(p.zoom, p.focal_mm, p.distortion) for p in msg.lens])
         return "taken"
 

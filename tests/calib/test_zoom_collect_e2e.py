@@ -18,7 +18,7 @@ import pytest
 from common import keys
 from common import messages as m
 from common.bus import Bus
-from common.camera import Pose, head_pose, project
+from common.camera import Intrinsics, Pose, head_pose, project
 from common.ptz_lens import PtzLens, measured_lens
 from tests.calib.test_collect_e2e import calibration_lab
 from tests.calib.test_solve import errors
@@ -46,16 +46,26 @@ def with_lens(lab: Path, lens: PtzLens) -> None:
         "[up]\n", '[up]\nservices = ["router", "sim", "tracker", "calib", "ptz:ptz1"]\n', 1))
 
 
+def true_pixels(truths: list[tuple[m.PtzTruth, m.RobotTruth]], lens: PtzLens
+                ) -> tuple[np.ndarray, list[Intrinsics]]:
+    """Where the robot's true marker is in each of the camera's true views (pixels), and the
+    true lens at each view's zoom."""
+    uv, lenses = [], []
+    for camera, robot in truths:
+        intr = lens.intrinsics(camera.zoom)
+        uv.append(project(np.array([[robot.x_mm, robot.y_mm, robot.z_mm]]),
+                          head_pose(PTZ1_MOUNT, camera.pan_deg, camera.tilt_deg), intr)[0])
+        lenses.append(intr)
+    return np.array(uv).reshape(-1, 2), lenses
+
+
 def central_share(truths: list[tuple[m.PtzTruth, m.RobotTruth]], lens: PtzLens) -> float:
     """The share of the camera's true views in which the robot's true marker is within the
     central 40 % of the picture's width."""
-    inside = 0
-    for camera, robot in truths:
-        intr = lens.intrinsics(camera.zoom)
-        u, _ = project(np.array([[robot.x_mm, robot.y_mm, robot.z_mm]]),
-                       head_pose(PTZ1_MOUNT, camera.pan_deg, camera.tilt_deg), intr)[0]
-        inside += bool(0.3 * intr.width_px <= u <= 0.7 * intr.width_px)
-    return inside / len(truths)
+    uv, lenses = true_pixels(truths, lens)
+    inside = [0.3 * intr.width_px <= u <= 0.7 * intr.width_px
+              for (u, _), intr in zip(uv, lenses, strict=True)]
+    return sum(inside) / len(truths)
 
 
 def collect(lab: Path, zooms: list[int], count: int) -> subprocess.CompletedProcess:
