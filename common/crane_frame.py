@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 from pydantic import BaseModel, ConfigDict, Field
 
 from common.crane_registers import RegisterMap
@@ -54,18 +55,18 @@ class CraneFrame(BaseModel):
     def is_identity(self) -> bool:
         return self == CraneFrame()
 
-    def to_world(self, xy_crane: np.ndarray) -> np.ndarray:
+    def to_world(self, xy_crane: ArrayLike) -> np.ndarray:
         """Crane coordinates (…, 2) in the world (mm)."""
         return np.asarray(self.origin_mm) + np.asarray(xy_crane, dtype=float) @ self.linear.T
 
-    def to_crane(self, xy_world: np.ndarray) -> np.ndarray:
+    def to_crane(self, xy_world: ArrayLike) -> np.ndarray:
         """World coordinates (…, 2) as the crane counts them (mm)."""
         return (np.asarray(xy_world, dtype=float) - np.asarray(self.origin_mm)) @ self.linear
 
-    def vector_to_world(self, v_crane: np.ndarray) -> np.ndarray:
+    def vector_to_world(self, v_crane: ArrayLike) -> np.ndarray:
         return np.asarray(v_crane, dtype=float) @ self.linear.T
 
-    def vector_to_crane(self, v_world: np.ndarray) -> np.ndarray:
+    def vector_to_crane(self, v_world: ArrayLike) -> np.ndarray:
         return np.asarray(v_world, dtype=float) @ self.linear
 
     @classmethod

@@ -15,6 +15,7 @@ import io
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -74,9 +75,10 @@ class HeightMap:
         """Write the map whole or not at all: other processes read it as it is written.
         ``extra``: more arrays beside it (an imported scan's ``filled`` cells)."""
         buffer = io.BytesIO()
-        np.savez_compressed(buffer, heights_mm=self.heights_mm.astype(np.float32),
-                            origin_mm=np.array([self.origin_x_mm, self.origin_y_mm]),
-                            resolution_mm=np.array(self.resolution_mm), **extra)
+        arrays: dict[str, Any] = {"heights_mm": self.heights_mm.astype(np.float32),
+                  "origin_mm": np.array([self.origin_x_mm, self.origin_y_mm]),
+                  "resolution_mm": np.array(self.resolution_mm), **extra}
+        np.savez_compressed(buffer, **arrays)
         write_atomically(path, buffer.getvalue())
 
     @classmethod

@@ -447,6 +447,9 @@ class KeyStats(BaseModel):
     dropped: dict[str, int] = Field(description="dropped samples by reason, e.g. not_msgpack")
 
 
+HealthStatus = Literal["ok", "degraded", "stopping"]
+
+
 class ServiceHealth(Message):
     """Published by every service once per second."""
 
@@ -455,6 +458,6 @@ class ServiceHealth(Message):
     host: str = Field(max_length=255)
     pid: int = Field(ge=0)
     started_s: float
-    status: Literal["ok", "degraded", "stopping"]
+    status: HealthStatus
     detail: str = Field("", max_length=500, description="why degraded, if it is")
     keys: dict[str, KeyStats] = Field(description="per concrete key expression")

@@ -19,7 +19,7 @@ from typing import Generic, TypeVar
 
 from common import keys
 from common.bus import Bus, BusUnreachable, open_session
-from common.messages import ServiceHealth
+from common.messages import HealthStatus, ServiceHealth
 from common.realtime import use_realtime_priority
 from common.settings import ServiceSettings
 
@@ -47,16 +47,18 @@ class Node(Generic[S]):
         self.bus = bus
         self.stop = threading.Event()
         self.started_s = time.time()
-        self._status: tuple[str, str] = ("ok", "")
+        self._status: tuple[HealthStatus, str] = ("ok", "")
 
-    def set_status(self, status: str, detail: str = "") -> None:
+    def set_status(self, status: HealthStatus, detail: str = "") -> None:
         """``ok`` or ``degraded`` (with a reason); shows in the published health."""
         if (status, detail) != self._status:
             log.info("status %s%s", status, f": {detail}" if detail else "")
         self._status = (status, detail)
 
     def health(self) -> ServiceHealth:
-        status, detail = ("stopping", "") if self.stop.is_set() else self._status
+        status, detail = self._status
+        if self.stop.is_set():
+            status, detail = "stopping", ""
         return ServiceHealth(
             measured_s=time.time(), service=self.service, instance=self.settings.instance,
             host=socket.gethostname()[:255], pid=os.getpid(), started_s=self.started_s,

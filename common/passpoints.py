@@ -55,10 +55,10 @@ class Passpoints:
     def joined(cls, by_zoom: dict[int, Passpoints]) -> Passpoints:
         """The passpoints of several zoom steps in one, each row with its zoom."""
         parts = list(by_zoom.items())
-        times = [p.times_s for _, p in parts]
+        times = [p.times_s for _, p in parts if p.times_s is not None]
         return cls(np.vstack([p.world_mm for _, p in parts]).reshape(-1, 3),
                    np.vstack([p.pixels for _, p in parts]).reshape(-1, 2),
-                   None if any(t is None for t in times) else np.concatenate(times),
+                   np.concatenate(times) if len(times) == len(parts) else None,
                    np.concatenate([np.full(len(p), z, dtype=float) for z, p in parts]))
 
 

@@ -137,8 +137,9 @@ def _type_name(annotation: object) -> str:
         return " or ".join(_type_name(a) for a in args)
     if isinstance(annotation, type) and issubclass(annotation, BaseModel):
         return annotation.__name__
-    return {float: "float", int: "int", str: "str", bool: "bool", bytes: "bin",
-            type(None): "nil"}.get(annotation, str(annotation))  # type: ignore[arg-type]
+    names: dict[object, str] = {float: "float", int: "int", str: "str", bool: "bool",
+                                bytes: "bin", type(None): "nil"}
+    return names.get(annotation, str(annotation))
 
 
 def _constraints(info: FieldInfo) -> str:
@@ -225,8 +226,8 @@ def render() -> str:
             "", "Example (as JSON; on the wire it is msgpack):", "", "```json",
             json.dumps(example.model_dump(mode="json"), indent=None)[:600], "```", ""]
     out += ["## Nested maps", ""]
-    for model in _nested_models():
-        out += [f"### {model.__name__}", "", _summary(model), ""] + _model_table(model) + [""]
+    for nested in _nested_models():
+        out += [f"### {nested.__name__}", "", _summary(nested), ""] + _model_table(nested) + [""]
     out += [
         "## A subscriber in plain Python",
         "",

@@ -46,7 +46,7 @@ def refine_jointly(pose: Pose, points: Passpoints, intr: Intrinsics, *, fit_foca
                    track: Track | None = None, time_offset_s: float = 0.0) -> JointFit:
     """Least squares over the pose and, as asked, the focal length and the clock offset."""
     fit_offset = track is not None
-    if fit_offset:
+    if track is not None:
         if points.times_s is None:
             raise ValueError("a clock offset needs passpoint times")
         # UNIX times carry ~0.2 µs resolution: too coarse for the finite differences that
@@ -69,9 +69,14 @@ def refine_jointly(pose: Pose, points: Passpoints, intr: Intrinsics, *, fit_foca
         offset = p[-1] if fit_offset else 0.0
         return Pose.from_matrix(rotation, p[3:6]), intr.with_focal(float(focal)), float(offset)
 
+    def world_at(offset: float) -> np.ndarray:
+        if track is None or points.times_s is None:
+            return points.world_mm
+        return track.at(points.times_s + offset)
+
     def residuals(p: np.ndarray) -> np.ndarray:
         candidate, intr_p, offset = unpack(p)
-        world = track.at(points.times_s + offset) if track is not None else points.world_mm
+        world = world_at(offset)
         uv = project(world, candidate, intr_p)
         return np.nan_to_num(uv - points.pixels, nan=1e4).ravel()
 

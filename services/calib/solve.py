@@ -154,7 +154,9 @@ def check_input(points: Passpoints, options: Options) -> None:
         if not options.track.covers(points.times_s):
             raise CalibrationError("the mocap track does not cover the passpoints' times "
                                    f"{points.times_s.min():.3f}–{points.times_s.max():.3f} s")
-    world = options.track.at(points.times_s) if options.track is not None else points.world_mm
+        world = options.track.at(points.times_s)
+    else:
+        world = points.world_mm
     spread = np.linalg.svd(world - world.mean(axis=0), compute_uv=False)
     if spread[1] < 1e-3 * max(spread[0], 1e-9) or spread[0] < 1.0:
         raise CalibrationError("the passpoints' world positions lie on one line (or one point): "

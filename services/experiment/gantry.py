@@ -111,9 +111,8 @@ def run(lab: Lab, settings: GantrySettings, *, end_s: float | None = None,
     warm_up()  # load the compiled detector before the clock starts
     started = time.perf_counter()
     clock = SimClock(START_S)
-    controller = Controller(settings, lab.crater if heights is None else heights)
-    if oracle_ahead_s is not None:
-        controller.predictor = Oracle(lab.robot, oracle_ahead_s)  # type: ignore[assignment]
+    controller = Controller(settings, lab.crater if heights is None else heights,
+                            None if oracle_ahead_s is None else Oracle(lab.robot, oracle_ahead_s))
     loop = GantryLoop(settings, ModelCrane(lab, clock, settings.crane, settings.crane.frame()),
                       SimFrames(lab, clock, np.random.default_rng((settings.seed, 2))),
                       controller, START_S,

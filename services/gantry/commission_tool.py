@@ -20,7 +20,8 @@ from services.gantry.commissioning_run import (
     lab_of,
     run_moves,
 )
-from services.gantry.crane import CraneError, ModbusCrane
+from services.gantry.crane import ModbusCrane
+from services.gantry.reading import CraneError
 from services.gantry.settings import GantrySettings
 
 EXIT_NOT_SAFE, EXIT_NO_DEVICE = 1, 3

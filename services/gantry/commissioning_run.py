@@ -27,8 +27,9 @@ from services.gantry.commission import (
     sampling_period,
     set_off,
 )
-from services.gantry.crane import CraneError, CraneReading, RegisterCrane
-from services.gantry.frames import FrameInbox, FrameSource, OpenCvFrames, decode
+from services.gantry.crane import RegisterCrane
+from services.gantry.frames import FrameInbox, FrameSource, OpenCvFrames
+from services.gantry.reading import CraneError, CraneReading
 from services.gantry.settings import GantrySettings
 
 POLL_S = 0.01
@@ -81,8 +82,7 @@ class Recorder:
             self.frames = OpenCvFrames(settings.frames.removeprefix("opencv:"), self._stop)
         else:
             inbox = self.frames = FrameInbox()
-            bus.subscribe(keys.GANTRY_FRAME,
-                          lambda msg: (frame := decode(msg)) is not None and inbox.put(frame))
+            bus.subscribe(keys.GANTRY_FRAME, inbox.put_message)
         self._threads = [threading.Thread(target=self._poll, daemon=True),
                          threading.Thread(target=self._look, daemon=True)]
 

@@ -19,17 +19,20 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from common.heightmap import HeightMap
 from common.markers import Detection, Spot, closest, detect
 from services.gantry.crosscheck import CrossCheck
-from services.gantry.frames import Frame
 from services.gantry.locate import locate
-from services.gantry.predict import Estimate, make_predictor, prediction_horizon
+from services.gantry.predict import Estimate, Predictor, make_predictor, prediction_horizon
 from services.gantry.safety import SetpointGuard, Workspace
 from services.gantry.settings import GantrySettings
+
+if TYPE_CHECKING:  # OpenCV's capture stays out of the core
+    from common.capture import Frame
 
 MAX_MARKERS = 20
 
@@ -78,11 +81,13 @@ class Controller:
     """The gantry's control law with the state that belongs to it: the last marker pixel, the
     predictor's filters, the estimate and its age, the guard's last setpoint."""
 
-    def __init__(self, settings: GantrySettings, heights: HeightMap) -> None:
+    def __init__(self, settings: GantrySettings, heights: HeightMap,
+                 predictor: Predictor | None = None) -> None:
+        """``predictor``: None for the one ``settings`` name (the experiments pass others)."""
         s = settings
         self.settings, self.heights = s, heights
         self.camera, self.frame = s.tracking_camera, s.crane.frame()
-        self.predictor = make_predictor(s.algorithm, seed=s.seed, horizon_s=min(
+        self.predictor = predictor or make_predictor(s.algorithm, seed=s.seed, horizon_s=min(
             prediction_horizon(s.reaction_s, 1 / s.control_hz), s.max_horizon_s),
             particle=(s.pf_velocity if s.algorithm == "pf-velocity" else s.pf_position).options(),
             kalman=s.default_filter.options())

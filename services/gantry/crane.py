@@ -14,8 +14,8 @@ import contextlib
 import socket
 import struct
 import threading
-from dataclasses import dataclass
-from typing import Protocol
+from collections.abc import Callable
+from typing import Any
 
 from pymodbus.client import ModbusTcpClient
 from pymodbus.exceptions import ModbusException
@@ -23,56 +23,7 @@ from pymodbus.exceptions import ModbusException
 from common import crane_registers as r
 from common.crane_frame import CRANE_COUNTS_IN_THE_WORLD, CraneFrame
 from common.crane_registers import DEFAULT_MAP, RegisterMap
-
-
-class CraneError(Exception):
-    """The crane controller cannot be used right now."""
-
-
-class CraneUnreachable(CraneError):
-    pass
-
-
-class CraneRejected(CraneError):
-    pass
-
-
-@dataclass(frozen=True)
-class CraneReading:
-    x_mm: float
-    y_mm: float
-    vx_mm_s: float
-    vy_mm_s: float
-    status: int
-    faults: int
-    target_x_mm: float
-    target_y_mm: float
-    setpoints_taken: int = 0  # the controller's count of setpoints it took (wraps at 65536)
-
-    @property
-    def enabled(self) -> bool:
-        return bool(self.status & r.ENABLED)
-
-    @property
-    def moving(self) -> bool:
-        return bool(self.status & r.MOVING)
-
-    @property
-    def watchdog_tripped(self) -> bool:
-        return bool(self.faults & r.FAULT_WATCHDOG)
-
-    @property
-    def safety_ok(self) -> bool:
-        """The controller's safety circuit is closed (no e-stop pressed)."""
-        return bool(self.status & r.SAFETY_OK)
-
-    @property
-    def latched_faults(self) -> int:
-        return self.faults & r.LATCHED_FAULTS
-
-    @property
-    def fault_names(self) -> str:
-        return r.fault_names(self.faults)
+from services.gantry.reading import CraneReading, CraneRejected, CraneUnreachable
 
 
 def reading_from(block: list[int], start: int, registers: RegisterMap = DEFAULT_MAP,
@@ -102,23 +53,6 @@ def setpoint_writes(registers: RegisterMap, x_mm: float, y_mm: float,
     if registers.setpoint_y == registers.setpoint_x + len(x):
         return [(registers.setpoint_x, x + y)]
     return [(registers.setpoint_x, x), (registers.setpoint_y, y)]
-
-
-class Crane(Protocol):
-    """The crane controller as the gantry uses it: the Modbus driver here, a simulated one in
-    the experiments. Every method raises ``CraneError`` when the controller cannot be used."""
-
-    def read(self) -> CraneReading: ...
-
-    def enable(self) -> None: ...
-
-    def disable(self) -> None: ...
-
-    def reset_faults(self) -> None: ...
-
-    def write_setpoint(self, x_mm: float, y_mm: float) -> None: ...
-
-    def heartbeat(self) -> None: ...
 
 
 class RegisterCrane:
@@ -190,7 +124,7 @@ class ModbusCrane(RegisterCrane):
             self._call(lambda: self._client.write_registers(address, values,
                                                             device_id=self.registers.unit_id))
 
-    def _call(self, request):  # type: ignore[no-untyped-def]
+    def _call(self, request: Callable[[], Any]) -> Any:
         try:
             if not self._client.connected and not self._client.connect():
                 raise CraneUnreachable(f"crane controller {self.host}:{self.port} not reachable")

@@ -21,9 +21,10 @@ from common.crane_frame import CraneFrame
 from common.markers import Spot, detect
 from common.tracking_camera import TrackingCameraModel
 from services.gantry.commissioning_run import CommissioningError
-from services.gantry.crane import CraneError, CraneReading, RegisterCrane
+from services.gantry.crane import RegisterCrane
 from services.gantry.frames import FrameInbox, decode
 from services.gantry.geometry_fit import CameraFit, Sighting, fit_camera
+from services.gantry.reading import CraneError, CraneReading
 
 REST_MM, REST_MM_S, REST_FOR_S = 2.0, 2.0, 0.3  # standing still: near the target, not moving
 MOVE_TIMEOUT_S = 15.0
@@ -77,7 +78,7 @@ class Watch:
 
     def spots(self, count: int = FRAMES, timeout_s: float = 2.0) -> list[list[Spot]]:
         """The spots in each of the next ``count`` frames captured from now."""
-        since, out = time.time(), []
+        since, out = time.time(), list[list[Spot]]()
         deadline = time.monotonic() + timeout_s
         while len(out) < count and time.monotonic() < deadline:
             frame = self.frames.take()

@@ -24,7 +24,7 @@ from services.gantry.commissioning_run import (
     lab_of,
     run_moves,
 )
-from services.gantry.crane import CraneError, ModbusCrane
+from services.gantry.crane import ModbusCrane
 from services.gantry.first_day import (
     Watch,
     camera_from_stands,
@@ -34,6 +34,7 @@ from services.gantry.first_day import (
     heartbeat,
 )
 from services.gantry.geometry_fit import CameraFit, FitRefused, FrameFit, fit_frame
+from services.gantry.reading import CraneError
 from services.gantry.settings import GantrySettings
 
 EXIT_REFUSED, EXIT_NO_DEVICE = 1, 3

@@ -42,6 +42,12 @@ class FrameInbox:
         with self._lock:
             self._frames.append(frame)
 
+    def put_message(self, msg: m.CameraFrame) -> None:
+        """A frame from the bus; one that does not decode is logged and left out."""
+        frame = decode(msg)
+        if frame is not None:
+            self.put(frame)
+
     def take(self) -> Frame | None:
         recent = self.take_recent()
         return recent[0] if recent else None

@@ -16,18 +16,21 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from services.gantry.command_rate import CommandRate
 from services.gantry.control import Controller, Fix, Step, Timing
-from services.gantry.crane import Crane, CraneError, CraneReading
 from services.gantry.crosscheck import CrossCheck
 from services.gantry.cycle import CycleSync
-from services.gantry.frames import FrameSource
 from services.gantry.modes import Action, Command, Decision, Facts, Mode, ModeKeeper
+from services.gantry.reading import Crane, CraneError, CraneReading
 from services.gantry.safety import TargetCheck
 from services.gantry.settings import GantrySettings
+
+if TYPE_CHECKING:  # the frames' threads and JPEG decoding stay out of the core
+    from services.gantry.frames import FrameSource
 
 log = logging.getLogger(__name__)
 

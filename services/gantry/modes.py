@@ -16,7 +16,9 @@
   clears the controller's latched faults) leads out, to ``disarmed``; then ``arm``. The
   gantry never resets a fault on its own.
 
-Every change names who asked and why.
+Every change names who asked and why. What the gantry says of itself follows from its mode
+too: the status it publishes with the crane's state (``crane_status``), its health
+(``health``) and whether it feeds the crane's watchdog (``heartbeat_due``).
 """
 
 from __future__ import annotations
@@ -24,7 +26,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import StrEnum
 
-from services.gantry.crane import CraneReading
+from common.messages import CraneStatus, HealthStatus
+from services.gantry.reading import CraneReading
 
 
 class Mode(StrEnum):
@@ -147,3 +150,41 @@ def stopped_why(crane: CraneReading) -> str | None:
     if crane.latched_faults:
         return f"crane fault latched ({crane.fault_names})"
     return None
+
+
+def crane_status(mode: Mode, reading: CraneReading, *, hold: bool, reacquiring: bool = False
+                 ) -> CraneStatus:
+    """What the crane's state says the gantry is doing: a latched fault shows unless the
+    gantry is stopped (then the stop says more: who and why)."""
+    if reading.latched_faults and mode is not Mode.STOPPED:
+        return "fault"
+    if mode is Mode.DISARMED:
+        return "idle"
+    if mode is Mode.STOPPED:
+        return "stopped"
+    if hold:
+        return "holding"
+    return "reacquiring" if reacquiring else "tracking"
+
+
+def health(keeper: ModeKeeper, *, untrusted: str | None, disagreement: str, hold: bool,
+           hold_reason: str) -> tuple[HealthStatus, str]:
+    """The gantry's health while the controller answers: degraded when stopped, when it would
+    not arm (``untrusted``: why the geometry is not trusted), when the tracking camera and the
+    motion capture disagree, or while it holds (``hold_reason``)."""
+    if keeper.mode is Mode.STOPPED:
+        return "degraded", f"stopped by {keeper.by}: {keeper.reason}"
+    if keeper.mode is Mode.DISARMED:
+        if untrusted:
+            return "degraded", f"disarmed; would not arm: {untrusted}"
+        return "ok", "disarmed"
+    if disagreement:
+        return "degraded", disagreement
+    return ("degraded" if hold else "ok"), hold_reason
+
+
+def heartbeat_due(armed: bool, since_last_step_s: float, control_hz: float) -> bool:
+    """The crane's watchdog is fed only while armed and the control loop is alive (a step in
+    the last 2.5 periods): a stuck or failing loop stops the heartbeat, and the crane's
+    watchdog stops the crane."""
+    return armed and since_last_step_s <= 2.5 / control_hz

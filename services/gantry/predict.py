@@ -39,7 +39,9 @@ class Predictor(Protocol):
     """One of the gantry's algorithms: fed every measured position (None when the marker was
     not seen), it gives its estimate of where the crane should go."""
 
-    name: AlgorithmName
+    @property
+    def name(self) -> str:
+        """The algorithm's name (``AlgorithmName``; the experiments' bound is ``oracle``)."""
 
     def update(self, t_s: float, measured: np.ndarray | None, horizon_s: float | None = None
                ) -> Estimate | None:
@@ -262,17 +264,20 @@ class ParticleOptions:
 def make_predictor(name: AlgorithmName, *, seed: int = 0, horizon_s: float = PAPER_HORIZON_S,
                    particle: ParticleOptions = ParticleOptions(),
                    kalman: KalmanOptions = _KALMAN) -> Predictor:
-    pf = {"particles": particle.particles, "seed": seed,
-          "velocity_noise_mm_s": particle.velocity_noise_mm_s,
-          "diff_max_mm": particle.diff_max_mm}
+    def pf(output: Literal["position", "velocity"],
+           model: Literal["linear", "gauss"]) -> ParticleFilter:
+        return ParticleFilter(name, output, model, particles=particle.particles, seed=seed,
+                              velocity_noise_mm_s=particle.velocity_noise_mm_s,
+                              diff_max_mm=particle.diff_max_mm)
+
     if name == "basic":
         return Basic()
     if name == "pf-position":
-        return ParticleFilter(name, "position", "linear", **pf)
+        return pf("position", "linear")
     if name == "pf-position-gauss":
-        return ParticleFilter(name, "position", "gauss", **pf)
+        return pf("position", "gauss")
     if name == "pf-velocity":
-        return ParticleFilter(name, "velocity", "linear", **pf)
+        return pf("velocity", "linear")
     if name == "default":
         return KalmanPredictor(horizon_s=horizon_s, **asdict(kalman))
     raise ValueError(f"unknown algorithm {name!r}; choose one of {', '.join(ALGORITHMS)}")

@@ -22,7 +22,7 @@ from common.crane_registers import FAULT_CLAMPED
 from common.volume import Box
 
 if TYPE_CHECKING:  # the reading's type only: this module stays free of the Modbus driver
-    from services.gantry.crane import CraneReading
+    from services.gantry.reading import CraneReading
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,7 @@ import contextlib
 import logging
 import threading
 import time
+from typing import TypedDict
 
 import numpy as np
 
@@ -33,11 +34,12 @@ from common.heightmap import HeightMap
 from common.markers import to_message, warm_up
 from common.node import Node, StartupError, run_every
 from services.gantry.control import Controller, Fix, Step
-from services.gantry.crane import CraneError, CraneReading, ModbusCrane
-from services.gantry.frames import FrameInbox, FrameSource, OpenCvFrames, decode
+from services.gantry.crane import ModbusCrane
+from services.gantry.frames import FrameInbox, FrameSource, OpenCvFrames
 from services.gantry.loop import GantryLoop, Reply, Request
-from services.gantry.modes import Command, Mode
+from services.gantry.modes import Command, Mode, crane_status, health, heartbeat_due
 from services.gantry.offload import offload
+from services.gantry.reading import CraneError, CraneReading
 from services.gantry.settings import GantrySettings
 
 log = logging.getLogger(__name__)
@@ -54,7 +56,7 @@ def run(node: Node[GantrySettings]) -> None:
     frames: FrameSource
     if s.frames == "bus":
         inbox = frames = FrameInbox()
-        node.bus.subscribe(keys.GANTRY_FRAME, lambda msg: _put(inbox, msg))
+        node.bus.subscribe(keys.GANTRY_FRAME, inbox.put_message)
     else:
         frames = OpenCvFrames(s.frames.removeprefix("opencv:"), node.stop)
     fix, crane_marker = LatestFix(), LatestMarker(s.crane_marker)
@@ -124,10 +126,14 @@ class LatestMarker:
         return self._fix
 
 
-def _put(inbox: FrameInbox, msg: m.CameraFrame) -> None:
-    frame = decode(msg)
-    if frame is not None:
-        inbox.put(frame)
+class CommandAudit(TypedDict, total=False):
+    """The fields of ``CraneState`` that say what the last operator's command was."""
+
+    command: str
+    command_by: str
+    command_s: float
+    command_accepted: bool
+    command_detail: str
 
 
 class Control:
@@ -144,9 +150,8 @@ class Control:
                                   msg.measured_s))
 
     def heartbeat(self) -> None:
-        """Only while armed and the control loop is alive: a stuck or failing loop stops the
-        heartbeat, and the crane's watchdog stops the crane."""
-        if not self.loop.armed or time.monotonic() - self.last_tick > 2.5 / self.s.control_hz:
+        if not heartbeat_due(self.loop.armed, time.monotonic() - self.last_tick,
+                             self.s.control_hz):
             return
         with contextlib.suppress(CraneError):  # the control loop reports it
             self.loop.crane.heartbeat()
@@ -192,17 +197,9 @@ class Control:
 
     def _status(self, step: Step) -> None:
         modes = self.loop.modes
-        if modes.mode is Mode.STOPPED:
-            self.node.set_status("degraded", f"stopped by {modes.by}: {modes.reason}")
-        elif modes.mode is Mode.DISARMED:
-            untrusted = self.loop.geometry(time.time())
-            self.node.set_status("degraded" if untrusted else "ok",
-                                 f"disarmed; would not arm: {untrusted}" if untrusted
-                                 else "disarmed")
-        elif step.disagreement:
-            self.node.set_status("degraded", step.disagreement)
-        else:
-            self.node.set_status("degraded" if step.hold else "ok", step.reason)
+        untrusted = self.loop.geometry(time.time()) if modes.mode is Mode.DISARMED else None
+        self.node.set_status(*health(modes, untrusted=untrusted, disagreement=step.disagreement,
+                                     hold=step.hold, hold_reason=step.reason))
 
     def _estimate(self, step: Step) -> None:
         e, xyz = step.estimate, step.measured_xyz
@@ -235,7 +232,7 @@ class Control:
             mode=modes.mode.value, mode_by=modes.by[:128], mode_reason=modes.reason[:500],
             mode_since_s=modes.since_s, **self._last_command()))
 
-    def _last_command(self) -> dict[str, object]:
+    def _last_command(self) -> CommandAudit:
         """The audit of the last operator's command: who, when, what and the answer."""
         if self.loop.last_reply is None:
             return {}
@@ -247,13 +244,9 @@ class Control:
     def _state(self, now: float, reading: CraneReading, *, hold: bool,
                reacquiring: bool = False) -> None:
         modes = self.loop.modes
-        following = "reacquiring" if reacquiring else "tracking"
-        status = {Mode.DISARMED: "idle", Mode.STOPPED: "stopped"}.get(
-            modes.mode, "holding" if hold else following)
-        if reading.latched_faults and modes.mode is not Mode.STOPPED:
-            status = "fault"
         self.node.bus.publish(keys.GANTRY_STATE, m.CraneState(
-            measured_s=now, status=status, x_mm=reading.x_mm, y_mm=reading.y_mm,
+            measured_s=now, x_mm=reading.x_mm, y_mm=reading.y_mm,
+            status=crane_status(modes.mode, reading, hold=hold, reacquiring=reacquiring),
             target_x_mm=reading.target_x_mm, target_y_mm=reading.target_y_mm,
             enabled=reading.enabled, moving=reading.moving, fault_bits=reading.faults & 0xFFFF,
             safety_ok=reading.safety_ok, mode=modes.mode.value, mode_by=modes.by[:128],

@@ -213,6 +213,8 @@ def calibration_residuals(rec: Recording, marker_label: str = "wand") -> dict[st
         if not collector.times:
             continue
         points = collector.passpoints()
+        if points.times_s is None:
+            continue
         st, pan_tilt = states.arrays()
         mount = Pose.of(pose_msg)
         track = collector.track()

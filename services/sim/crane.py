@@ -201,8 +201,8 @@ class CraneModel:
         while self._pending and self._pending[0][0] <= self._step:
             self._target = list(self._pending.pop(0)[1])
         self._move()
-        p, v = self._p, self._v
-        self._history[self._step % len(self._history)] = (p[0], p[1], v[0], v[1])
+        pos, vel = self._p, self._v
+        self._history[self._step % len(self._history)] = (pos[0], pos[1], vel[0], vel[1])
 
     def _stop_with(self, fault: int) -> None:
         self.enabled = False
@@ -231,11 +231,10 @@ class CraneModel:
     def _move(self) -> None:
         p = self.params
         dv_max = p.max_accel_mm_s2 * STEP_S
-        braking = self._target is None or not self.enabled
+        target = None if not self.enabled else self._target
         for axis, low, high in ((0, p.x_min_mm, p.x_max_mm), (1, p.y_min_mm, p.y_max_mm)):
             pos, vel = self._p[axis], self._v[axis]
-            desired = 0.0 if braking else _desired_speed(
-                self._target[axis] - pos, p, dv_max)  # type: ignore[index]
+            desired = 0.0 if target is None else _desired_speed(target[axis] - pos, p, dv_max)
             vel += min(max(desired - vel, -dv_max), dv_max)
             pos += vel * STEP_S
             if pos < low or pos > high:

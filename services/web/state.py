@@ -115,8 +115,8 @@ class LiveState:
             if shot is not None and shot[0].measured_s == msg.measured_s:
                 self.snapshots[msg.camera] = (shot[0], msg.markers)
         elif isinstance(msg, m.CollectProgress):
-            old = self.collections.get(msg.camera)
-            if old is None or old.state not in ("collecting", "solving"):
+            previous = self.collections.get(msg.camera)
+            if previous is None or previous.state not in ("collecting", "solving"):
                 _keep(self.collecting_since, msg.camera, msg.measured_s, MAX_CAMERAS)
             _keep(self.collections, msg.camera, msg, MAX_CAMERAS)
         elif isinstance(msg, m.ServiceHealth):

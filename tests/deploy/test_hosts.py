@@ -20,7 +20,8 @@ from common import messages as m
 from common.bus import Bus
 from common.camera import Pose
 from common.settings import BusSettings
-from services.gantry.crane import CraneError, ModbusCrane
+from services.gantry.crane import ModbusCrane
+from services.gantry.reading import CraneError
 from services.sim.settings import SimSettings
 from tests.conftest import ROOT, open_when_up, wait_for
 from tests.deploy import netns

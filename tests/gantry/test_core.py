@@ -15,10 +15,10 @@ from common.crane_frame import CraneFrame
 from common.crane_registers import FAULT_CLAMPED
 from common.heightmap import HeightMap
 from common.tracking_camera import TrackingCameraModel
-from services.gantry.crane import CraneReading
 from services.gantry.frames import FrameInbox
 from services.gantry.locate import locate
 from services.gantry.predict import ALGORITHMS, ParticleOptions, make_predictor
+from services.gantry.reading import CraneReading
 from services.gantry.safety import SetpointGuard, TargetCheck, Workspace
 from tests.gantry.camera import pixel_of
 

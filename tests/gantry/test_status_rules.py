@@ -1,0 +1,95 @@
+"""What the gantry says of itself (modes.py, pure): the crane state's status, its health and
+whether it feeds the crane's watchdog; and that the cores load no I/O library."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from common.crane_registers import ENABLED, FAULT_WATCHDOG, SAFETY_OK
+from services.gantry.modes import (
+    Command,
+    Facts,
+    Mode,
+    ModeKeeper,
+    crane_status,
+    health,
+    heartbeat_due,
+)
+from services.gantry.reading import CraneReading
+
+OK = CraneReading(0.0, 0.0, 0.0, 0.0, ENABLED | SAFETY_OK, 0, 0.0, 0.0)
+TRIPPED = CraneReading(0.0, 0.0, 0.0, 0.0, SAFETY_OK, FAULT_WATCHDOG, 0.0, 0.0)
+
+
+@pytest.mark.parametrize(("mode", "reading", "hold", "reacquiring", "status"), [
+    (Mode.DISARMED, OK, False, False, "idle"),
+    (Mode.DISARMED, OK, True, True, "idle"),
+    (Mode.STOPPED, OK, False, False, "stopped"),
+    (Mode.STOPPED, TRIPPED, False, False, "stopped"),  # the stop says who and why
+    (Mode.ARMED, OK, False, False, "tracking"),
+    (Mode.ARMED, OK, False, True, "reacquiring"),
+    (Mode.ARMED, OK, True, True, "holding"),
+    (Mode.ARMED, TRIPPED, False, False, "fault"),
+    (Mode.DISARMED, TRIPPED, False, False, "fault"),
+])
+def test_the_crane_state_says_what_the_gantry_does(mode: Mode, reading: CraneReading,
+                                                   hold: bool, reacquiring: bool,
+                                                   status: str) -> None:
+    assert crane_status(mode, reading, hold=hold, reacquiring=reacquiring) == status
+
+
+def _keeper(mode: Mode) -> ModeKeeper:
+    keeper = ModeKeeper(0.0)
+    facts = Facts(OK, estimate_age_s=0.0, stale_after_s=1.0)
+    if mode is Mode.ARMED:
+        assert keeper.command(Command.ARM, "ana", "", 1.0, facts).accepted
+    elif mode is Mode.STOPPED:
+        keeper.command(Command.STOP, "ana", "lunch", 1.0, facts)
+    return keeper
+
+
+def test_health_while_disarmed_says_whether_it_would_arm() -> None:
+    keeper = _keeper(Mode.DISARMED)
+    assert health(keeper, untrusted=None, disagreement="", hold=True, hold_reason="x") == (
+        "ok", "disarmed")
+    assert health(keeper, untrusted="crane frame off by 80 mm", disagreement="", hold=False,
+                  hold_reason="") == ("degraded",
+                                      "disarmed; would not arm: crane frame off by 80 mm")
+
+
+def test_health_when_stopped_names_who_and_why() -> None:
+    assert health(_keeper(Mode.STOPPED), untrusted=None, disagreement="disagree", hold=False,
+                  hold_reason="") == ("degraded", "stopped by ana: lunch")
+
+
+def test_health_while_armed_disagreement_first_then_the_hold() -> None:
+    armed = _keeper(Mode.ARMED)
+    assert health(armed, untrusted=None, disagreement="fixes 300 mm apart", hold=True,
+                  hold_reason="stale") == ("degraded", "fixes 300 mm apart")
+    assert health(armed, untrusted=None, disagreement="", hold=True,
+                  hold_reason="marker lost") == ("degraded", "marker lost")
+    assert health(armed, untrusted=None, disagreement="", hold=False, hold_reason="") == (
+        "ok", "")
+
+
+def test_the_heartbeat_only_while_armed_and_the_loop_alive() -> None:
+    assert heartbeat_due(True, 0.0, 25.0)
+    assert heartbeat_due(True, 2.5 / 25.0, 25.0), "two and a half periods late is still alive"
+    assert not heartbeat_due(True, 2.6 / 25.0, 25.0), "a stuck loop starves the watchdog"
+    assert not heartbeat_due(False, 0.0, 25.0)
+
+
+def test_the_cores_load_no_io_library() -> None:
+    """The control law, the modes and the loop run on numbers: no Modbus client, no camera
+    capture, no bus."""
+    code = ("import sys\n"
+            "import services.gantry.control, services.gantry.modes, services.gantry.loop\n"
+            "import services.gantry.safety, services.gantry.reading\n"
+            "loaded = {'pymodbus', 'cv2', 'zenoh', 'httpx'} & set(sys.modules)\n"
+            "assert not loaded, loaded\n")
+    subprocess.run([sys.executable, "-c", code], cwd=Path(__file__).parents[2], check=True,
+                   timeout=60)
