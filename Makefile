@@ -18,9 +18,11 @@ setup: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/stb up --lab $(or $(LAB),config/demo.toml)
 
-## Lint, then the test suite but for the long whole-lab runs (about 6 minutes on 2 cores).
+## Lint and type-check, then the test suite but for the long whole-lab runs (about 6 minutes
+## on 2 cores).
 test: $(STAMP)
 	$(BIN)/ruff check common services tests benchmarks compose_test
+	$(BIN)/mypy
 	$(BIN)/python -m pytest -q -m "not system"
 
 ## The long whole-lab runs on real time (fault campaign, demo calibration, live vs experiment,
@@ -38,4 +40,4 @@ wire-doc: $(STAMP)
 	$(BIN)/python -m common.wiredoc > docs/wire-format.md
 
 clean:
-	rm -rf $(VENV) run .pytest_cache .ruff_cache
+	rm -rf $(VENV) run .pytest_cache .ruff_cache .mypy_cache

@@ -285,14 +285,15 @@ class Bus:
             lambda key, payload: self.accept(topic, key, payload, max_age_s=max_age_s),
             handler, latest=latest, queue_size=queue_size)
 
-    def subscribe_any(self, key_expr: str, handler: Callable[[tuple[str, Message | dict]], None],
+    def subscribe_any(self, key_expr: str,
+                      handler: Callable[[tuple[str, Message | dict[str, Any]]], None],
                       *, latest: bool = False, queue_size: int = 1000) -> Subscription:
         """Every valid sample under ``key_expr`` as ``(key, message)``, for generic tools.
 
         Keys of our topics are decoded with their model (invalid ones are counted and dropped);
         other keys are handed over as plain dicts if they are msgpack maps.
         """
-        def accept(key: str, payload: bytes) -> tuple[str, Message | dict] | None:
+        def accept(key: str, payload: bytes) -> tuple[str, Message | dict[str, Any]] | None:
             topic = topic_for(self.prefix, key)
             if topic is not None:
                 msg = self.accept(topic, key, payload)

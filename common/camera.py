@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from functools import cached_property
-from typing import Protocol
+from typing import Protocol, TypedDict
 
 import numpy as np
 
@@ -50,7 +50,8 @@ def euler_xyz_deg(rotation: np.ndarray) -> tuple[float, float, float]:
     else:  # gimbal lock: only rx + rz (or rx - rz) is defined; put it all in rx
         rx = np.arctan2(r[2, 1], r[1, 1])
         rz = 0.0
-    return tuple(float(a) for a in np.degrees([rx, ry, rz]))  # type: ignore[return-value]
+    degrees = np.degrees([rx, ry, rz])
+    return float(degrees[0]), float(degrees[1]), float(degrees[2])
 
 
 def quaternion_wxyz(rotation: np.ndarray) -> tuple[float, float, float, float]:
@@ -73,7 +74,8 @@ def quaternion_wxyz(rotation: np.ndarray) -> tuple[float, float, float, float]:
         q[1 + m] = (r[m, i] + r[i, m]) / s
     quat = np.array(q) / np.linalg.norm(q)
     quat = -quat if quat[0] < 0 else quat
-    return tuple(float(c) for c in np.clip(quat, -1.0, 1.0))  # type: ignore[return-value]
+    w, x, y, z = (float(c) for c in np.clip(quat, -1.0, 1.0))
+    return w, x, y, z
 
 
 class PositionFields(Protocol):
@@ -96,6 +98,17 @@ class PoseFields(PositionFields, Protocol):
     def ry_deg(self) -> float: ...
     @property
     def rz_deg(self) -> float: ...
+
+
+class PoseKeywords(TypedDict):
+    """A pose as keyword arguments of a message (``Pose.fields``)."""
+
+    x_mm: float
+    y_mm: float
+    z_mm: float
+    rx_deg: float
+    ry_deg: float
+    rz_deg: float
 
 
 @dataclass(frozen=True)
@@ -123,7 +136,7 @@ class Pose:
         camera's settings)."""
         return cls(f.x_mm, f.y_mm, f.z_mm, f.rx_deg, f.ry_deg, f.rz_deg)
 
-    def fields(self) -> dict[str, float]:
+    def fields(self) -> PoseKeywords:
         """``x_mm … rz_deg`` as keyword arguments (for a CameraPose message)."""
         return {"x_mm": self.x_mm, "y_mm": self.y_mm, "z_mm": self.z_mm,
                 "rx_deg": self.rx_deg, "ry_deg": self.ry_deg, "rz_deg": self.rz_deg}

@@ -63,7 +63,7 @@ def encode(msg: Message, *, sent_s: float | None = None) -> bytes:
     return msgpack.packb(data, use_bin_type=True)
 
 
-def unpack(payload: bytes, *, max_bytes: int) -> dict:
+def unpack(payload: bytes, *, max_bytes: int) -> dict[str, Any]:
     """Unpack a msgpack map without validating it against a model (for generic tools)."""
     if len(payload) > max_bytes:
         raise DecodeError(TOO_LARGE, f"{len(payload)} bytes > limit {max_bytes}")
@@ -94,7 +94,7 @@ def _has_non_finite(value: object) -> bool:
     return isinstance(value, float) and not math.isfinite(value)
 
 
-def to_plain(msg: BaseModel | dict) -> dict[str, Any]:
+def to_plain(msg: BaseModel | dict[str, Any]) -> dict[str, Any]:
     """A JSON-ready dict of a message; bytes become base64 strings (monitor, recordings)."""
     data = msg.model_dump() if isinstance(msg, BaseModel) else dict(msg)
     return _plain(data)

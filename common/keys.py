@@ -12,7 +12,7 @@ import functools
 import re
 import string
 from dataclasses import dataclass
-from typing import Generic, TypeVar
+from typing import Any, Generic, TypeVar
 
 from common import messages as m
 
@@ -134,7 +134,7 @@ TRUTH_PTZ = Topic("sim/truth/ptz/{camera}", m.PtzTruth, "sim only: true camera p
 HEALTH = Topic("health/{service}/{instance}", m.ServiceHealth,
                "each service's health, 1 Hz", stream=False)
 
-ALL_TOPICS: tuple[Topic, ...] = (
+ALL_TOPICS: tuple[Topic[Any], ...] = (
     TRACKER_MARKERS, TRACKER_ROBOT, PTZ_STATE, PTZ_DETECTIONS, PTZ_CALIBRATION, PTZ_SNAPSHOT,
     PTZ_PREVIEW, PTZ_HAND,
     CALIB_COLLECT, CALIB_PROGRESS, CALIB_POSE, GANTRY_FRAME, GANTRY_DETECTIONS, GANTRY_ESTIMATE,
@@ -163,6 +163,6 @@ def parse_alive(prefix: str, key: str) -> tuple[str, str] | None:
     return parts[-2], parts[-1]
 
 
-def topic_for(prefix: str, key: str) -> Topic | None:
+def topic_for(prefix: str, key: str) -> Topic[Any] | None:
     """The topic a concrete key belongs to, or None."""
     return next((t for t in ALL_TOPICS if t.match(prefix, key) is not None), None)

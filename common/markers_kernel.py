@@ -6,6 +6,8 @@ Pure and allocation-light; ``common.markers`` is its only caller and documents t
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numba import njit
 
@@ -24,7 +26,7 @@ def _find(parent: np.ndarray, i: int) -> int:
 
 @njit(cache=True, nogil=True)
 def bright_segments(image: np.ndarray, band_max: np.ndarray, band_rows: int, floor: int
-                    ) -> tuple:
+                    ) -> tuple[Any, ...]:
     """Where a threshold of at least ``floor`` can find anything: in each band whose brightest
     (``band_max``) reaches it, the segments of columns whose brightest over the band's rows
     (a vectorised pass) does — ``segments[band_start[b]:band_start[b + 1]]``, (first, end)
@@ -110,7 +112,8 @@ def run_capacity(row_max: np.ndarray, band_rows: int, band_start: np.ndarray,
 @njit(cache=True, nogil=True)
 def _scan_runs(image: np.ndarray, row_max: np.ndarray, row_span: np.ndarray, band_rows: int,
                band_start: np.ndarray, segments: np.ndarray, bright: np.ndarray,
-               threshold: int, l_min: int, runs: np.ndarray, weights: np.ndarray) -> tuple:
+               threshold: int, l_min: int, runs: np.ndarray, weights: np.ndarray
+               ) -> tuple[Any, ...]:
     """Runs (row, start, end exclusive; Σw, Σw·x) with w = gray − threshold + 1, in the rows
     whose maximum reaches the threshold, within their band's segments and their span; sorted
     by row, then
@@ -144,7 +147,7 @@ def _scan_runs(image: np.ndarray, row_max: np.ndarray, row_span: np.ndarray, ban
 
 
 @njit(cache=True, nogil=True)
-def _label_runs(run_row: np.ndarray, run_start: np.ndarray, run_end: np.ndarray) -> tuple:
+def _label_runs(run_row: np.ndarray, run_start: np.ndarray, run_end: np.ndarray) -> tuple[Any, ...]:
     """Union-find over runs overlapping on consecutive rows; (label per run, region count)."""
     n = run_row.shape[0]
     parent = np.arange(n)
@@ -182,7 +185,7 @@ def _label_runs(run_row: np.ndarray, run_start: np.ndarray, run_end: np.ndarray)
 def regions_kernel(image: np.ndarray, row_max: np.ndarray, row_span: np.ndarray, band_rows: int,
                    band_start: np.ndarray, segments: np.ndarray, bright: np.ndarray,
                    threshold: int, l_min: int, small_area: int, refine_from: int,
-                   runs: np.ndarray, weights: np.ndarray) -> tuple:
+                   runs: np.ndarray, weights: np.ndarray) -> tuple[Any, ...]:
     """(table, seeds): one row per region, columns u, v, radius_long, radius_short,
     angle_deg, roundness, area: the brightness-weighted centroid, and the binary region's
     inertia ellipse (radius = 2·√eigenvalue, + 1/12 px² for a pixel's own extent, so a disc
@@ -361,7 +364,7 @@ def _is_marker(region: np.ndarray, r_lim: float, min_area: int, max_area: int) -
 @njit(cache=True, nogil=True)
 def threshold_kernel(image: np.ndarray, band_max: np.ndarray, band_rows: int,
                      thresholds: np.ndarray, l_min: int, small_area: int, r_lim: float,
-                     min_area: int, max_area: int, out: np.ndarray) -> tuple:
+                     min_area: int, max_area: int, out: np.ndarray) -> tuple[Any, ...]:
     """The paper's threshold loop in one call (each call from Python costs microseconds, and
     an array handed back two more: the result goes into ``out``): the bright segments of the
     bands that reach the lowest threshold (``bright_segments``), then from the first

@@ -22,7 +22,7 @@ from collections import Counter
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
 from mcap.exceptions import EndOfFile, McapError
 from mcap.reader import make_reader
@@ -85,7 +85,7 @@ class RecordWriter:
         self.messages += 1
         return sequence
 
-    def write_json(self, key: str, data: bytes, *, schema: tuple[str, dict] | None,
+    def write_json(self, key: str, data: bytes, *, schema: tuple[str, dict[str, Any]] | None,
                    received_s: float, measured_s: float | None, sequence: int) -> None:
         """The JSON copy of a sample written with ``write`` (same times and sequence)."""
         topic = JSON_PREFIX + key
@@ -160,7 +160,7 @@ def read_run(paths: Path | Sequence[Path], keys: Iterable[str] | None = None
 def run_keys(paths: Path | Sequence[Path]) -> dict[str, int]:
     """Every key recorded in any file of a run, and its number of samples (from each file's
     summary; a pose written again at a part's start counts again)."""
-    counts: Counter = Counter()
+    counts: Counter[str] = Counter()
     for path in [paths] if isinstance(paths, Path) else paths:
         counts.update(recorded_keys(path))
     return dict(counts)

@@ -12,9 +12,11 @@ Conventions (see docs/wire-format.md, which is generated from this module):
 
 from __future__ import annotations
 
-from typing import Annotated, Literal, get_args
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from common.names import AlgorithmName, GantryCommandName, GantryMode
 
 Name = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")]
 
@@ -309,13 +311,10 @@ class CameraFrame(Message):
     data: bytes
 
 
-Algorithm = Literal["basic", "pf-position", "pf-position-gauss", "pf-velocity", "default"]
-
-
 class RobotEstimate(Message):
     """The gantry's estimate of the robot marker (``measured_s`` = capture time of its frame)."""
 
-    algorithm: Algorithm
+    algorithm: AlgorithmName
     valid: bool = Field(description="False while the marker is lost")
     x_mm: float
     y_mm: float
@@ -337,10 +336,6 @@ CraneStatus = Literal["idle", "tracking", "reacquiring", "holding", "stale", "fa
                       "unreachable"]
 
 
-GantryMode = Literal["disarmed", "armed", "stopped"]
-GantryCommandName = Literal["arm", "disarm", "stop", "reset"]
-GANTRY_COMMANDS: tuple[GantryCommandName, ...] = get_args(GantryCommandName)
-"""The operator's commands to the gantry, in their order of the help texts."""
 
 
 class CraneState(Message):

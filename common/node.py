@@ -15,7 +15,7 @@ import threading
 import time
 from collections.abc import Callable
 from types import FrameType
-from typing import Generic, TypeVar
+from typing import Any, Generic, TypeVar
 
 from common import keys
 from common.bus import Bus, BusUnreachable, open_session
@@ -104,7 +104,7 @@ def configure_logging(level: str) -> None:
         logging.getLogger(chatty).setLevel(max(logging.WARNING, logging.getLogger().level))
 
 
-def run_node(service: str, settings: ServiceSettings, body: Callable[[Node], None]) -> int:
+def run_node(service: str, settings: ServiceSettings, body: Callable[[Node[Any]], None]) -> int:
     """Run ``body(node)`` as service ``service`` until it returns or a signal stops it.
 
     ``body`` must return soon after ``node.stop`` is set. Returns the process exit code.
@@ -140,7 +140,7 @@ def run_node(service: str, settings: ServiceSettings, body: Callable[[Node], Non
     return EXIT_OK
 
 
-def _health_loop(node: Node) -> None:
+def _health_loop(node: Node[Any]) -> None:
     while not node.stop.wait(node.settings.bus.health_period_s):
         _try(node.publish_health)
 

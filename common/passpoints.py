@@ -12,6 +12,7 @@ import csv
 import io
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -121,7 +122,8 @@ def format_passpoints(points: Passpoints) -> str:
     return out.getvalue()
 
 
-def _read_table(path: Path, columns: tuple[str, ...], optional: tuple[str, ...] = ()) -> dict:
+def _read_table(path: Path, columns: tuple[str, ...], optional: tuple[str, ...] = ()
+                ) -> dict[str, Any]:
     try:
         text = path.read_text()
     except OSError as err:

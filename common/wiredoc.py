@@ -164,7 +164,7 @@ def _model_table(model: type[BaseModel]) -> list[str]:
     for name, info in model.model_fields.items():
         meaning = (info.description or "").replace("|", "\\|")
         if not info.is_required():
-            default = info.default_factory() if info.default_factory else info.default  # type: ignore[call-arg]
+            default = info.get_default(call_default_factory=True, validated_data={})
             meaning = f"{meaning} (default {default!r})".strip()
         lines.append(f"| `{name}` | {_type_name(info.annotation)} | {_constraints(info)} "
                      f"| {meaning} |")

@@ -25,7 +25,7 @@ class Parser(argparse.ArgumentParser):
     vector of them is a value, never an option: ``--initial -100,200,3000,180,0,180`` and
     ``--target -1200,300,0`` work as written (plain argparse takes only a lone number so)."""
 
-    def _parse_optional(self, arg_string: str) -> tuple | None:  # type: ignore[override]
+    def _parse_optional(self, arg_string: str) -> tuple | None:
         if NUMBERS.match(arg_string):
             return None
         return super()._parse_optional(arg_string)

@@ -12,8 +12,9 @@ from typing import Any, TypeVar
 import zenoh
 
 from common.bus import BusUnreachable, open_session
+from common.errors import ConfigError
 from common.node import EXIT_UNREACHABLE, Node, configure_logging, run_node
-from common.settings import ConfigError, ServiceSettings, load_settings
+from common.settings import ServiceSettings, load_settings
 from services.args import EXIT_CONFIG, overrides_from
 
 S = TypeVar("S", bound=ServiceSettings)

@@ -12,6 +12,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import BinaryIO
 
 import zenoh
 from pydantic import Field, field_validator
@@ -67,11 +68,16 @@ class Child:
     alive: bool = False
     health: str = ""  # as shown: status, detail, drops
     status: str = ""  # ok, degraded, stopping: a change of it is worth reporting
-    log_file: object = field(default=None, repr=False)
+    log_file: BinaryIO | None = field(default=None, repr=False)
 
     @property
     def name(self) -> str:
         return f"{self.service}/{self.instance}"
+
+    def close_log(self) -> None:
+        if self.log_file is not None:
+            self.log_file.close()
+            self.log_file = None
 
 
 class Supervisor:
@@ -101,8 +107,8 @@ class Supervisor:
     def _start(self, child: Child, now: float) -> None:
         self.settings.log_dir.mkdir(parents=True, exist_ok=True)
         path = self.settings.log_dir / f"{child.service}-{child.instance}.log"
-        child.log_file = open(path, "ab")  # noqa: SIM115 - kept open while the child runs
-        child.process = subprocess.Popen(self.argv(child), stdout=child.log_file,
+        log_file = child.log_file = open(path, "ab")  # noqa: SIM115 - open while it runs
+        child.process = subprocess.Popen(self.argv(child), stdout=log_file,
                                          stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
         child.started_at, child.restart_at = now, None
         log.info("started %s (pid %d), log %s", child.name, child.process.pid, path)
@@ -111,7 +117,7 @@ class Supervisor:
         assert child.process is not None
         child.last_exit = child.process.returncode
         child.process = None
-        child.log_file.close()  # type: ignore[attr-defined]
+        child.close_log()
         child.delay_s = next_delay(child.delay_s, now - child.started_at, self.settings)
         child.restart_at = now + child.delay_s
         child.restarts += 1
@@ -122,18 +128,18 @@ class Supervisor:
         """SIGTERM the services, then the router; SIGKILL what is still there after the timeout."""
         for group in ([c for c in self.children if c.service != "router"],
                       [c for c in self.children if c.service == "router"]):
-            running = [c for c in group if c.process is not None]
-            for child in running:
+            running = [(c, c.process) for c in group if c.process is not None]
+            for child, process in running:
                 child.restart_at = None
-                child.process.send_signal(signal.SIGTERM)  # type: ignore[union-attr]
-            for child in running:
+                process.send_signal(signal.SIGTERM)
+            for child, process in running:
                 try:
-                    child.process.wait(self.settings.stop_timeout_s)  # type: ignore[union-attr]
+                    process.wait(self.settings.stop_timeout_s)
                 except subprocess.TimeoutExpired:
                     log.warning("%s did not stop in time, killing it", child.name)
-                    child.process.kill()  # type: ignore[union-attr]
-                    child.process.wait()  # type: ignore[union-attr]
-                child.log_file.close()  # type: ignore[attr-defined]
+                    process.kill()
+                    process.wait()
+                child.close_log()
                 child.process = None
 
     def set_alive(self, service: str, instance: str, alive: bool) -> None:

@@ -19,24 +19,26 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import deque
+from collections.abc import Callable
+from functools import partial
 
 from common import keys
 from common import messages as m
 from common.node import Node
+from services.calib.pose_rules import (
+    ForeignPoses,
+    health,
+    next_version,
+    rotation_gap_deg,
+    same_solve,
+)
 from services.calib.session import Session
 from services.calib.settings import CalibSettings
 from services.calib.store import PoseStore
 
+OfACamera = m.MarkerDetections | m.CameraFrame | m.PtzState  # what a session is told
+
 log = logging.getLogger(__name__)
-
-FOREIGN_REPORTED_S = 60.0  # health is degraded this long after the last foreign pose
-
-
-def _same_solve(a: m.CameraPose, b: m.CameraPose) -> bool:
-    """The same pose whatever its version and publication time (an echo or a re-assertion)."""
-    ignore = {"version", "sent_s"}
-    return a.model_dump(exclude=ignore) == b.model_dump(exclude=ignore)
 
 
 class Calib:
@@ -45,7 +47,7 @@ class Calib:
         self.lock = threading.Lock()
         self.poses: dict[str, m.CameraPose] = {}
         self.sessions: dict[str, Session] = {}
-        self.foreign: dict[str, deque[float]] = {}  # when poses it did not send were heard
+        self.foreign = ForeignPoses()  # when poses it did not send were heard (monotonic)
         self.status_due: threading.Timer | None = None  # the status once the minute is over
 
     def start(self) -> None:
@@ -57,7 +59,7 @@ class Calib:
                 log.info("%s: stored pose (%.2f px over %d passpoints)", camera,
                          pose.mean_error_px, pose.passpoints)
                 bus.publish(keys.CALIB_POSE, pose, camera=camera)
-            bus.serve_latest(keys.CALIB_POSE, lambda c=camera: self.poses.get(c), camera=camera)
+            bus.serve_latest(keys.CALIB_POSE, partial(self.poses.get, camera), camera=camera)
             bus.subscribe(keys.CALIB_POSE, self.on_pose_heard, latest=False, camera=camera)
             bus.subscribe(keys.CALIB_COLLECT, self.on_request, latest=False, camera=camera)
         bus.subscribe(keys.TRACKER_MARKERS, self._each_session("on_frame"), latest=False)
@@ -96,8 +98,7 @@ class Calib:
 
     def solved(self, pose: m.CameraPose, report: dict) -> None:
         with self.lock:
-            held = self.poses.get(pose.camera)
-            pose = pose.model_copy(update={"version": (held.version if held else 0) + 1})
+            pose = next_version(pose, self.poses.get(pose.camera))
             self.poses[pose.camera] = pose
         self.store.save(pose, report)
         self.node.bus.publish(keys.CALIB_POSE, pose, camera=pose.camera)
@@ -109,16 +110,14 @@ class Calib:
         camera = msg.camera
         with self.lock:
             own = self.poses.get(camera)
-            if own is not None and _same_solve(msg, own):
+            if own is not None and same_solve(msg, own):
                 return
-            heard = self.foreign.setdefault(camera, deque(maxlen=10_000))
-            heard.append(time.monotonic())
-            first = len(heard) == 1
+            first = self.foreign.heard(camera, time.monotonic())
         if first:
             log.warning("%s: a pose it did not send (version %d%s) on the bus; PTZ services "
                         "take only the stored one, asked of this service", camera, msg.version,
                         "" if own is None else
-                        f", up to {_rotation_gap_deg(msg, own):.1f}° from its own")
+                        f", up to {rotation_gap_deg(msg, own):.1f}° from its own")
         self._report_status()
 
     def _start(self, camera: str, count: int, timeout_s: float, review: bool = False,
@@ -129,7 +128,7 @@ class Calib:
             self.sessions[camera] = session
         threading.Thread(target=session.run, name=f"collect-{camera}", daemon=True).start()
 
-    def _each_session(self, method: str):  # type: ignore[no-untyped-def]
+    def _each_session(self, method: str) -> Callable[[m.Message], None]:
         def handler(msg: m.Message) -> None:
             with self.lock:
                 sessions = [s for s in self.sessions.values() if s.running]
@@ -137,10 +136,10 @@ class Calib:
                 getattr(session, method)(msg)
         return handler
 
-    def _to_session(self, method: str):  # type: ignore[no-untyped-def]
-        def handler(msg: m.Message) -> None:
+    def _to_session(self, method: str) -> Callable[[OfACamera], None]:
+        def handler(msg: OfACamera) -> None:
             with self.lock:
-                session = self.sessions.get(msg.camera)  # type: ignore[attr-defined]
+                session = self.sessions.get(msg.camera)
             if session is not None and session.running:
                 getattr(session, method)(msg)
         return handler
@@ -148,28 +147,16 @@ class Calib:
     def _report_status(self) -> None:
         now = time.monotonic()
         with self.lock:
-            missing = [c for c in self.settings.cameras if c not in self.poses]
-            for heard in self.foreign.values():
-                while heard and now - heard[0] >= FOREIGN_REPORTED_S:
-                    heard.popleft()
-            foreign = {c: len(heard) for c, heard in self.foreign.items()}
-        problems = [f"no pose yet: {', '.join(missing)}"] if missing else []
-        problems += [f"{c}: {n} poses it did not send were on the bus in the last minute "
-                     "(not taken: PTZ services ask this service)"
-                     for c, n in sorted(foreign.items()) if n]
-        self.node.set_status("degraded" if problems else "ok", "; ".join(problems))
-        with self.lock:  # and again when the minute is over
+            status = health(self.settings.cameras, self.poses, self.foreign.counts(now))
+            change_s = self.foreign.next_change_s()
+        self.node.set_status(*status)
+        with self.lock:  # and again when a foreign pose leaves the window
             due = self.status_due
             pending = due is not None and due.is_alive() and due is not threading.current_thread()
-            if any(foreign.values()) and not pending:
-                self.status_due = threading.Timer(FOREIGN_REPORTED_S + 0.5, self._report_status)
+            if change_s is not None and not pending:
+                self.status_due = threading.Timer(change_s - now + 0.5, self._report_status)
                 self.status_due.daemon = True
                 self.status_due.start()
-
-
-def _rotation_gap_deg(a: m.CameraPose, b: m.CameraPose) -> float:
-    return max(abs((getattr(a, f) - getattr(b, f) + 180) % 360 - 180)
-               for f in ("rx_deg", "ry_deg", "rz_deg"))
 
 
 def run(node: Node[CalibSettings]) -> None:

@@ -66,12 +66,13 @@ class Session:
         track_t: list[float] = []  # one mocap track for every zoom's collector
         track_xyz: list[np.ndarray] = []
         widest = min(self.zooms) if self.zooms else None
+        each: list[int | None] = list(self.zooms) if self.zooms else [None]  # None: as it is
         self.collectors = [Collector(count, settings.marker_label, settings.min_spacing_mm,
                                      settings.min_spacing_px,
                                      WIDE_COVERAGE if self.zooms and zoom == widest
                                      else (0, 0, 0),
                                      track_t=track_t, track_xyz=track_xyz)
-                           for zoom in self.zooms or [None]]
+                           for zoom in each]
         self.collector = self.collectors[0]
         self._zoom_index = 0
         self._zoom_since: float | None = None  # the camera's first state at the present zoom

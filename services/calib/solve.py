@@ -25,7 +25,7 @@ from common.passpoints import CalibrationError, Passpoints, Track
 from services.calib.cost import Fitness
 from services.calib.joint import best_offset_on_grid, refine_jointly
 from services.calib.pnp import pose_std, ransac_seed, robust_refine
-from services.calib.search import search
+from services.calib.search import SearchMethod, search
 
 Method = Literal["auto", "cmaes", "simplex"]
 MIN_PASSPOINTS = 6
@@ -118,7 +118,7 @@ def solve(points: Passpoints, options: Options = Options()) -> Solution:
     if options.method == "auto":
         pose, inliers, evaluations, curve = _auto(points, intr, options)
     else:
-        pose, inliers, evaluations, curve = _search(points, intr, options)
+        pose, inliers, evaluations, curve = _search(points, intr, options, options.method)
     offset = None
     if options.fit_focal or options.track is not None:
         pose, intr, offset, inliers, more = _joint(pose, points, inliers, intr, options)
@@ -196,19 +196,19 @@ def _auto(points: Passpoints, intr: Intrinsics, options: Options
     return pose, inliers, 0, []
 
 
-def _search(points: Passpoints, intr: Intrinsics, options: Options
+def _search(points: Passpoints, intr: Intrinsics, options: Options, method: SearchMethod
             ) -> tuple[Pose, np.ndarray, int, list]:
     assert options.initial is not None
     p = options.initial
     start = np.array([p.x_mm, p.y_mm, p.z_mm, p.rx_deg, p.ry_deg, p.rz_deg])
     fitness = Fitness(points.world_mm, points.pixels, intr)
-    best = search(options.method, fitness, start, options.seed)  # type: ignore[arg-type]
+    best = search(method, fitness, start, options.seed)
     pose = Pose(*best)
     inliers = np.flatnonzero(reprojection_px(pose, points.world_mm, points.pixels, intr)
                              <= options.inlier_px)
     if MIN_PASSPOINTS <= len(inliers) < len(points):
         kept = Fitness(points.world_mm[inliers], points.pixels[inliers], intr)
-        best = search(options.method, kept, best, options.seed + 1,  # type: ignore[arg-type]
+        best = search(method, kept, best, options.seed + 1,
                       step=np.array([50.0, 50.0, 50.0, 2.0, 2.0, 2.0]))
         pose = Pose(*best)
         inliers = np.flatnonzero(reprojection_px(pose, points.world_mm, points.pixels, intr)

@@ -3,10 +3,12 @@ command and its documentation)."""
 
 from __future__ import annotations
 
+import argparse
 import sys
 
+from common.errors import ConfigError
 from common.files import write_atomically
-from common.settings import ConfigError, read_lab_file
+from common.settings import read_lab_file
 from services.deploy.render import (
     COMPOSE_FILE,
     ROUTER_CONFIG,
@@ -21,7 +23,7 @@ from services.ptz.settings import PtzSettings
 EXIT_DRIFT = 1
 
 
-def render_files(args) -> int:  # type: ignore[no-untyped-def]
+def render_files(args: argparse.Namespace) -> int:
     try:
         lab = read_lab_file(args.lab) if args.lab else {}
         cameras = cameras_of(list(lab.get("ptz", {}).get("cameras", {})))

@@ -23,9 +23,9 @@ from typing import TYPE_CHECKING, TextIO
 
 from common.errors import ConfigError
 from common.lab_paths import DEFAULT_HEIGHT_MAP
+from common.names import ALGORITHMS
 from services.args import Parser, plain
 from services.experiment.paper import TABLES
-from services.gantry.algorithms import ALGORITHMS
 
 if TYPE_CHECKING:  # imported once the flags are parsed: --help answers at once
     from services.gantry.settings import GantrySettings

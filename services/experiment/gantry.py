@@ -20,11 +20,11 @@ import numpy as np
 
 from common.heightmap import HeightMap
 from common.markers import warm_up
+from common.names import AlgorithmName
 from services.experiment.devices import ModelCrane, SimClock, SimFrames
 from services.gantry.control import Controller, Fix
 from services.gantry.loop import GantryLoop, Request
-from services.gantry.modes import Command
-from services.gantry.predict import AlgorithmName, Estimate
+from services.gantry.predict import Estimate
 from services.gantry.settings import GantrySettings
 from services.sim.lab import Lab, load_or_make_crater
 from services.sim.robots import MARKER_HEIGHT_MM, SAMPLE_HZ, Trajectory
@@ -140,7 +140,7 @@ def run(lab: Lab, settings: GantrySettings, *, end_s: float | None = None,
             continue
         step = tick.step
         if not arm_asked and step.estimate is not None:  # as an operator would, once in view
-            loop.request(Request(Command.ARM, "experiment", "the robot is in view"))
+            loop.request(Request("arm", "experiment", "the robot is in view"))
             arm_asked = True
         result.report_age_s.append(t - lab.crane.reported_s)
         if step.estimate is not None and step.frame_s is not None:

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from common.names import AlgorithmName
 from services.experiment.paper import PAPER_ALGORITHMS, SCENARIOS, TABLES
 from services.gantry.settings import GantrySettings
 from services.sim.crane import ramp_following_s
@@ -167,7 +168,7 @@ class Evaluation:
         return float(np.mean(np.square(logs)) + 10 * np.sum(np.square(outside)))
 
 
-Job = tuple[dict[str, float], str, str, int, GantrySettings, SimSettings, Path]
+Job = tuple[dict[str, float], str, AlgorithmName, int, GantrySettings, SimSettings, Path]
 
 
 def _run_job(job: Job) -> tuple[float, float]:
@@ -175,7 +176,7 @@ def _run_job(job: Job) -> tuple[float, float]:
 
     values, scenario, algorithm, seed, gantry, sim, crater = job
     gantry, sim = apply(values, gantry, sim)
-    s = run_scenario(scenario, algorithm, seed=seed, crater_file=crater, gantry=gantry,  # type: ignore[arg-type]
+    s = run_scenario(scenario, algorithm, seed=seed, crater_file=crater, gantry=gantry,
                      sim=sim).summary()
     return s["std_x_mm"], s["std_y_mm"]
 
@@ -219,7 +220,7 @@ class Evaluator:
             runs.setdefault(job[1], {}).setdefault(job[2], []).append(result)
         std = {sc: {a: tuple(np.mean(r, axis=0).round(2)) for a, r in algs.items()}
                for sc, algs in runs.items()}
-        return Evaluation(values, std, self.seeds)  # type: ignore[arg-type]
+        return Evaluation(values, std, self.seeds)
 
 
 def fit(evaluate: Evaluator, start: Mapping[str, float], *, evaluations: int, seed: int = 1,

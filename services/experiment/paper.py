@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+from common.names import AlgorithmName
+
 TABLES: dict[str, dict[str, tuple[float, float]]] = {
     "locomotive": {  # Table 3
         "basic": (68.0, 62.5), "pf-position": (94.0, 97.1), "pf-velocity": (59.4, 53.2)},
     "walker": {  # Table 4
         "basic": (46.3, 50.9), "pf-position": (9.41, 13.1), "pf-velocity": (28.0, 30.8)},
 }
-PAPER_ALGORITHMS = ("basic", "pf-position", "pf-velocity")
+PAPER_ALGORITHMS: tuple[AlgorithmName, ...] = ("basic", "pf-position", "pf-velocity")
 SCENARIOS = ("locomotive", "walker")
 
 ORDERS: dict[str, tuple[str, ...]] = {

@@ -38,7 +38,7 @@ def main(argv: Sequence[str]) -> int:
     parser.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the "
                         "gantry's answer")
     args = parser.parse_args(argv)
-    from common.messages import GANTRY_COMMANDS
+    from common.names import GANTRY_COMMANDS
     from services.entry import tool_main
 
     if args.command not in GANTRY_COMMANDS:
@@ -71,9 +71,9 @@ def send(bus: Bus, command: str, operator: str, reason: str, timeout_s: float) -
     bus.subscribe(keys.GANTRY_COMMAND_REPLY, replies.put, latest=False)
     ident = f"cli-{os.getpid()}-{time.monotonic_ns() % 10**9}"
     time.sleep(0.2)  # let the subscription reach the router before the command goes out
-    bus.publish(keys.GANTRY_COMMAND, m.GantryCommand(
-        measured_s=time.time(), command=command, operator=operator,  # type: ignore[arg-type]
-        reason=reason, id=ident))
+    bus.publish(keys.GANTRY_COMMAND, m.GantryCommand.model_validate({
+        "measured_s": time.time(), "command": command, "operator": operator,
+        "reason": reason, "id": ident}))
     deadline = time.monotonic() + timeout_s
     while (left := deadline - time.monotonic()) > 0:
         try:

@@ -35,7 +35,7 @@ def identify(args: argparse.Namespace) -> int:
         return err.code
 
 
-def _identify(settings: GantrySettings, heights: HeightMap, args: object) -> int:
+def _identify(settings: GantrySettings, heights: HeightMap, args: argparse.Namespace) -> int:
     crane = ModbusCrane(settings.crane_host, settings.crane_port, settings.crane_timeout_s,
                         settings.crane, settings.crane.frame())
     session = bus = None
@@ -61,8 +61,8 @@ def _identify(settings: GantrySettings, heights: HeightMap, args: object) -> int
             session.close()
 
 
-def _measure(recorder: Recorder, settings: GantrySettings, args: object) -> int:
-    box, steps, yes = args.box, args.steps, args.yes  # type: ignore[attr-defined]
+def _measure(recorder: Recorder, settings: GantrySettings, args: argparse.Namespace) -> int:
+    box, steps, yes = args.box, args.steps, args.yes
     start = recorder.ready_to_move()  # the crane idle and fault-free, the marker still
     out = sys.stderr if getattr(args, "json", False) else sys.stdout
     print(f"the crane stands at ({start[0]:.0f}, {start[1]:.0f}) mm; it will move within "

@@ -14,10 +14,11 @@ import numpy as np
 
 from common import keys
 from common.bus import Bus
+from common.errors import ConfigError
 from common.heightmap import HeightMap
 from common.markers import closest, detect, warm_up
 from common.node import configure_logging
-from common.settings import ConfigError, load_settings
+from common.settings import load_settings
 from services.args import EXIT_CONFIG, overrides_from
 from services.gantry.commission import (
     Figure,

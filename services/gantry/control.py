@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -123,7 +123,7 @@ class Controller:
         s = self.settings
         self._fix = fix if fix is not None and abs(now_s - fix.t_s) <= s.mocap_max_age_s \
             else None
-        seen: dict = {}
+        seen: dict[str, Any] = {}
         if frame is not None:
             seen = self._measure([frame, *older], crane_xy, self._horizon(timing))
             failing = self.tracking_check.failing(seen["frame_s"])
@@ -158,7 +158,7 @@ class Controller:
                 + 0.5 * period)
 
     def _measure(self, frames: Sequence[Frame], crane_xy: np.ndarray, horizon_s: float | None
-                 ) -> dict:
+                 ) -> dict[str, Any]:
         """The newest of ``frames`` that shows the robot where the motion capture sees it
         (within ``fix_check_mm``); of frames captured at the same time — a frame sent again,
         changed — the one nearest the motion capture's robot. A frame whose fix disagrees

@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import OptimizeResult, least_squares
 
 from common.crane_frame import CraneFrame
 from common.tracking_camera import TrackingCameraModel
@@ -158,9 +158,9 @@ def fit_camera(sightings: list[Sighting], nominal: TrackingCameraModel, frame: C
     return fit
 
 
-def _spreads(result: object) -> np.ndarray:
+def _spreads(result: OptimizeResult) -> np.ndarray:
     """1σ of each parameter: the residual's variance times (JᵀJ)⁻¹."""
-    jac, fun = result.jac, result.fun  # type: ignore[attr-defined]
+    jac, fun = result.jac, result.fun
     dof = max(len(fun) - jac.shape[1], 1)
     variance = float(fun @ fun) / dof
     return np.sqrt(np.diag(np.linalg.pinv(jac.T @ jac)) * variance)

@@ -20,11 +20,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from common.names import GantryCommandName
 from services.gantry.command_rate import CommandRate
 from services.gantry.control import Controller, Fix, Step, Timing
 from services.gantry.crosscheck import CrossCheck
 from services.gantry.cycle import CycleSync
-from services.gantry.modes import Action, Command, Decision, Facts, Mode, ModeKeeper
+from services.gantry.modes import Action, Decision, Facts, ModeKeeper
 from services.gantry.reading import Crane, CraneError, CraneReading
 from services.gantry.safety import TargetCheck
 from services.gantry.settings import GantrySettings
@@ -45,7 +46,7 @@ MAX_REFUSALS_QUEUED = 100
 
 @dataclass(frozen=True)
 class Request:
-    command: Command
+    command: GantryCommandName
     by: str
     reason: str = ""
     id: str = ""
@@ -103,14 +104,14 @@ class GantryLoop:
 
     @property
     def armed(self) -> bool:
-        return self.modes.mode is Mode.ARMED
+        return self.modes.mode == "armed"
 
     def request(self, request: Request) -> None:
         """An operator's command, carried out at the next poll (from any thread) if its
         sender has not sent too many (``CommandRate``)."""
         with self._lock:
             admission = self.rate.admit(request.by, self.clock(),
-                                        always=request.command is Command.STOP)
+                                        always=request.command == "stop")
             if admission.admitted:
                 self._requests.append(request)
             elif len(self._too_many) < MAX_REFUSALS_QUEUED:
@@ -161,7 +162,7 @@ class GantryLoop:
 
     def _carry_out(self, request: Request, now_s: float) -> Decision:
         age = 0.0 if request.sent_s is None else now_s - request.sent_s
-        if request.command is not Command.STOP and abs(age) > COMMAND_MAX_AGE_S:
+        if request.command != "stop" and abs(age) > COMMAND_MAX_AGE_S:
             return Decision(False, self.modes.mode, Action.NONE,
                             f"sent {age:.1f} s ago: too old to act on, send it again")
         estimate_s, fix = self.controller.estimate_s, self.fix()
@@ -174,7 +175,7 @@ class GantryLoop:
             log.warning("%s from %s refused: %s", request.command, request.by, decision.detail)
             return decision
         failed = self._act(decision.action)
-        if failed is not None and request.command is Command.STOP:
+        if failed is not None and request.command == "stop":
             detail = (f"stopped; the controller did not answer ({failed}): its watchdog stops "
                       "the crane")
             return Decision(True, self.modes.mode, decision.action, detail)

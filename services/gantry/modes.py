@@ -27,20 +27,8 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 from common.messages import CraneStatus, HealthStatus
+from common.names import GantryCommandName, GantryMode
 from services.gantry.reading import CraneReading
-
-
-class Mode(StrEnum):
-    DISARMED = "disarmed"
-    ARMED = "armed"
-    STOPPED = "stopped"
-
-
-class Command(StrEnum):
-    ARM = "arm"
-    DISARM = "disarm"
-    STOP = "stop"
-    RESET = "reset"
 
 
 class Action(StrEnum):
@@ -56,7 +44,7 @@ class Action(StrEnum):
 @dataclass(frozen=True)
 class Decision:
     accepted: bool
-    mode: Mode  # the mode after it
+    mode: GantryMode  # the mode after it
     action: Action
     detail: str  # why: the refusal's reason, or what changed
 
@@ -74,50 +62,50 @@ class Facts:
 
 class ModeKeeper:
     def __init__(self, now_s: float, enable_grace_s: float = 1.0) -> None:
-        self.mode = Mode.DISARMED
+        self.mode: GantryMode = "disarmed"
         self.by, self.reason, self.since_s = "gantry", "started: disarmed until an operator " \
             "arms it", now_s
         self.enable_grace_s = enable_grace_s
         self._armed_at_s = now_s
 
-    def command(self, command: Command, by: str, reason: str, now_s: float, facts: Facts
+    def command(self, command: GantryCommandName, by: str, reason: str, now_s: float, facts: Facts
                 ) -> Decision:
         """An operator's command: accepted (and what to do) or refused (and why)."""
-        if command is Command.STOP:
-            return self._change(Mode.STOPPED, Action.FREEZE_AND_DISABLE, by,
+        if command == "stop":
+            return self._change("stopped", Action.FREEZE_AND_DISABLE, by,
                                 reason or "stop", now_s)
-        if command is Command.RESET:
-            if self.mode is Mode.ARMED:
+        if command == "reset":
+            if self.mode == "armed":
                 return self._refuse("armed: disarm or stop before a reset")
-            return self._change(Mode.DISARMED, Action.RESET_FAULTS, by,
+            return self._change("disarmed", Action.RESET_FAULTS, by,
                                 reason or "reset", now_s)
-        if command is Command.DISARM:
-            if self.mode is Mode.STOPPED:
+        if command == "disarm":
+            if self.mode == "stopped":
                 return self._refuse("stopped: reset first")
-            if self.mode is Mode.DISARMED:
+            if self.mode == "disarmed":
                 return Decision(True, self.mode, Action.NONE, "already disarmed")
-            return self._change(Mode.DISARMED, Action.DISABLE, by, reason or "disarm", now_s)
+            return self._change("disarmed", Action.DISABLE, by, reason or "disarm", now_s)
         return self._arm(by, reason, now_s, facts)
 
     def observe(self, crane: CraneReading, now_s: float) -> Decision | None:
         """The controller's report while armed: a stop if the crane stopped on its own."""
-        if self.mode is not Mode.ARMED:
+        if self.mode != "armed":
             return None
         why = stopped_why(crane)
         if why is None and not crane.enabled and now_s - self._armed_at_s > self.enable_grace_s:
             why = "crane disabled at the controller"
         if why is None:
             return None
-        return self._change(Mode.STOPPED, Action.FREEZE_AND_DISABLE, "crane", why, now_s)
+        return self._change("stopped", Action.FREEZE_AND_DISABLE, "crane", why, now_s)
 
     def halt(self, why: str, now_s: float) -> Decision:
         """The gantry stops the crane by itself (what it saw is ``why``), as a stop would."""
-        return self._change(Mode.STOPPED, Action.FREEZE_AND_DISABLE, "gantry", why, now_s)
+        return self._change("stopped", Action.FREEZE_AND_DISABLE, "gantry", why, now_s)
 
     def _arm(self, by: str, reason: str, now_s: float, facts: Facts) -> Decision:
-        if self.mode is Mode.ARMED:
+        if self.mode == "armed":
             return Decision(True, self.mode, Action.NONE, "already armed")
-        if self.mode is Mode.STOPPED:
+        if self.mode == "stopped":
             return self._refuse("stopped: reset first")
         if facts.crane is None:
             return self._refuse("the crane controller does not answer")
@@ -131,9 +119,9 @@ class ModeKeeper:
         if facts.geometry is not None:
             return self._refuse(facts.geometry)
         self._armed_at_s = now_s
-        return self._change(Mode.ARMED, Action.ENABLE, by, reason or "arm", now_s)
+        return self._change("armed", Action.ENABLE, by, reason or "arm", now_s)
 
-    def _change(self, mode: Mode, action: Action, by: str, reason: str, now_s: float
+    def _change(self, mode: GantryMode, action: Action, by: str, reason: str, now_s: float
                 ) -> Decision:
         self.mode, self.by, self.reason, self.since_s = mode, by, reason, now_s
         return Decision(True, mode, action, reason)
@@ -152,15 +140,15 @@ def stopped_why(crane: CraneReading) -> str | None:
     return None
 
 
-def crane_status(mode: Mode, reading: CraneReading, *, hold: bool, reacquiring: bool = False
+def crane_status(mode: GantryMode, reading: CraneReading, *, hold: bool, reacquiring: bool = False
                  ) -> CraneStatus:
     """What the crane's state says the gantry is doing: a latched fault shows unless the
     gantry is stopped (then the stop says more: who and why)."""
-    if reading.latched_faults and mode is not Mode.STOPPED:
+    if reading.latched_faults and mode != "stopped":
         return "fault"
-    if mode is Mode.DISARMED:
+    if mode == "disarmed":
         return "idle"
-    if mode is Mode.STOPPED:
+    if mode == "stopped":
         return "stopped"
     if hold:
         return "holding"
@@ -172,9 +160,9 @@ def health(keeper: ModeKeeper, *, untrusted: str | None, disagreement: str, hold
     """The gantry's health while the controller answers: degraded when stopped, when it would
     not arm (``untrusted``: why the geometry is not trusted), when the tracking camera and the
     motion capture disagree, or while it holds (``hold_reason``)."""
-    if keeper.mode is Mode.STOPPED:
+    if keeper.mode == "stopped":
         return "degraded", f"stopped by {keeper.by}: {keeper.reason}"
-    if keeper.mode is Mode.DISARMED:
+    if keeper.mode == "disarmed":
         if untrusted:
             return "degraded", f"disarmed; would not arm: {untrusted}"
         return "ok", "disarmed"

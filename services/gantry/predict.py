@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Literal, Protocol
 
 import numpy as np
 
-from services.gantry.algorithms import ALGORITHMS, AlgorithmName  # noqa: F401 - one definition
+from common.names import ALGORITHMS, AlgorithmName
 
 if TYPE_CHECKING:  # filterpy (with scipy.stats) takes 0.8 s to import: only the IMM needs it
     from filterpy.kalman import IMMEstimator, KalmanFilter

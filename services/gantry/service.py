@@ -37,7 +37,7 @@ from services.gantry.control import Controller, Fix, Step
 from services.gantry.crane import ModbusCrane
 from services.gantry.frames import FrameInbox, FrameSource, OpenCvFrames
 from services.gantry.loop import GantryLoop, Reply, Request
-from services.gantry.modes import Command, Mode, crane_status, health, heartbeat_due
+from services.gantry.modes import crane_status, health, heartbeat_due
 from services.gantry.offload import offload
 from services.gantry.reading import CraneError, CraneReading
 from services.gantry.settings import GantrySettings
@@ -146,7 +146,7 @@ class Control:
         self.last_tick = time.monotonic()
 
     def command(self, msg: m.GantryCommand) -> None:
-        self.loop.request(Request(Command(msg.command), msg.operator, msg.reason, msg.id,
+        self.loop.request(Request(msg.command, msg.operator, msg.reason, msg.id,
                                   msg.measured_s))
 
     def heartbeat(self) -> None:
@@ -174,8 +174,8 @@ class Control:
     def _reply(self, now: float, reply: Reply) -> None:
         r, d = reply.request, reply.decision
         self.node.bus.publish(keys.GANTRY_COMMAND_REPLY, m.GantryCommandReply(
-            measured_s=now, id=r.id[:64], command=r.command.value, accepted=d.accepted,
-            detail=d.detail[:500], mode=d.mode.value))
+            measured_s=now, id=r.id[:64], command=r.command, accepted=d.accepted,
+            detail=d.detail[:500], mode=d.mode))
 
     def _publish(self, now: float, step: Step, reading: CraneReading) -> None:
         if step.detection is not None and step.frame_s is not None:
@@ -197,7 +197,7 @@ class Control:
 
     def _status(self, step: Step) -> None:
         modes = self.loop.modes
-        untrusted = self.loop.geometry(time.time()) if modes.mode is Mode.DISARMED else None
+        untrusted = self.loop.geometry(time.time()) if modes.mode == "disarmed" else None
         self.node.set_status(*health(modes, untrusted=untrusted, disagreement=step.disagreement,
                                      hold=step.hold, hold_reason=step.reason))
 
@@ -229,7 +229,7 @@ class Control:
         self.node.bus.publish(keys.GANTRY_STATE, m.CraneState(
             measured_s=now, status="unreachable", x_mm=0.0, y_mm=0.0, target_x_mm=0.0,
             target_y_mm=0.0, enabled=False, moving=False, fault_bits=0,
-            mode=modes.mode.value, mode_by=modes.by[:128], mode_reason=modes.reason[:500],
+            mode=modes.mode, mode_by=modes.by[:128], mode_reason=modes.reason[:500],
             mode_since_s=modes.since_s, **self._last_command()))
 
     def _last_command(self) -> CommandAudit:
@@ -237,7 +237,7 @@ class Control:
         if self.loop.last_reply is None:
             return {}
         at_s, reply = self.loop.last_reply
-        return {"command": reply.request.command.value, "command_by": reply.request.by[:128],
+        return {"command": reply.request.command, "command_by": reply.request.by[:128],
                 "command_s": at_s, "command_accepted": reply.decision.accepted,
                 "command_detail": reply.decision.detail[:500]}
 
@@ -249,5 +249,5 @@ class Control:
             status=crane_status(modes.mode, reading, hold=hold, reacquiring=reacquiring),
             target_x_mm=reading.target_x_mm, target_y_mm=reading.target_y_mm,
             enabled=reading.enabled, moving=reading.moving, fault_bits=reading.faults & 0xFFFF,
-            safety_ok=reading.safety_ok, mode=modes.mode.value, mode_by=modes.by[:128],
+            safety_ok=reading.safety_ok, mode=modes.mode, mode_by=modes.by[:128],
             mode_reason=modes.reason[:500], mode_since_s=modes.since_s, **self._last_command()))

@@ -8,10 +8,11 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validat
 
 from common.crane_frame import CraneConnection
 from common.lab_paths import DEFAULT_HEIGHT_MAP
+from common.names import AlgorithmName
 from common.settings import ServiceSettings, above_its_minimum
 from common.tracking_camera import TrackingCameraModel
 from services.gantry.cycle import AFTER_REPORT_S
-from services.gantry.predict import AlgorithmName, KalmanOptions, ParticleOptions
+from services.gantry.predict import KalmanOptions, ParticleOptions
 
 _PF = ParticleOptions()
 _KF = KalmanOptions()

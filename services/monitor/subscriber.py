@@ -14,6 +14,7 @@ import zenoh
 
 from common import keys
 from common.bus import Bus
+from common.messages import Message
 from common.node import stop_on_signals
 from services.entry import checked_key_exprs, tool_session, tool_settings
 from services.monitor.settings import MonitorSettings
@@ -41,11 +42,11 @@ def monitor(args: argparse.Namespace) -> int:
 
 
 def _raw(bus: Bus, key_expr: str, stop: threading.Event, duration: float | None) -> None:
-    def show(item: tuple[str, object]) -> None:
+    def show(item: tuple[str, Message | dict]) -> None:
         if stop.is_set():
             return
         try:
-            print(json_line(*item), flush=True)  # type: ignore[arg-type]
+            print(json_line(*item), flush=True)
         except BrokenPipeError:  # the reader went away (| head): stop quietly
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             stop.set()
@@ -59,9 +60,9 @@ def _table(bus: Bus, settings: MonitorSettings, stop: threading.Event,
     view = LabView()
     lock = threading.Lock()
 
-    def on_sample(item: tuple[str, object]) -> None:
+    def on_sample(item: tuple[str, Message | dict]) -> None:
         with lock:
-            view.on_sample(item[0], item[1], time.time())  # type: ignore[arg-type]
+            view.on_sample(item[0], item[1], time.time())
 
     def on_alive(sample: zenoh.Sample) -> None:
         parsed = keys.parse_alive(bus.prefix, str(sample.key_expr))

@@ -62,8 +62,8 @@ Hold = tuple[float, float, int]
 @dataclass
 class CalibrationHold:
     camera: PtzCamera
-    publish_detections: Callable[[m.MarkerDetections], None]
-    publish_snapshot: Callable[[m.CameraFrame], None]
+    publish_detections: Callable[[m.MarkerDetections], object]
+    publish_snapshot: Callable[[m.CameraFrame], object]
     max_markers: int = 8
     moved: Callable[[float | None, float | None], None] = lambda _pan, _tilt: None  # each
     # move it sends (None: to home, or left as it is), for the manual-override detector
@@ -107,8 +107,9 @@ class CalibrationHold:
         """Command the hold: the request's pan, tilt and zoom; home for what it leaves open.
         A command the camera did not take (PtzError) is sent again by the next renewal or
         snapshot: the camera is never held wherever it happened to stand."""
-        if None not in _asked(msg):
-            self.hold = (msg.pan_deg, msg.tilt_deg, msg.zoom)  # type: ignore[assignment]
+        pan, tilt, zoom = _asked(msg)
+        if pan is not None and tilt is not None and zoom is not None:
+            self.hold = (pan, tilt, zoom)
         else:
             self.hold, self._homed_at = None, time.monotonic()
             self.moved(None, None)

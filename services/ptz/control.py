@@ -34,11 +34,11 @@ RETRY_MAX_S = 5.0
 class Status:
     """The camera's state as published: status, aim error and the pointing check."""
 
-    status: str  # waiting_for_pose, idle, tracking, calibrating, manual, held
+    status: m.PtzStatus
     aim_error_deg: float
     pointing_error_deg: float | None
     problem: str  # "" when the pointing check is content
-    health: str  # ok or degraded
+    health: m.HealthStatus
     health_why: str
 
 
@@ -143,9 +143,11 @@ class PtzControl:
         manual = not self.held_by and self._watch_hands(now, pan_deg, tilt_deg, calibrating)
         problem = self.pointing.problem() or ""
         pointing = self.pointing.error_deg
-        status = ("calibrating" if calibrating else "held" if self.held_by
-                  else "manual" if manual else "waiting_for_pose" if self.pose is None
-                  else "tracking" if self.robot else "idle")
+        status: m.PtzStatus = (
+            "calibrating" if calibrating else "held" if self.held_by
+            else "manual" if manual else "waiting_for_pose" if self.pose is None
+            else "tracking" if self.robot else "idle")
+        health: m.HealthStatus
         if self.pose is None:
             health, why = "degraded", self.pose_problem or "waiting for a camera pose from calib"
         else:

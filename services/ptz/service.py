@@ -141,6 +141,8 @@ class _Loop:
             taken = "none" if pose is None else self.control.take_pose(pose, time.time())
         if why and answers:
             log.warning("%s", why)
+        if pose is None:
+            return
         if taken == "future":
             key = keys.CALIB_POSE.key(self.node.bus.prefix, camera=name)
             self.node.bus.count_drop(key, codec.FROM_FUTURE, "pose measured "
@@ -253,7 +255,7 @@ class _Loop:
         self._publish(state.status, position.pan_deg, position.tilt_deg, position.zoom,
                       state.aim_error_deg, now, state.pointing_error_deg, state.problem)
 
-    def _publish(self, status: str, pan: float, tilt: float, zoom: int, error: float,
+    def _publish(self, status: m.PtzStatus, pan: float, tilt: float, zoom: int, error: float,
                  now: float, pointing_error: float | None = None, problem: str = "") -> None:
         held_by = self.control.held_by[:128]
         self.node.bus.publish(keys.PTZ_STATE, m.PtzState(

@@ -13,6 +13,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import zenoh
 from pydantic import Field
@@ -26,6 +27,10 @@ from services.recording.foxglove import json_copy
 from services.recording.origin_gate import OriginGate
 from services.recording.record import crater, decode, latest_samples
 from services.recording.typed import CRATER, LabScene, Typed
+
+if TYPE_CHECKING:  # foxglove-sdk is loaded when the bridge starts, not with the settings
+    import foxglove
+    from foxglove.websocket import ServerListener
 
 log = logging.getLogger(__name__)
 JSON_PREFIX = "json/"
@@ -49,11 +54,11 @@ class FoxgloveSettings(ServiceSettings):
 class Bridge:
     """Bus samples in (queued by the Zenoh callback), Foxglove channels out (one thread)."""
 
-    def __init__(self, prefix: str, scene: LabScene, context: object) -> None:
+    def __init__(self, prefix: str, scene: LabScene, context: foxglove.Context) -> None:
         import foxglove
 
         self._foxglove, self.prefix, self.scene, self.context = foxglove, prefix, scene, context
-        self.channels: dict[str, object] = {}
+        self.channels: dict[str, foxglove.Channel] = {}
         self.queue: queue.SimpleQueue = queue.SimpleQueue()
         self.forwarded = 0
         self._thread = threading.Thread(target=self._run, name="foxglove-bridge", daemon=True)
@@ -98,7 +103,8 @@ class Bridge:
                 context=self.context)
         channel.log(typed.data, log_time=round(typed.time_s * 1e9))
 
-    def _channel(self, topic: str, *, schema: dict | None, schema_name: str | None) -> object:
+    def _channel(self, topic: str, *, schema: dict[str, Any] | None, schema_name: str | None
+                 ) -> foxglove.Channel:
         channel = self.channels.get(topic)
         if channel is None:
             fox_schema = None if schema is None else self._foxglove.Schema(
@@ -113,15 +119,16 @@ class Bridge:
         self._thread.join(timeout=5)
 
 
-class _Listener:
+def _listener(scene: LabScene) -> ServerListener:
     """A client that subscribes to the crater gets it with the next message."""
+    from foxglove.websocket import ServerListener
 
-    def __init__(self, scene: LabScene) -> None:
-        self.scene = scene
+    class Listener(ServerListener):
+        def on_subscribe(self, client: object, channel: object) -> None:
+            if getattr(channel, "topic", None) == CRATER:
+                scene.resend_crater()
 
-    def on_subscribe(self, client: object, channel: object) -> None:
-        if getattr(channel, "topic", None) == CRATER:
-            self.scene.resend_crater()
+    return Listener()
 
 
 def serve(args: argparse.Namespace) -> int:
@@ -140,7 +147,7 @@ def serve(args: argparse.Namespace) -> int:
     try:
         try:  # foxglove-sdk's server on a loopback port of its own, behind the Origin gate
             server = foxglove.start_server(name="stb-supervisor", host="127.0.0.1", port=0,
-                                          context=context, server_listener=_Listener(scene))
+                                          context=context, server_listener=_listener(scene))
             gate = OriginGate(settings.host, settings.port, server.port,
                               settings.allowed_origins).start()
         except (RuntimeError, OSError) as err:

@@ -13,6 +13,7 @@ import time
 from collections import Counter
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import IO
 
@@ -21,6 +22,7 @@ from pydantic import Field
 
 from common import codec, keys
 from common import messages as m
+from common.errors import ConfigError
 from common.heightmap import HeightMap
 from common.jpeg import jpeg_size
 from common.lab_paths import DEFAULT_HEIGHT_MAP
@@ -28,7 +30,7 @@ from common.lab_views import CameraConnection, LabCameras
 from common.mcap_file import RecordWriter
 from common.mjpeg import CameraVideo
 from common.node import stop_on_signals
-from common.settings import ConfigError, LogLevel, ServiceSettings, load_settings
+from common.settings import LogLevel, ServiceSettings, load_settings
 from services.entry import (
     ToolError,
     checked_key_exprs,
@@ -126,7 +128,7 @@ class Recorder:
         self._thread = threading.Thread(target=self._run, name="record-writer", daemon=True)
         self._thread.start()
         self._subs = [session.declare_subscriber(
-            expr, zenoh.handlers.Callback(lambda s, i=i: self._on_sample(i, s), indirect=False))
+            expr, zenoh.handlers.Callback(partial(self._on_sample, i), indirect=False))
             for i, expr in enumerate(self._exprs)]
 
     def ask_latest(self, timeout_s: float = 1.0) -> int:

@@ -12,11 +12,12 @@ from pathlib import Path
 
 import numpy as np
 
+from common.errors import ConfigError
 from common.files import write_atomically
 from common.heightmap import HeightMap
 from common.lab_views import GantryHeightMap
 from common.mcap_file import RecordingError
-from common.settings import ConfigError, load_settings
+from common.settings import load_settings
 from services.entry import EXIT_CONFIG
 from services.report import birdseye, plots
 from services.report.data import Recording, crane_error, moments, read_recording, summary

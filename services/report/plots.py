@@ -5,6 +5,7 @@ error. Each function returns the file it wrote, or None when the recording has n
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -14,7 +15,12 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from common.heightmap import HeightMap  # noqa: E402
-from services.report.data import Recording, calibration_residuals, crane_error  # noqa: E402
+from services.report.data import (  # noqa: E402
+    Recording,
+    Series,
+    calibration_residuals,
+    crane_error,
+)
 
 DPI = 100
 
@@ -70,10 +76,11 @@ def track_plot(rec: Recording, height_map: HeightMap | None, path: Path) -> Path
                           cmap="gray", alpha=0.7)
         fig.colorbar(shown, ax=ax, shrink=0.7, label="height (mm)")
     outline = [effects.Stroke(linewidth=3.6, foreground="white"), effects.Normal()]
-    for series, label, style in (  # the crane's wide line under the robot's thin one
-            (rec.truth, "robot (sim truth)", dict(color="0.3", ls="--", lw=1.0)),
-            (rec.crane, "crane", dict(color="tab:blue", lw=2.4, path_effects=outline)),
-            (rec.robot, "robot (mocap)", dict(color="tab:red", lw=0.9))):
+    lines: list[tuple[Series, str, dict[str, Any]]] = [
+        (rec.truth, "robot (sim truth)", dict(color="0.3", ls="--", lw=1.0)),
+        (rec.crane, "crane", dict(color="tab:blue", lw=2.4, path_effects=outline)),
+        (rec.robot, "robot (mocap)", dict(color="tab:red", lw=0.9))]
+    for series, label, style in lines:  # the crane's wide line under the robot's thin one
         if len(series):
             _, values = series.arrays()
             ax.plot(values[:, 0], values[:, 1], label=label, **style)

@@ -39,8 +39,7 @@ def write_stills(paths: Sequence[Path], moments: list[tuple[float, str]], out_di
                  run_start_s: float, prefix: str = keys.DEFAULT_PREFIX) -> list[Moment]:
     """Each moment with the pictures written for it (``still-N-NAME.jpg`` in ``out_dir``)."""
     topics = sorted(video_topics(paths), key=_order)
-    previews = [k for k in _bus_keys(paths)
-                if (topic := keys.topic_for(prefix, k)) is keys.PTZ_PREVIEW]
+    previews = [k for k in _bus_keys(paths) if keys.topic_for(prefix, k) is keys.PTZ_PREVIEW]
     out = []
     for n, (when, what) in enumerate(moments, start=1):
         moment = Moment(when, what)

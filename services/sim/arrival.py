@@ -14,6 +14,10 @@ import io
 import socket
 import struct
 import time
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from _typeshed import WriteableBuffer
 
 SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)  # Linux; absent elsewhere
 _TIMESPEC = struct.Struct("qq")
@@ -34,7 +38,7 @@ class StampedReader(io.RawIOBase):
     def readable(self) -> bool:
         return True
 
-    def readinto(self, buffer: bytearray | memoryview) -> int:  # type: ignore[override]
+    def readinto(self, buffer: WriteableBuffer) -> int:
         n, ancillary, _, _ = self._sock.recvmsg_into([buffer], _ANCILLARY_BYTES)
         self.arrived_s = time.time()
         for level, kind, data in ancillary:

@@ -41,6 +41,13 @@ BOUNDARY = "myboundary"  # what AXIS cameras put between the JPEGs of video.cgi
 NONCE_LIFETIME_S = 300.0
 
 
+class StampedHandler(BaseHTTPRequestHandler):
+    """A request handler that knows when its request reached the camera (``arrived``, UNIX
+    seconds; ``StampedReader``)."""
+
+    arrived = 0.0
+
+
 class ServedCamera(Protocol):
     """What the server needs of any camera: its name, credentials, pictures and their sizes
     (VAPIX names, the first is the default)."""
@@ -188,13 +195,12 @@ class CameraServer:
         self._httpd.shutdown()
         self._httpd.server_close()
 
-    def _handler_class(self) -> type[BaseHTTPRequestHandler]:
+    def _handler_class(self) -> type[StampedHandler]:
         server = self
 
-        class Handler(BaseHTTPRequestHandler):
+        class Handler(StampedHandler):
             server_version = "Boa/0.94.14rc21"  # what AXIS 2xx cameras announce
             protocol_version = "HTTP/1.1"
-            arrived = 0.0
 
             def setup(self) -> None:
                 super().setup()
@@ -222,8 +228,8 @@ class CameraServer:
 
         return Handler
 
-    def _serve(self, request: BaseHTTPRequestHandler, method: str) -> None:
-        arrived: float = request.arrived  # type: ignore[attr-defined]
+    def _serve(self, request: StampedHandler, method: str) -> None:
+        arrived = request.arrived
         url = urlsplit(request.path)
         args = dict(parse_qsl(url.query, keep_blank_values=True))
         body = b""

@@ -279,13 +279,14 @@ class MocapServer:
                 words = body.split()
                 verb = [w.lower() for w in words[:2]]  # QTM's commands ignore case
                 if verb == ["streamframes", "stop"]:
-                    streamer = _cancel(streamer)
+                    _cancel(streamer)
+                    streamer = None
                 elif verb[:1] == ["streamframes"]:
                     parsed = parse_stream_command(words[1:], self.source.rate_hz)
                     if isinstance(parsed, str):
                         writer.write(text_packet(PacketType.ERROR, parsed))
                     else:
-                        streamer = _cancel(streamer)
+                        _cancel(streamer)
                         streamer = asyncio.create_task(self._stream(writer, *parsed))
                 else:
                     writer.write(self._reply(words, writer))
@@ -389,4 +390,3 @@ class MocapServer:
 def _cancel(task: asyncio.Task | None) -> None:
     if task is not None:
         task.cancel()
-    return None

@@ -122,7 +122,8 @@ class ObservationCamera:
         for hip, foot in legs_mm(marker, heading, ground, self._phase):
             uv = project(np.vstack([hip, foot]), pose, intr)
             if np.all(np.isfinite(uv)):
-                cv2.line(image, *(tuple(int(round(c * 16)) for c in p) for p in uv),
+                hip_px, foot_px = ((round(u * 16), round(v * 16)) for u, v in uv)
+                cv2.line(image, hip_px, foot_px,
                          LEG_BGR, max(2, round(intr.fy_px * 25 / pose.z_mm)), cv2.LINE_AA,
                          shift=4)
         hull = chassis_outline(marker, heading, ground, pose, intr)

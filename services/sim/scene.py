@@ -94,8 +94,8 @@ class GroundView:
             s = (height - origin[2]) / dz
             col = (origin[0] + s * rays[..., 0] - c.origin_x_mm) / c.resolution_mm
             row = (origin[1] + s * rays[..., 1] - c.origin_y_mm) / c.resolution_mm
-            height = cv2.remap(c.heights_mm, col, row, cv2.INTER_LINEAR,
-                               borderMode=cv2.BORDER_REPLICATE)
+            height = np.asarray(cv2.remap(c.heights_mm, col, row, cv2.INTER_LINEAR,
+                                          borderMode=cv2.BORDER_REPLICATE), np.float32)
         bright = cv2.remap(self.shade, col, row, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                            borderValue=HALL)
         bright[~down] = HALL

@@ -18,6 +18,7 @@ import itertools
 import logging
 import threading
 from collections.abc import Callable
+from functools import partial
 
 import numpy as np
 
@@ -58,7 +59,7 @@ def run(node: Node[SimSettings]) -> None:
         if settings.calibrate_first and settings.scenario != "calibration":
             _start_robot_once_calibrated(
                 node, lab, settings.calibrate_first, clock,
-                also=lambda t: [process.start_robot(t) for process in processes])
+                also=partial(_start_robots, processes))
         threads = [
             _every(1 / (4 * settings.tracking_camera.rate_hz), node.stop,  # on time ± 10 ms
                    _frame_publisher(node, lab, settings, clock)),
@@ -263,3 +264,8 @@ def _truth_publisher(node: Node, lab: Lab, clock: Clock) -> Callable[[], None]:
                 camera=name)
 
     return publish
+
+
+def _start_robots(processes: list[DeviceProcess], now_s: float) -> None:
+    for process in processes:
+        process.start_robot(now_s)

@@ -197,12 +197,12 @@ def _move(args: Mapping[str, str], head: PtzHead, memory: CameraMemory, now: flo
     speed = number(args, "speed")
     if speed is not None and not 1 <= speed <= 100:
         raise BadArgument(f'speed: invalid value "{args["speed"]}"')
-    absolute = [number(args, k) for k in ("pan", "tilt", "zoom")]
-    relative = [number(args, k) for k in ("rpan", "rtilt", "rzoom")]
-    if any(v is not None for v in absolute):
-        head.absolute(now, *absolute, speed=speed)
-    if any(v is not None for v in relative):
-        head.relative(now, *(v or 0.0 for v in relative), speed=speed)
+    pan, tilt, zoom = (number(args, k) for k in ("pan", "tilt", "zoom"))
+    rpan, rtilt, rzoom = (number(args, k) for k in ("rpan", "rtilt", "rzoom"))
+    if (pan, tilt, zoom) != (None, None, None):
+        head.absolute(now, pan, tilt, zoom, speed=speed)
+    if (rpan, rtilt, rzoom) != (None, None, None):
+        head.relative(now, rpan or 0.0, rtilt or 0.0, rzoom or 0.0, speed=speed)
     if "continuouspantiltmove" in args:
         pan_pct, tilt_pct = _pair(args["continuouspantiltmove"])
         head.continuous(now, pan_pct, tilt_pct)

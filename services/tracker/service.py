@@ -49,11 +49,12 @@ def run(node: Node[TrackerSettings], mocap: MotionCapture | None = None) -> None
             # control input, never sent as fresh (the bus judges its age at the sent stamp);
             # the frame itself goes on below with its true capture time
             (x, y, z), (vx, vy, vz) = robot
-            turn = {} if body is None else {"body": body.name, "qw": body.qw, "qx": body.qx,
-                                            "qy": body.qy, "qz": body.qz}
             node.bus.publish(keys.TRACKER_ROBOT, m.RobotPosition(
                 measured_s=frame.measured_s, label="" if body else settings.robot_label,
-                x_mm=x, y_mm=y, z_mm=z, vx_mm_s=vx, vy_mm_s=vy, vz_mm_s=vz, **turn),
+                x_mm=x, y_mm=y, z_mm=z, vx_mm_s=vx, vy_mm_s=vy, vz_mm_s=vz,
+                body=body.name if body else "", qw=body.qw if body else None,
+                qx=body.qx if body else None, qy=body.qy if body else None,
+                qz=body.qz if body else None),
                 max_age_s=settings.bus.max_age_s)
         node.bus.publish(keys.TRACKER_MARKERS, frame)
 

@@ -44,9 +44,11 @@ class Sessions:
         return token, session
 
     def get(self, token: str | None, now_s: float) -> Session | None:
-        session = self._by_token.get(token) if token else None
+        if not token:
+            return None
+        session = self._by_token.get(token)
         if session is not None and now_s >= session.expires_s:
-            del self._by_token[token]  # type: ignore[arg-type]
+            del self._by_token[token]
             return None
         return session
 

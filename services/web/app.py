@@ -31,7 +31,7 @@ from starlette.requests import Request
 from starlette.responses import JSONResponse, Response, StreamingResponse
 from starlette.routing import Route
 
-from common.messages import GANTRY_COMMANDS
+from common.names import GANTRY_COMMANDS
 from services.web.console import Console, console_routes
 from services.web.crater_image import CraterImage
 from services.web.gate import COOKIE, Caller, Gate, command_refusal

@@ -12,6 +12,7 @@ import time
 from common import keys
 from common import messages as m
 from common.bus import Bus
+from common.names import GANTRY_COMMANDS
 
 
 class GantryCommander:
@@ -32,11 +33,11 @@ class GantryCommander:
     def send(self, command: str, operator: str) -> dict:
         """Send ``command`` as ``operator`` and wait for the answer: {accepted, detail,
         mode}."""
-        if command not in m.GANTRY_COMMANDS:
+        if command not in GANTRY_COMMANDS:
             raise ValueError(f"unknown command {command!r}")
         ident = f"web-{os.getpid()}-{next(self._ids)}"
         self.bus.publish(keys.GANTRY_COMMAND, m.GantryCommand(
-            measured_s=time.time(), command=command, operator=operator[:128],  # type: ignore[arg-type]
+            measured_s=time.time(), command=command, operator=operator[:128],
             reason="from the operator page", id=ident))
         with self._changed:
             answered = self._changed.wait_for(lambda: ident in self._replies, self.timeout_s)

@@ -45,17 +45,17 @@ class Console:
     def calibrate(self, camera: str, action: str, by: str) -> dict[str, Any]:
         """A passpoint collection for ``camera``: started for an operator's review, or
         cancelled, accepted, discarded (the calib service answers on its progress key)."""
-        self.bus.publish(keys.CALIB_COLLECT, m.CollectRequest(
-            measured_s=time.time(), camera=camera, action=action,  # type: ignore[arg-type]
-            count=self.calibration_count, review=True), camera=camera)
+        self.bus.publish(keys.CALIB_COLLECT, m.CollectRequest.model_validate({
+            "measured_s": time.time(), "camera": camera, "action": action,
+            "count": self.calibration_count, "review": True}), camera=camera)
         log.info("calibration of %s: %s by %s", camera, action, by)
         return {"accepted": True, "detail": f"{action} sent to calib for {camera} as {by}"}
 
     def hand(self, camera: str, action: str, body: dict[str, Any], by: str) -> dict[str, Any]:
         """An operator's hand on a PTZ camera (its state says what it made of it)."""
-        hand = m.PtzHand(measured_s=time.time(), camera=camera, action=action,  # type: ignore[arg-type]
-                         operator=by, **{k: body[k] for k in ("pan_deg", "tilt_deg", "zoom",
-                                                                 "preset") if k in body})
+        asked = {k: body[k] for k in ("pan_deg", "tilt_deg", "zoom", "preset") if k in body}
+        hand = m.PtzHand.model_validate({"measured_s": time.time(), "camera": camera,
+                                         "action": action, "operator": by, **asked})
         self.bus.publish(keys.PTZ_HAND, hand, camera=camera)
         log.info("%s: %s by %s", camera, action, by)
         return {"accepted": True, "detail": f"{action} sent to {camera}"}

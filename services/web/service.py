@@ -5,11 +5,13 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from typing import Any
 
 import zenoh
 
 from common import keys
 from common import messages as m
+from common.keys import Topic
 from common.node import Node, StartupError
 from common.settings import bus_environment
 from services.web.app import build_app
@@ -25,10 +27,12 @@ from services.web.users import Users, UsersFileError
 
 log = logging.getLogger(__name__)
 JUDGE_PERIOD_S = 0.5  # alarms begin and end on time even while no page looks
-TOPICS = (keys.TRACKER_ROBOT, keys.CALIB_PROGRESS, keys.GANTRY_STATE, keys.GANTRY_ESTIMATE,
-          keys.GANTRY_OFFLOAD, keys.PTZ_STATE, keys.PTZ_PREVIEW, keys.PTZ_SNAPSHOT,
-          keys.PTZ_DETECTIONS, keys.TRUTH_ROBOT)
-COMMAND_TOPICS = (keys.GANTRY_COMMAND, keys.GANTRY_COMMAND_REPLY)  # the page's command history
+TOPICS: tuple[Topic[Any], ...] = (
+    keys.TRACKER_ROBOT, keys.CALIB_PROGRESS, keys.GANTRY_STATE, keys.GANTRY_ESTIMATE,
+    keys.GANTRY_OFFLOAD, keys.PTZ_STATE, keys.PTZ_PREVIEW, keys.PTZ_SNAPSHOT,
+    keys.PTZ_DETECTIONS, keys.TRUTH_ROBOT)
+# the page's command history
+COMMAND_TOPICS: tuple[Topic[Any], ...] = (keys.GANTRY_COMMAND, keys.GANTRY_COMMAND_REPLY)
 
 
 def open_gate(settings: WebSettings) -> Gate:
@@ -57,9 +61,9 @@ def run(node: Node[WebSettings]) -> None:
     state = LiveState(track_s=settings.track_s, history_s=settings.history_s)
     lock = threading.Lock()
 
-    def on_message(msg: object) -> None:
+    def on_message(msg: m.Message) -> None:
         with lock:
-            state.on_message(msg)  # type: ignore[arg-type]
+            state.on_message(msg)
 
     def on_alive(sample: zenoh.Sample) -> None:
         parsed = keys.parse_alive(node.bus.prefix, str(sample.key_expr))

@@ -45,7 +45,7 @@ def test_a_foreign_pose_changes_nothing_and_is_reported(make_bus: Callable[..., 
     spoof = m.CameraPose(measured_s=time.time(), version=version, **{**SOLVED, "rz_deg": 100.0})
     for _ in range(300):  # a flood
         world.publish(keys.CALIB_POSE, spoof, camera="ptz1")
-    wait_for(lambda: len(calib.foreign.get("ptz1", ())) == 300, timeout=5)
+    wait_for(lambda: calib.foreign.counts(time.monotonic()).get("ptz1") == 300, timeout=5)
     health = node.health()
     assert health.status == "degraded" and "ptz1: 300 poses it did not send" in health.detail
     assert all(p.rz_deg == 100.0 for p in heard), "it published nothing in answer"
