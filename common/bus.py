@@ -235,6 +235,10 @@ class Bus:
         self._stats: dict[str, _Stats] = {}
         self._stats_lock = threading.Lock()
         self._publishers: dict[str, zenoh.Publisher] = {}
+        # A publisher is put to by the threads that publish and undeclared by close: Zenoh
+        # refuses both at once ("Already borrowed"), so they take turns (a put is microseconds)
+        self._publishing = threading.Lock()
+        self._closed = False
         self._subscriptions: list[Subscription] = []
         self._declared: list[Any] = []
         self._log = _RateLimitedLog()
@@ -257,11 +261,15 @@ class Bus:
             self.count_drop(key, codec.STALE, f"measured {sent_s - msg.measured_s:.3f} s "
                             f"before sending > {max_age_s} s: not sent")
             return False
-        publisher = self._publishers.get(key)
-        if publisher is None:
-            publisher = declare_publisher(self.session, key, topic.model)
-            self._publishers[key] = publisher
-        publisher.put(codec.encode(msg, sent_s=sent_s))
+        payload = codec.encode(msg, sent_s=sent_s)
+        with self._publishing:
+            if self._closed:
+                return False
+            publisher = self._publishers.get(key)
+            if publisher is None:
+                publisher = declare_publisher(self.session, key, topic.model)
+                self._publishers[key] = publisher
+            publisher.put(payload)
         with self._stats_lock:
             _stats_of(self._stats, key).published += 1
         return True
@@ -392,9 +400,11 @@ class Bus:
         """Undeclare everything this bus declared (the session stays open)."""
         for sub in self._subscriptions:
             sub.close()
-        for entity in [*self._declared, *self._publishers.values()]:
-            with contextlib.suppress(zenoh.ZError):  # session already closed
-                entity.undeclare()
-        self._subscriptions.clear()
-        self._declared.clear()
-        self._publishers.clear()
+        with self._publishing:
+            self._closed = True  # a publish from a thread still running is not sent
+            for entity in [*self._declared, *self._publishers.values()]:
+                with contextlib.suppress(zenoh.ZError):  # session already closed
+                    entity.undeclare()
+            self._subscriptions.clear()
+            self._declared.clear()
+            self._publishers.clear()

@@ -49,6 +49,18 @@ def wait_for(predicate: Callable[[], object], timeout: float = 5.0, period: floa
     return value
 
 
+def until_heard(publisher: Bus, key: str, timeout: float = 10.0) -> None:
+    """Wait until a subscriber of ``key`` is known to ``publisher``'s session (Zenoh's
+    matching status: the subscription has reached it through the router), so that what it
+    puts next is delivered — instead of a fixed pause."""
+    declared = publisher.session.declare_publisher(key)
+    try:
+        wait_for(lambda: declared.matching_status.matching, timeout=timeout,
+                 why=lambda: f"no subscriber of {key} reached the publisher")
+    finally:
+        declared.undeclare()
+
+
 def open_when_up(settings: ZenohSettings, timeout: float = 15.0) -> zenoh.Session:
     """A session as soon as the router accepts it (it may still be starting)."""
     def attempt() -> zenoh.Session | None:

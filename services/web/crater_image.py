@@ -66,6 +66,13 @@ class CraterImage:
                 self._load(self.path)
             return self.info, self.png
 
+    def waiting_for(self) -> str:
+        """Why the page shows no crater yet: its file is not there (yet); "" otherwise."""
+        if self.png is None and self.path is not None and not self.path.exists():
+            return (f"waiting for the crater height map {self.path} (the sim writes it as it "
+                    "starts; a real lab's comes from stb crater import)")
+        return ""
+
     def _load(self, path: Path) -> None:
         if not path.exists():
             return

@@ -100,7 +100,8 @@ def run(node: Node[WebSettings]) -> None:
         keys.alive_pattern(node.bus.prefix), on_alive, history=True)
     desk = RecordingDesk(settings.recordings_dir, bus_environment(settings.bus),
                          settings.height_map)
-    app = build_app(gate, view, preview, video, CraterImage(settings.height_map),
+    crater = CraterImage(settings.height_map)
+    app = build_app(gate, view, preview, video, crater,
                     push_period_s=1 / settings.push_hz, max_streams=settings.max_streams,
                     command=GantryCommander(node.bus).send,
                     console=Console(node.bus, desk, settings.calibration_count))
@@ -115,6 +116,8 @@ def run(node: Node[WebSettings]) -> None:
         while not node.stop.wait(JUDGE_PERIOD_S):
             with lock:
                 state.judge(time.time())
+            waiting = crater.waiting_for()  # the page still serves; the map comes when written
+            node.set_status("degraded" if waiting else "ok", waiting)
     finally:
         server.close()
         desk.close()

@@ -18,9 +18,9 @@ from common.node import Node
 from common.settings import ServiceSettings
 from common.wiredoc import EXAMPLES
 from tests.common.test_codec import BAD
-from tests.conftest import wait_for
+from tests.conftest import until_heard, wait_for
 
-SETTLE_S = 0.3  # subscription declarations need a moment to reach the publisher via the router
+ROBOT_KEY = "stb/tracker/robot"
 
 
 def _robot(x_mm: float = 1.0, measured_s: float | None = None) -> m.RobotPosition:
@@ -32,7 +32,7 @@ def test_typed_message_arrives_with_both_time_stamps(make_bus: Callable[..., Bus
     producer, consumer = make_bus(), make_bus()
     got: queue.Queue[m.RobotPosition] = queue.Queue()
     consumer.subscribe(keys.TRACKER_ROBOT, got.put)
-    time.sleep(SETTLE_S)
+    until_heard(producer, ROBOT_KEY)
     sent = _robot(x_mm=42.0, measured_s=time.time() - 0.05)
     before = time.time()
     producer.publish(keys.TRACKER_ROBOT, sent)
@@ -54,7 +54,7 @@ def test_bad_payload_is_dropped_counted_and_the_next_good_one_arrives(
     producer, consumer = make_bus(), make_bus()
     got: queue.Queue[m.RobotPosition] = queue.Queue()
     consumer.subscribe(keys.TRACKER_ROBOT, got.put)
-    time.sleep(SETTLE_S)
+    until_heard(producer, ROBOT_KEY)
     payload, reason = BAD[case]
     producer.session.put("stb/tracker/robot", payload)
     wait_for(lambda: consumer.key_stats().get("stb/tracker/robot"))
@@ -69,7 +69,7 @@ def test_stale_and_future_samples_never_reach_the_handler(make_bus: Callable[...
     producer, consumer = make_bus(), make_bus(max_age_s=0.2, max_future_s=0.2)
     got: queue.Queue[m.RobotPosition] = queue.Queue()
     consumer.subscribe(keys.TRACKER_ROBOT, got.put)
-    time.sleep(SETTLE_S)
+    until_heard(producer, ROBOT_KEY)
     now = time.time()
     for x_mm, sent_s in ((1.0, now - 1.0), (2.0, now + 1.0)):
         producer.session.put("stb/tracker/robot", codec.encode(_robot(x_mm), sent_s=sent_s))
@@ -87,7 +87,7 @@ def test_a_publisher_with_max_age_does_not_send_what_is_already_stale(
     producer, consumer = make_bus(), make_bus()
     got: queue.Queue[m.RobotPosition] = queue.Queue()
     consumer.subscribe(keys.TRACKER_ROBOT, got.put, latest=False)
-    time.sleep(SETTLE_S)
+    until_heard(producer, ROBOT_KEY)
     assert not producer.publish(keys.TRACKER_ROBOT, _robot(1.0, time.time() - 0.6),
                                 max_age_s=0.5)
     assert producer.publish(keys.TRACKER_ROBOT, _robot(2.0, time.time() - 0.1), max_age_s=0.5)
@@ -105,13 +105,13 @@ def test_slow_consumer_gets_the_latest_value_and_never_holds_back_the_producer(
     last = threading.Event()
 
     def slow(msg: m.RobotPosition) -> None:
-        time.sleep(0.05)
+        time.sleep(0.05)  # the subject: a handler that takes 50 ms
         seen.append(msg.x_mm)
         if msg.x_mm == 499:
             last.set()
 
     consumer.subscribe(keys.TRACKER_ROBOT, slow)
-    time.sleep(SETTLE_S)
+    until_heard(producer, ROBOT_KEY)
     start = time.perf_counter()
     for i in range(500):
         producer.publish(keys.TRACKER_ROBOT, _robot(float(i)))
@@ -132,15 +132,17 @@ def test_latest_value_is_kept_per_key(make_bus: Callable[..., Bus]) -> None:
         got.append(msg.camera)
 
     consumer.subscribe(keys.PTZ_STATE, handler)
-    time.sleep(SETTLE_S)
+    until_heard(producer, "stb/ptz/ptz1/state")
     state = EXAMPLES[m.PtzState]
     for camera in ("ptz1", "ptz2", "ptz1", "ptz2"):
         producer.publish(keys.PTZ_STATE, state.model_copy(
             update={"camera": camera, "measured_s": time.time()}), camera=camera)
-    time.sleep(0.2)
+    wait_for(lambda: all(consumer.key_stats().get(f"stb/ptz/{c}/state") is not None
+                         and consumer.key_stats()[f"stb/ptz/{c}/state"].received == 2
+                         for c in ("ptz1", "ptz2")), why=lambda: str(consumer.key_stats()))
     gate.set()
     wait_for(lambda: len(got) >= 2)
-    time.sleep(0.2)
+    time.sleep(0.2)  # the subject: nothing more comes (the superseded samples are gone)
     assert sorted(got[-2:]) == ["ptz1", "ptz2"], "one camera must not hide the other"
     assert len(got) <= 3
 
@@ -156,10 +158,10 @@ def test_handler_error_is_counted_and_the_subscription_goes_on(
         got.put(msg.x_mm)
 
     consumer.subscribe(keys.TRACKER_ROBOT, fragile)
-    time.sleep(SETTLE_S)
+    until_heard(producer, ROBOT_KEY)
     producer.publish(keys.TRACKER_ROBOT, _robot(-1.0))
-    wait_for(lambda: consumer.key_stats().get("stb/tracker/robot"))
-    time.sleep(0.1)
+    wait_for(lambda: consumer.key_stats().get("stb/tracker/robot")
+             and consumer.key_stats()["stb/tracker/robot"].dropped.get("handler_error"))
     producer.publish(keys.TRACKER_ROBOT, _robot(5.0))
     assert got.get(timeout=2) == 5.0
     assert consumer.key_stats()["stb/tracker/robot"].dropped == {"handler_error": 1}
@@ -169,7 +171,7 @@ def test_ordered_subscription_delivers_every_sample(make_bus: Callable[..., Bus]
     producer, consumer = make_bus(), make_bus()
     got: list[int] = []
     consumer.subscribe(keys.GANTRY_SETPOINT, lambda s: got.append(s.seq), latest=False)
-    time.sleep(SETTLE_S)
+    until_heard(producer, "stb/gantry/setpoint")
     for seq in range(50):
         producer.publish(keys.GANTRY_SETPOINT, EXAMPLES[m.CraneSetpoint].model_copy(
             update={"seq": seq, "measured_s": time.time()}))
@@ -181,8 +183,8 @@ def test_late_joiner_gets_the_latest_pose_by_query(make_bus: Callable[..., Bus])
     calib, ptz = make_bus(), make_bus()
     pose = EXAMPLES[m.CameraPose]
     calib.serve_latest(keys.CALIB_POSE, lambda: pose, camera="ptz1")
-    time.sleep(SETTLE_S)
-    answers = ptz.query_latest(keys.CALIB_POSE, camera="ptz1")
+    answers = wait_for(lambda: ptz.query_latest(keys.CALIB_POSE, camera="ptz1"),
+                       why=lambda: "the queryable never answered")
     assert [a.model_copy(update={"sent_s": 0.0}) for a in answers] == [pose]
 
 
@@ -190,7 +192,7 @@ def test_prefix_separates_two_labs(make_bus: Callable[..., Bus]) -> None:
     lab_a, lab_b = make_bus(prefix="laba"), make_bus(prefix="labb")
     got: queue.Queue[m.RobotPosition] = queue.Queue()
     lab_b.subscribe(keys.TRACKER_ROBOT, got.put)
-    time.sleep(SETTLE_S)
+    until_heard(lab_a, "labb/tracker/robot")  # lab b's subscriber is known to lab a's session
     lab_a.publish(keys.TRACKER_ROBOT, _robot())
     with pytest.raises(queue.Empty):
         got.get(timeout=0.5)
@@ -201,7 +203,7 @@ def test_generic_subscription_decodes_known_and_unknown_keys(
     producer, monitor = make_bus(), make_bus()
     got: queue.Queue = queue.Queue()
     monitor.subscribe_any("stb/**", got.put)
-    time.sleep(SETTLE_S)
+    until_heard(producer, "stb/custom/thing")
     producer.publish(keys.TRACKER_ROBOT, _robot(9.0))
     producer.session.put("stb/custom/thing", msgpack.packb({"a": 1}))
     items = dict(got.get(timeout=2) for _ in range(2))
@@ -215,7 +217,8 @@ def test_drop_counts_show_in_the_published_health(make_bus: Callable[..., Bus]) 
     healths: queue.Queue[m.ServiceHealth] = queue.Queue()
     watcher.subscribe(keys.HEALTH, healths.put, latest=False, service="gantry")
     bus.subscribe(keys.GANTRY_FRAME, lambda frame: None)
-    time.sleep(SETTLE_S)
+    until_heard(attacker, "stb/gantry/camera/frame")
+    until_heard(bus, "stb/health/gantry/main")
     for n, payload in enumerate((b"not msgpack at all", msgpack.packb({"camera": "x"})), 1):
         attacker.session.put("stb/gantry/camera/frame", payload)
         wait_for(lambda n=n: "stb/gantry/camera/frame" in bus.key_stats() and sum(
@@ -252,7 +255,7 @@ def test_backlog_after_a_network_stall_never_reaches_the_handler(
     ages: list[float] = []
     consumer.subscribe(keys.TRACKER_ROBOT, lambda msg: ages.append(time.time() - msg.sent_s))
     try:
-        time.sleep(SETTLE_S)
+        until_heard(producer, ROBOT_KEY)
         stop = threading.Event()
 
         def produce() -> None:
@@ -263,7 +266,7 @@ def test_backlog_after_a_network_stall_never_reaches_the_handler(
         producing.start()
         wait_for(lambda: len(ages) > 10)
         proxy.stall()
-        time.sleep(1.5)
+        time.sleep(1.5)  # the subject: a network stall of 1.5 s
         before = len(ages)
         proxy.release()
         wait_for(lambda: len(ages) > before + 10, timeout=5)

@@ -177,11 +177,15 @@ def test_unknown_paths_and_cameras_are_404(server: tuple) -> None:
 
 def test_the_height_map_appears_once_the_sim_has_written_it(server: tuple) -> None:
     web, crater_file = server
+    crater = CraterImage(crater_file)
+    assert crater.waiting_for().startswith(f"waiting for the crater height map {crater_file}")
     assert json.loads(_get(web, "/map.json")[1])["image"] is False
     assert _get(web, "/map.png")[0] == 404
     heights = np.zeros((30, 40), dtype=np.float32)
     heights[10:20, 10:30] = -500.0
     HeightMap(heights, -2000.0, -1500.0, 100.0).save(crater_file)
+    assert crater.waiting_for() == ""
+    assert CraterImage(None).waiting_for() == "", "no map asked for: nothing to wait for"
     info = json.loads(_get(web, "/map.json")[1])
     assert info["extent_mm"] == [-2000.0, 1900.0, -1500.0, 1400.0] and info["image"] is True
     assert info["height_mm"] == [-500.0, 0.0], "the colour scale's ends"

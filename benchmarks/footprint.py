@@ -1,0 +1,121 @@
+"""What the demo lab's processes hold in memory: each service's resident memory under
+``stb up``, as a lab engineer starts it (``make demo`` without the live view).
+
+    .venv/bin/python -m benchmarks.footprint [--lab config/demo.toml] [--settle 60]
+
+Starts ``stb up --lab LAB --no-view``, waits until ``stb up`` has started every service
+and they have run for ``--settle`` seconds (the demo calibrates its cameras and follows the
+robot meanwhile; it says how many services ``stb up`` had to restart), then samples each
+process five times a second for ``--seconds`` and prints, per process, the peak of:
+
+* VmRSS — what ``top`` shows: the process's resident memory, shared libraries and Zenoh's
+  shared-memory pools included (every process that received a large message from another
+  maps that sender's 16 MiB pool);
+* RssAnon — what the process itself allocated (``benchmarks/faults/lab.py private_mb``).
+
+The lab's total is the sum of the services' VmRSS (the router and ``stb up`` itself
+included, the sim's device processes too): what the machine must hold. Goals (issue 39): a
+PTZ service ≤ 150 MB, the gantry ≤ 200 MB, the demo lab ≤ 1.2 GB. Figures with this command
+are in docs/benchmarks.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from benchmarks.faults.lab import _status, children, cmdline
+
+ROOT = Path(__file__).resolve().parent.parent
+GOALS_MB = {"ptz": 150.0, "gantry": 200.0}
+LAB_GOAL_MB = 1200.0
+
+
+def processes(up_pid: int) -> dict[str, int]:
+    """Every process of the lab by name: ``stb up``, its services (``ptz:ptz1``), and their
+    children (the sim's device processes, ``sim/1``)."""
+    found = {"stb up": up_pid}
+    for pid in children(up_pid):
+        words = cmdline(pid).split()
+        module = next((w for w in words if w.startswith("services.")), "?")
+        name = module.removeprefix("services.")
+        if "--instance" in words and words[words.index("--instance") + 1] != "main":
+            name += ":" + words[words.index("--instance") + 1]
+        found[name] = pid
+        for n, child in enumerate(children(pid), start=1):
+            found[f"{name}/{n}"] = child
+    return found
+
+
+def sample(pids: dict[str, int], seconds: float) -> dict[str, dict[str, float]]:
+    peak: dict[str, dict[str, float]] = {name: {"rss_mb": 0.0, "anon_mb": 0.0} for name in pids}
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        for name, pid in pids.items():
+            rss, anon = _status(pid, "VmRSS") / 1024, _status(pid, "RssAnon") / 1024
+            if rss == rss:  # not NaN: the process is there
+                peak[name]["rss_mb"] = max(peak[name]["rss_mb"], rss)
+                peak[name]["anon_mb"] = max(peak[name]["anon_mb"], anon)
+        time.sleep(0.2)
+    return peak
+
+
+def measure(lab: Path, settle_s: float, seconds: float) -> dict[str, dict[str, float]]:
+    with tempfile.TemporaryDirectory() as folder, \
+            open(Path(folder) / "up.log", "w") as log:
+        up = subprocess.Popen([sys.executable, "-m", "services.cli", "up", "--lab", str(lab),
+                               "--no-view"], cwd=ROOT, stdout=log, stderr=subprocess.STDOUT,
+                              env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        try:
+            count, since = 0, time.monotonic()  # the services are there when none is added
+            while time.monotonic() - since < 5.0:
+                if len(children(up.pid)) != count:
+                    count, since = len(children(up.pid)), time.monotonic()
+                time.sleep(0.2)
+            print(f"{count} services running; settling {settle_s:.0f} s", file=sys.stderr)
+            time.sleep(settle_s)
+            peak = sample(processes(up.pid), seconds)
+            restarts = (Path(folder) / "up.log").read_text().count(" exited with ")
+            print(f"restarts while it ran: {restarts}", file=sys.stderr)
+            return peak
+        finally:
+            up.send_signal(signal.SIGINT)
+            try:
+                up.wait(30)
+            except subprocess.TimeoutExpired:
+                up.kill()
+                up.wait()
+
+
+def table(peak: dict[str, dict[str, float]]) -> str:
+    rows = ["| process | VmRSS MB | RssAnon MB | goal |", "|---|---:|---:|---|"]
+    for name, p in sorted(peak.items()):
+        goal = GOALS_MB.get(name.split(":")[0])
+        rows.append(f"| {name} | {p['rss_mb']:.0f} | {p['anon_mb']:.0f} | "
+                    f"{'' if goal is None else f'≤ {goal:.0f}'} |")
+    total = sum(p["rss_mb"] for p in peak.values())
+    rows.append(f"| **lab** | **{total:.0f}** | {sum(p['anon_mb'] for p in peak.values()):.0f}"
+                f" | ≤ {LAB_GOAL_MB:.0f} |")
+    return "\n".join(rows)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--lab", type=Path, default=ROOT / "config" / "demo.toml")
+    parser.add_argument("--settle", type=float, default=60.0)
+    parser.add_argument("--seconds", type=float, default=10.0)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    peak = measure(args.lab.resolve(), args.settle, args.seconds)
+    print(json.dumps(peak, indent=1) if args.json else table(peak))
+
+
+if __name__ == "__main__":
+    main()
