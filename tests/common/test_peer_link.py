@@ -37,12 +37,13 @@ def test_robot_samples_go_straight_from_tracker_to_ptz_and_arrive_once() -> None
                 update={"x_mm": x_mm, "measured_s": time.time()}))
 
         wait_for(lambda: send(0.0) or not got.empty(), timeout=5)  # the subscription is known
-        time.sleep(0.3)
+        time.sleep(0.3)  # the probes still on their way, each once
         while not got.empty():
             got.get()
         for i in range(20):
             send(float(i + 1))
-        time.sleep(0.5)
+        wait_for(lambda: got.qsize() >= 20, timeout=5)
+        time.sleep(0.3)  # the subject: no second copy comes (not through the router too)
         assert [got.get_nowait().x_mm for _ in range(got.qsize())] == [i + 1 for i in range(20)]
 
         router.close()  # the router gone: the peer link carries them on

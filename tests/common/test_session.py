@@ -15,7 +15,7 @@ from common import messages as m
 from common.bus import Bus, BusUnreachable, open_session, zenoh_config
 from common.settings import BusSettings, TlsSettings, ZenohSettings
 from common.wiredoc import EXAMPLES
-from tests.conftest import free_port
+from tests.conftest import free_port, until_heard
 
 
 def test_two_peers_talk_without_a_router() -> None:
@@ -26,7 +26,7 @@ def test_two_peers_talk_without_a_router() -> None:
     try:
         got: queue.Queue[m.CraneState] = queue.Queue()
         bus_b.subscribe(keys.GANTRY_STATE, got.put)
-        time.sleep(0.5)
+        until_heard(bus_a, "stb/gantry/state")
         bus_a.publish(keys.GANTRY_STATE, EXAMPLES[m.CraneState].model_copy(
             update={"measured_s": time.time()}))
         assert got.get(timeout=3).status == "tracking"

@@ -74,7 +74,7 @@ def test_stop_acts_within_a_control_period_and_only_reset_and_arm_move_again(
         wait_for(lambda: np.linalg.norm(crane.state()[1]) < 1.0, timeout=3)
         assert (refused := operator.send("arm")).accepted is False
         assert "reset first" in refused.detail
-        time.sleep(0.5)
+        time.sleep(0.5)  # the subject: half a second in which it stays stopped
         assert not crane.state()[2] and operator.states[-1].status == "stopped"
         assert operator.send("reset").mode == "disarmed"
         assert operator.send("arm").accepted
@@ -98,7 +98,7 @@ def test_a_restarted_gantry_leaves_a_watchdog_stopped_crane_alone_until_reset_an
         try:
             operator = Operator(make_bus())
             wait_for(lambda: operator.states, timeout=5)
-            time.sleep(1.5)
+            time.sleep(1.5)  # the subject: 1.5 s in which it must not enable the crane
             _, _, enabled, faults = crane.state()
             assert not enabled and faults & FAULT_WATCHDOG, "no enable, no reset by itself"
             assert operator.states[-1].mode == "disarmed"
@@ -154,7 +154,7 @@ def test_a_crane_disabled_at_the_controller_stops_the_gantry(rig: dict) -> None:
         crane.at_the_panel(0)  # someone disables it at the controller
         wait_for(lambda: operator.mode() == "stopped", timeout=1)
         assert operator.states[-1].mode_reason == "crane disabled at the controller"
-        time.sleep(1.5)
+        time.sleep(1.5)  # the subject: 1.5 s in which it must not enable it again
         assert not crane.state()[2], "the gantry does not enable it again"
 
 
@@ -167,7 +167,7 @@ def test_another_modbus_clients_setpoints_stop_the_gantry(rig: dict) -> None:
     registers = crane.registers
     with feeding(crane, rig["world"], lambda t: TARGET + [60.0 * t, 0.0]):
         _moving(rig)
-        time.sleep(1.0)
+        time.sleep(1.0)  # a second of its own setpoints
         assert operator.mode() == "armed", "its own setpoints are no reason to stop"
         foreign = ModbusTcpClient("127.0.0.1", port=crane.port, timeout=1, retries=0)
         began = time.monotonic()
@@ -177,7 +177,7 @@ def test_another_modbus_clients_setpoints_stop_the_gantry(rig: dict) -> None:
                                         registers.encode("setpoint_x", -2500.0)
                                         + registers.encode("setpoint_y", 2500.0),
                                         device_id=registers.unit_id)
-                time.sleep(0.1)
+                time.sleep(0.1)  # a foreign client writing ten times a second
         finally:
             foreign.close()
         stopped_after = time.monotonic() - began

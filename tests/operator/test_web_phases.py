@@ -2,10 +2,13 @@
 with its router, fed over Zenoh what the services would publish — before anything arrives,
 while a camera calibrates, while the crane follows with alarms, after an alarm clears — with a
 screenshot of each phase and assertions on what is visible; and the layout at 1400×900 and
-1280×720. (The whole lab's page, buttons to the real gantry included, is ``test_web.py``.)"""
+1280×720. Each test has a tab of its own and publishes what its phase needs, so they pass in
+any order; the first, before any data, has a page service of its own. (The whole lab's page,
+buttons to the real gantry included, is ``test_web.py``.)"""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import time
@@ -38,9 +41,9 @@ class Quiet:
     shots: Path
 
 
-@pytest.fixture(scope="module")
-def quiet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Quiet]:
-    tmp = tmp_path_factory.mktemp("page")
+@contextlib.contextmanager
+def _page_lab(tmp: Path) -> Iterator[Quiet]:
+    """``stb up`` with the router and the page, nothing else: the test plays the services."""
     lab, endpoint, port = write_up_lab(tmp, ["router", "web"])
     generate_crater(CraterShape(), np.random.default_rng(1)).save(tmp / "crater.npz")
     up = stb_process("up", "--lab", str(lab), "--no-view")
@@ -66,17 +69,32 @@ def quiet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Quiet]:
 
 
 @pytest.fixture(scope="module")
-def browser(quiet: Quiet) -> Iterator[object]:
+def quiet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Quiet]:
+    with _page_lab(tmp_path_factory.mktemp("page")) as lab:
+        yield lab
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[object]:
     with chromium() as launched:
         yield launched
 
 
-@pytest.fixture(scope="module")
-def tab(browser: object, quiet: Quiet) -> Iterator[object]:
+@contextlib.contextmanager
+def _tab(browser: object, quiet: Quiet) -> Iterator[object]:
     page = browser.new_page(viewport={"width": 1400, "height": 900})  # type: ignore[attr-defined]
-    page.goto(quiet.url, wait_until="load")
-    yield page
-    page.close()
+    try:
+        page.goto(quiet.url, wait_until="load")
+        wait_for(lambda: _text(page, "#connection") == "live", timeout=10)
+        yield page
+    finally:
+        page.close()
+
+
+@pytest.fixture
+def tab(browser: object, quiet: Quiet) -> Iterator[object]:
+    with _tab(browser, quiet) as page:
+        yield page
 
 
 def _text(page: object, selector: str) -> str:
@@ -137,9 +155,13 @@ def _robot(quiet: Quiet, x: float) -> None:
         vz_mm_s=0.0))
 
 
-def test_1_before_any_data_every_panel_says_what_it_waits_for(tab: object,
-                                                               quiet: Quiet) -> None:
-    wait_for(lambda: _text(tab, "#connection") == "live", timeout=10)
+def test_1_before_any_data_every_panel_says_what_it_waits_for(
+        browser: object, tmp_path: Path) -> None:
+    with _page_lab(tmp_path) as untouched, _tab(browser, untouched) as tab:
+        _before_any_data(tab, untouched)
+
+
+def _before_any_data(tab: object, quiet: Quiet) -> None:
     wait_for(lambda: tab.locator("#map").get_attribute("data-waiting"),  # type: ignore[attr-defined]
              timeout=5)
     assert "waiting for the robot" in tab.locator("#map").get_attribute("data-waiting")  # type: ignore[attr-defined]
@@ -199,7 +221,7 @@ def test_3_following_with_alarms_in_the_banner_and_the_plot(tab: object, quiet: 
         _robot(quiet, 100.0 * i)
         _crane(quiet, 100.0 * i - 40 - 10 * i)
         _offload(quiet, 40.0 + 10 * i)
-        time.sleep(0.2)
+        time.sleep(0.2)  # the subject: samples a fifth of a second apart, as the gantry sends
     banner = wait_for(lambda: "sideways pull" in _text(tab, "#alarms") and _text(
         tab, "#alarms"), timeout=5)
     causes = tab.eval_on_selector_all(  # type: ignore[attr-defined]
@@ -220,9 +242,15 @@ def test_3_following_with_alarms_in_the_banner_and_the_plot(tab: object, quiet: 
 
 def test_4_an_alarm_that_clears_leaves_the_banner_and_is_listed(tab: object,
                                                                  quiet: Quiet) -> None:
+    for i in range(5):  # the crane 200 mm behind: the sideways-pull alarm
+        _robot(quiet, 100.0 * i)
+        _crane(quiet, 100.0 * i - 200)
+        _offload(quiet, 200.0)
+        time.sleep(0.2)  # the alarm's samples a fifth of a second apart, as the gantry sends
+    wait_for(lambda: "sideways pull" in _text(tab, "#alarms"), timeout=5)
     for _ in range(5):
         _offload(quiet, 30.0)
-        time.sleep(0.2)
+        time.sleep(0.2)  # a second of the crane back on the robot
     wait_for(lambda: "sideways pull" not in _text(tab, "#alarms"), timeout=5)
     assert "sideways pull" in _text(tab, "#ended")
     _crane(quiet, 0.0, mode="stopped", status="stopped")

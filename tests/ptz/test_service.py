@@ -111,7 +111,7 @@ def test_waits_for_a_pose_then_follows_the_robot(service: dict) -> None:
     world, states = service["world"], service["states"]
     for _ in range(10):
         _publish_robot(world, TARGET)
-        time.sleep(0.05)
+        time.sleep(0.05)  # the robot's samples at the tracker's 20 Hz: no pose, no move
     wait_for(lambda: states and states[-1].status == "waiting_for_pose")
     assert states[-1].pan_deg == 0.0 and states[-1].tilt_deg == 0.0, "no move without a pose"
     _publish_pose(service)
@@ -158,7 +158,8 @@ def test_late_start_gets_the_pose_by_query(service: dict, make_bus: Callable[...
                         ry_deg=MOUNT.ry_deg, rz_deg=MOUNT.rz_deg, focal_mm=3.8,
                         mean_error_px=1.0, passpoints=100)
     calib.serve_latest(keys.CALIB_POSE, lambda: pose, camera="ptz1")
-    time.sleep(0.3)
+    wait_for(lambda: service["world"].query_latest(keys.CALIB_POSE, timeout_s=0.5,
+                                                   camera="ptz1"))  # calib answers
     service["servers"].append(_camera_server(service["port"]))
     service["thread"].start()
     wait_for(lambda: service["states"] and service["states"][-1].status in ("idle", "tracking"))
@@ -184,7 +185,7 @@ def test_positions_far_outside_the_crater_are_ignored(service: dict) -> None:
     _publish_pose(service)
     for _ in range(20):
         _publish_robot(world, np.array([90_000.0, 0.0, 0.0]))
-        time.sleep(0.05)
+        time.sleep(0.05)  # a second of samples at 20 Hz that must not move it
     wait_for(lambda: states and states[-1].status == "tracking")
     assert states[-1].pan_deg == 0.0 and states[-1].tilt_deg == 0.0
 
@@ -221,7 +222,7 @@ def test_calibration_mode_holds_still_detects_and_ends_with_its_lease(service: d
     wait_for(lambda: states[-1].status == "waiting_for_pose", timeout=4)  # lease ran out
     assert server.camera.head.ir_cut_filter == "auto"
     count = len(detections)
-    time.sleep(0.5)
+    time.sleep(0.5)  # the subject: nothing more for half a second
     assert len(detections) == count, "no more snapshots once the mode has ended"
 
 
@@ -248,7 +249,7 @@ def test_a_pose_from_the_future_is_refused_and_cannot_mis_aim_the_camera(service
              timeout=5)
     for _ in range(10):
         _publish_robot(world, TARGET)
-        time.sleep(0.05)
+        time.sleep(0.05)  # half a second of samples at 20 Hz: the refused pose must not act
     last = states[-1]
     assert aim_error_deg(TARGET, MOUNT, last.pan_deg, last.tilt_deg) < 0.5, "the true aim"
 
@@ -279,7 +280,7 @@ def test_a_pose_put_on_the_key_is_never_taken_whatever_its_version(service: dict
     quiet_until = time.monotonic() + 1.0  # the PTZ service asks calib within 0.6 s
     while time.monotonic() < quiet_until:
         assert _aim_error(service) < 0.5, "the spoof did not move the camera"
-        time.sleep(0.05)
+        time.sleep(0.05)  # the subject: a second in which nothing moves
     service["calib"].solve(rz_deg=MOUNT.rz_deg + 0.5, version=1)  # a later solve, lower version
     wait_for(lambda: abs(_aim_error(service) - 0.5) < 0.3, timeout=5, period=0.05)
 
@@ -365,7 +366,7 @@ def test_a_move_by_someone_else_pauses_following_then_it_follows_again(service: 
     while time.monotonic() - moved_at < 1.5:  # the robot's samples keep coming: left alone
         _publish_robot(world, TARGET)
         during.append(states[-1])
-        time.sleep(0.05)
+        time.sleep(0.05)  # samples at 20 Hz for 1.5 s, in which it must be left alone
     assert all(s.aim_error_deg > 10 for s in during[-10:]), "left where it was put"
     wait_for(following, timeout=5, period=0.05)
     assert time.monotonic() - moved_at >= 2.0, "the pause lasted"

@@ -22,8 +22,10 @@ from services.recording.record import Recorder
 from services.recording.replay import pace, replay, retimed
 from services.recording.typed import LabScene
 from services.sim.render import Blob, draw
-from tests.conftest import wait_for
+from tests.conftest import until_heard, wait_for
 from tests.recording.typed import decoded_typed
+
+ROBOT = "stb/tracker/robot"
 
 
 def _robot(i: int, t: float) -> m.RobotPosition:
@@ -38,10 +40,12 @@ def _frame(t: float) -> m.CameraFrame:
 
 
 def _record(bus: Bus, path: Path, publish: Callable[[], object], expect: int,
-            **kw: object) -> Recorder:
+            heard: tuple[Bus, str], **kw: object) -> Recorder:
+    """A recording of what ``publish`` sends, once ``heard``'s bus knows that the recorder
+    subscribes to its key."""
     with open(path, "wb") as out:
         recorder = Recorder(bus.session, "stb", ["stb/**"], out, **kw)  # type: ignore[arg-type]
-        time.sleep(0.3)  # the subscription reaches the router
+        until_heard(*heard)
         publish()
         wait_for(lambda: sum(recorder.stats.samples.values()) >= expect, timeout=5,
                  why=lambda: f"{dict(recorder.stats.samples)}")
@@ -61,7 +65,8 @@ def test_every_sample_is_recorded_in_order_with_its_times_and_a_json_copy(
         publisher.publish(keys.GANTRY_FRAME, _frame(t0))
         publisher.session.put("stb/tracker/robot", b"\xc1 not msgpack")
 
-    recorder = _record(recorder_bus, path, publish, expect=52, scene=LabScene())
+    recorder = _record(recorder_bus, path, publish, expect=52, scene=LabScene(),
+                       heard=(publisher, ROBOT))
     assert recorder.stats.invalid == {"stb/tracker/robot: not_msgpack": 1}
     assert recorded_keys(path) == {"stb/tracker/robot": 51, "stb/gantry/camera/frame": 1}
     robot = list(read_samples(path, ["stb/tracker/robot"]))
@@ -100,13 +105,13 @@ def test_replay_puts_the_same_messages_back_in_order_and_on_time(
     def publish() -> None:
         for i in range(20):
             publisher.publish(keys.TRACKER_ROBOT, _robot(i, t0 + i * 0.05))
-            time.sleep(0.05)
+            time.sleep(0.05)  # the subject: 50 ms apart, replayed at speed 2
 
-    _record(recorder_bus, path, publish, expect=20, with_json=False)
+    _record(recorder_bus, path, publish, expect=20, with_json=False, heard=(publisher, ROBOT))
     got: list[tuple[float, m.RobotPosition]] = []
     listener.subscribe(keys.TRACKER_ROBOT, lambda r: got.append((time.time(), r)),
                        latest=False)
-    time.sleep(0.3)
+    until_heard(listener, ROBOT)
     started = time.time()
     sent = replay(listener.session, path, speed=2.0)
     wait_for(lambda: len(got) == 20, timeout=5)
@@ -125,11 +130,11 @@ def test_replay_as_recorded_sends_the_exact_bytes(make_bus: Callable[..., Bus],
     path = tmp_path / "run.mcap"
     t0 = time.time()
     _record(recorder_bus, path, lambda: [publisher.publish(keys.TRACKER_ROBOT, _robot(i, t0))
-                                         for i in range(5)], expect=5)
+                                         for i in range(5)], expect=5, heard=(publisher, ROBOT))
     raw: list[bytes] = []
     sub = listener.session.declare_subscriber("stb/**", lambda s: raw.append(
         s.payload.to_bytes()))
-    time.sleep(0.3)
+    until_heard(listener, ROBOT)
     replay(listener.session, path, speed=10.0, as_recorded=True)
     wait_for(lambda: len(raw) == 5, timeout=5)
     sub.undeclare()
@@ -173,11 +178,11 @@ def test_recorder_skips_keys_it_excludes(make_bus: Callable[..., Bus], tmp_path:
     out = io.BytesIO()
     recorder = Recorder(recorder_bus.session, "stb", ["stb/**", "stb/tracker/**"], out,
                         exclude=["stb/gantry/**"])
-    time.sleep(0.3)
+    until_heard(publisher, ROBOT)
     publisher.publish(keys.GANTRY_FRAME, _frame(time.time()))
     publisher.publish(keys.TRACKER_ROBOT, _robot(1, time.time()))
     wait_for(lambda: recorder.stats.samples, timeout=5)
-    time.sleep(0.2)
+    time.sleep(0.2)  # the subject: the excluded frame, sent first, is not recorded after it
     recorder.close()
     assert dict(recorder.stats.samples) == {"stb/tracker/robot": 1}, \
         "excluded keys left out, overlapping expressions recorded once"
@@ -222,7 +227,8 @@ def test_camera_frames_are_recorded_as_h264_video_that_decodes_in_order_on_their
             time.sleep(1 / 30)  # a camera's pace (a burst of 9 MB may be dropped by the bus)
 
     recorder = _record(recorder_bus, path, publish, expect=25,  # most of them, on a busy machine
-                       scene=LabScene(video=True), raw_frames=False)
+                       scene=LabScene(video=True), raw_frames=False,
+                       heard=(publisher, "stb/gantry/camera/frame"))
     count = recorder.stats.samples["stb/gantry/camera/frame"]
     assert "stb/gantry/camera/frame" not in recorded_keys(path), "no raw frames"
     with open(path, "rb") as f:

@@ -149,6 +149,19 @@ def test_heartbeat_alone_keeps_the_watchdog_quiet() -> None:
     assert crane.status() & ENABLED and not crane.faults
 
 
+async def _connected(port: int, timeout_s: float = 10.0
+                     ) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
+    """A connection to the server as soon as it listens (it starts on the same loop)."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            return await asyncio.open_connection("127.0.0.1", port)
+        except OSError:
+            if time.monotonic() > deadline:
+                raise
+            await asyncio.sleep(0.02)
+
+
 def test_modbus_client_drives_the_crane_over_tcp() -> None:
     port = free_port()
     t0 = time.monotonic()
@@ -162,7 +175,7 @@ def test_modbus_client_drives_the_crane_over_tcp() -> None:
 
     async def main() -> dict:
         serving = asyncio.create_task(server.serve())
-        await asyncio.sleep(0.2)
+        (await _connected(port))[1].close()
         client = AsyncModbusTcpClient("127.0.0.1", port=port, timeout=2)
         await client.connect()
         try:
@@ -230,8 +243,7 @@ def test_the_sim_stopping_with_a_gantry_connected_logs_no_error(
 
     async def main() -> None:
         asyncio.create_task(server.serve())  # noqa: RUF006 - asyncio.run cancels it at the end
-        await asyncio.sleep(0.2)
-        await asyncio.open_connection("127.0.0.1", port)
+        await _connected(port)
         await asyncio.sleep(0.2)  # the server's task for this connection waits for a request
         # returning now, the connection open: asyncio.run cancels the server and its task
 

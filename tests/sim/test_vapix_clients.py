@@ -14,12 +14,14 @@ import httpx
 import numpy as np
 import pytest
 from axis.device import AxisDevice
+from axis.interfaces.ptz import PtzControl
 from axis.models.configuration import Configuration
 from axis.models.pwdgrp_cgi import SecondaryGroup
 
 from services.sim.camera_server import CameraServer, SimCamera
 from services.sim.lab import Lab
 from services.sim.vapix_device import serial_of
+from tests.conftest import wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -84,14 +86,23 @@ def test_the_axis_library_identifies_the_camera(camera: tuple, lab: Lab) -> None
 def test_the_axis_library_moves_the_camera_and_reads_it_back(camera: tuple) -> None:
     server, _ = camera
 
+    async def reaching(ptz: PtzControl, pan: float, tilt: float, zoom: int) -> bytes:
+        """The position once it is the one asked for (or what it is after 10 s)."""
+        deadline = time.monotonic() + 10
+        while True:
+            now = await ptz.query("position")
+            at = _pairs(now)
+            if (float(at["pan"]), float(at["tilt"]), int(at["zoom"])) == (pan, tilt, zoom) \
+                    or time.monotonic() > deadline:
+                return now
+            await asyncio.sleep(0.05)
+
     async def move(device: AxisDevice) -> tuple[bytes, bytes, bytes]:
         ptz = device.vapix.ptz
         await ptz.control(pan=30.0, tilt=-10.0, zoom=2000, speed=100)
-        await asyncio.sleep(1.0)
-        moved = await ptz.query("position")
+        moved = await reaching(ptz, 30.0, -10.0, 2000)
         await ptz.control(go_to_server_preset_name="Home")
-        await asyncio.sleep(1.0)
-        home = await ptz.query("position")
+        home = await reaching(ptz, 0.0, 0.0, 1)
         return moved, home, await ptz.query("limits")
 
     moved, home, limits = _with_axis(server, move)  # type: ignore[misc]
@@ -102,21 +113,24 @@ def test_the_axis_library_moves_the_camera_and_reads_it_back(camera: tuple) -> N
     assert _pairs(limits)["MaxPan"] == f"{server.camera.head.limits.max_pan:g}"
 
 
+def _at(client: httpx.Client) -> tuple[float, float]:
+    at = _pairs(client.get("/axis-cgi/com/ptz.cgi", params={"query": "position"}).content)
+    return float(at["pan"]), float(at["tilt"])
+
+
 def test_server_presets_set_list_go_and_remove(camera: tuple) -> None:
     _, client = camera
     ptz = "/axis-cgi/com/ptz.cgi"
     assert client.get(ptz, params={"pan": "45", "tilt": "-20"}).status_code == 204
-    time.sleep(0.8)
+    wait_for(lambda: _at(client) == (45.0, -20.0), timeout=5, why=lambda: str(_at(client)))
     assert client.get(ptz, params={"setserverpresetname": "crater rim"}).status_code == 204
     listed = client.get(ptz, params={"query": "presetposall"}).text.splitlines()
     assert listed == ["Preset Positions for camera 1", "presetposno1=Home",
                       "presetposno2=crater rim"]
     client.get(ptz, params={"move": "home"})
-    time.sleep(0.8)
+    wait_for(lambda: _at(client) == (0.0, 0.0), timeout=5, why=lambda: str(_at(client)))
     assert client.get(ptz, params={"gotoserverpresetno": "2"}).status_code == 204
-    time.sleep(0.8)
-    at = _pairs(client.get(ptz, params={"query": "position"}).content)
-    assert (float(at["pan"]), float(at["tilt"])) == (45.0, -20.0)
+    wait_for(lambda: _at(client) == (45.0, -20.0), timeout=5, why=lambda: str(_at(client)))
     assert client.get(ptz, params={"removeserverpresetname": "crater rim"}).status_code == 204
     refused = client.get(ptz, params={"gotoserverpresetname": "crater rim"})
     assert refused.status_code == 200 and refused.text.startswith("Error:")

@@ -19,7 +19,7 @@ from services.sim.mocap_server import MocapServer, MocapSource
 from services.tracker.mocap import QualisysMocap, bodies_from_xml, labels_from_xml
 from services.tracker.service import run
 from services.tracker.settings import TrackerSettings
-from tests.conftest import free_port, wait_for
+from tests.conftest import free_port, until_heard, wait_for
 
 
 class QtmThread:
@@ -103,7 +103,7 @@ def test_driver_reconnects_when_qtm_comes_back(qtm: QtmThread) -> None:
         qtm.stop()
         wait_for(lambda: states and states[-1][0] is False, timeout=5)
         count = len(frames)
-        time.sleep(0.5)
+        time.sleep(0.5)  # QTM away for half a second
         qtm.start()
         wait_for(lambda: len(frames) > count + 20, timeout=5)
         assert states[-1][0] is True
@@ -277,17 +277,12 @@ def test_a_body_lost_by_qtm_gives_no_robot_sample_never_a_zero_or_its_marker(
     watcher.subscribe(keys.TRACKER_ROBOT, robots.append, latest=False)
     # the body's 20 frames go out in 0.2 s: only once the watcher's subscription has reached
     # the tracker's session (a CI run lost the first few to its propagation)
-    probe = m.RobotPosition(measured_s=time.time(), x_mm=-1.0, y_mm=0.0, z_mm=0.0,
-                            vx_mm_s=0.0, vy_mm_s=0.0, vz_mm_s=0.0)
-    wait_for(lambda: service_bus.publish(keys.TRACKER_ROBOT, probe) and robots, timeout=10,
-             period=0.05)
-    time.sleep(0.3)  # the probes still on their way
-    robots.clear()
+    until_heard(service_bus, "stb/tracker/robot")
     thread = threading.Thread(target=run, args=(node, LosingBody()))
     thread.start()
     try:
         wait_for(lambda: len(robots) >= 20, timeout=10)
-        time.sleep(0.5)
+        time.sleep(0.5)  # the subject: the 20 frames without the body give no sample
         assert [r.x_mm for r in robots] == [float(k) for k in range(20)]
         assert all(r.body == "robot" and r.qw == 1.0 for r in robots)
     finally:
