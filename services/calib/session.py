@@ -40,7 +40,6 @@ TICK_S = 0.05
 PROGRESS_S = 0.5
 MOCAP_WAIT_S = 1.0
 SNAPSHOTS_KEPT = 30
-HOLD_WAIT_S = 15.0  # the PTZ service may take this long to hold the camera (a busy PC)
 WIDE_COVERAGE = (4, 3, 3)  # at the widest of several zooms: every cell of a 4×3 grid, 3 each
 STALL_HINTS = {  # why snapshots gave no passpoint → what to check
     "no marker": "the wand is not in the camera's view (or the IR cut filter is on)",
@@ -180,7 +179,7 @@ class Session:
             if len(self.collector.times) != gained[0]:
                 gained = (len(self.collector.times), now, Counter(self.collector.skipped))
             elif now - gained[1] > (stall := self.settings.stall_s if held else
-                                    max(self.settings.stall_s, HOLD_WAIT_S)):
+                                    max(self.settings.stall_s, self.settings.hold_wait_s)):
                 self._finish("failed", self._stalled_text(gained[2], stall))
                 return False
             if now >= renew_at:

@@ -34,6 +34,9 @@ class CalibSettings(ServiceSettings):
     stall_s: float = Field(60.0, gt=0, description="a collection that gains no passpoint for "
                            "this long (from when the camera is held) fails, saying what the "
                            "snapshots showed")
+    hold_wait_s: float = Field(15.0, gt=0, description="how long a collection waits for the "
+                               "PTZ service to hold the camera (a busy PC) before it fails "
+                               "naming that service")
     min_spacing_mm: float = Field(50.0, ge=0, description="a passpoint needs the marker this "
                                   "far from the previous one")
     min_spacing_px: float = Field(20.0, ge=0, le=200, description="a passpoint needs the "

@@ -183,7 +183,9 @@ class CameraServer:
         self._httpd = ThreadingHTTPServer((host, port), self._handler_class())
         self._httpd.daemon_threads = True
         self.port = self._httpd.server_address[1]
-        self._thread = threading.Thread(target=self._httpd.serve_forever,
+        # it looks for a shutdown every 50 ms (the standard half second made every close,
+        # and every test's end, wait that long)
+        self._thread = threading.Thread(target=self._httpd.serve_forever, args=(0.05,),
                                         name=f"vapix:{camera.name}", daemon=True)
 
     def start(self) -> CameraServer:

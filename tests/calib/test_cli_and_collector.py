@@ -274,8 +274,8 @@ def test_a_collection_never_held_stalls_after_stall_s_naming_the_ptz_service(
     from services.calib.settings import CalibSettings
     from services.calib.store import PoseStore
 
-    session = Session(_quiet_node(), CalibSettings(stall_s=0.3), PoseStore(tmp_path),  # type: ignore[arg-type]
-                      "ptz1", 100, 60.0, lambda pose, report: None)
+    session = Session(_quiet_node(), CalibSettings(stall_s=0.3, hold_wait_s=0.5),  # type: ignore[arg-type]
+                      PoseStore(tmp_path), "ptz1", 100, 60.0, lambda pose, report: None)
     assert session._collect() is False
     assert session.state == "failed"
     assert "has not taken the camera into calibration mode" in session.message

@@ -245,11 +245,25 @@ def test_the_target_check_stops_on_targets_the_gantry_never_wrote() -> None:
 def test_the_imm_loads_its_libraries_when_made_not_at_its_first_update() -> None:
     """Importing filterpy and scipy takes 0.8 s with the GIL held: at the first update, while
     the crane is armed, it starved the heartbeat and tripped the crane's watchdog."""
-    code = ("import sys\n"
-            "from services.gantry.predict import make_predictor\n"
-            "assert 'filterpy.kalman' not in sys.modules, 'the CLI stays fast'\n"
-            "make_predictor('default')\n"
-            "assert {'filterpy.kalman', 'scipy.linalg'} <= set(sys.modules)\n")
+    _in_a_fresh_python("import sys\n"
+                       "from services.gantry.predict import make_predictor\n"
+                       "assert 'filterpy.kalman' not in sys.modules, 'the CLI stays fast'\n"
+                       "make_predictor('default')\n"
+                       "assert {'filterpy.kalman', 'scipy.linalg'} <= set(sys.modules)\n")
+
+
+def test_the_cores_load_no_io_library() -> None:
+    """The control law, the modes and the loop run on numbers: no Modbus client, no camera
+    capture, no bus."""
+    _in_a_fresh_python(
+        "import sys\n"
+        "import services.gantry.control, services.gantry.modes, services.gantry.loop\n"
+        "import services.gantry.safety, services.gantry.reading\n"
+        "loaded = {'pymodbus', 'cv2', 'zenoh', 'httpx'} & set(sys.modules)\n"
+        "assert not loaded, loaded\n")
+
+
+def _in_a_fresh_python(code: str) -> None:
     subprocess.run([sys.executable, "-c", code], cwd=Path(__file__).parents[2], check=True,
                    timeout=60)
 

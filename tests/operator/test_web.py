@@ -19,6 +19,8 @@ from tests.operator.conftest import LIVE_SERVICES, LiveLab
 from tests.uplab import OPERATOR, VIEWER
 from tests.webpage import basic
 
+pytestmark = pytest.mark.system  # the whole lab under stb up, armed (make test-system)
+
 CHROMIUM = os.environ.get("STB_CHROMIUM", "/usr/bin/chromium")
 FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync"]
