@@ -89,6 +89,8 @@ def only_allowed_arrive(session: Callable[[str], zenoh.Session],
     ``allowed`` payloads (any account may read). ``session(account)``: a session as it."""
     sessions = {account: session(account) for account, _, _ in puts}
     got, _sub = _collect(session("tracker"), "stb/**")
+    # a fixed pause: the reader's subscription must reach the router first, and a matching
+    # status cannot tell it for the accounts the router denies (theirs never match)
     time.sleep(0.5)
     for _ in range(3):
         for account, key, payload in puts:

@@ -176,7 +176,7 @@ def test_the_chain_across_hosts_survives_cut_links_and_a_router_restart(lab: dic
     print(f"watchdog tripped {tripped - cut_at:.3f} s after the cut")  # type: ignore[operator]
     assert tripped - cut_at <= 0.55  # type: ignore[operator]
     wait_for(lambda: (r := _read(crane)) is not None and not r.moving, timeout=3)
-    time.sleep(1.5)
+    time.sleep(1.5)  # the subject: it stays stopped
     reading = _read(crane)
     assert reading is not None and not reading.enabled and not reading.moving
 
@@ -188,7 +188,7 @@ def test_the_chain_across_hosts_survives_cut_links_and_a_router_restart(lab: dic
     lab["lan"].plug("gantry")
     wait_for(lambda: any(s.mode == "stopped" and "watchdog" in s.mode_reason
                          for s in states), timeout=5, period=0.1)
-    time.sleep(1.0)
+    time.sleep(1.0)  # the subject: a second in which the gantry leaves the crane alone
     reading = _read(crane)
     assert reading is not None and not reading.enabled and reading.watchdog_tripped
     assert operator.send("reset").accepted

@@ -127,7 +127,7 @@ def test_liveliness_and_queries_work_under_default_deny(lab: dict) -> None:
                                     lambda q: q.reply("stb/calib/ptz1/pose", b"pose"))
     _fake = ptz1.declare_queryable("stb/calib/ptz2/pose",
                                    lambda q: q.reply("stb/calib/ptz2/pose", b"fake pose"))
-    time.sleep(0.5)
+    time.sleep(0.5)  # both queryables reach the router (the denied one cannot be probed)
     answers = [r.ok.payload.to_bytes() for r in monitor.get("stb/calib/*/pose", timeout=2)
                if r.ok]
     assert answers == [b"pose"], "only calib answers pose queries"
