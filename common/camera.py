@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from functools import cached_property
-from typing import Protocol, TypedDict
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -100,17 +100,6 @@ class PoseFields(PositionFields, Protocol):
     def rz_deg(self) -> float: ...
 
 
-class PoseKeywords(TypedDict):
-    """A pose as keyword arguments of a message (``Pose.fields``)."""
-
-    x_mm: float
-    y_mm: float
-    z_mm: float
-    rx_deg: float
-    ry_deg: float
-    rz_deg: float
-
-
 @dataclass(frozen=True)
 class Pose:
     """T_world_camera: where a camera is (mm) and how it is turned (deg, R = Rx·Ry·Rz)."""
@@ -136,7 +125,7 @@ class Pose:
         camera's settings)."""
         return cls(f.x_mm, f.y_mm, f.z_mm, f.rx_deg, f.ry_deg, f.rz_deg)
 
-    def fields(self) -> PoseKeywords:
+    def fields(self) -> dict[str, Any]:  # Any: spread into a message's other fields
         """``x_mm … rz_deg`` as keyword arguments (for a CameraPose message)."""
         return {"x_mm": self.x_mm, "y_mm": self.y_mm, "z_mm": self.z_mm,
                 "rx_deg": self.rx_deg, "ry_deg": self.ry_deg, "rz_deg": self.rz_deg}
