@@ -122,9 +122,8 @@ class Bridge:
 class _Listener:
     """A client that subscribes to the crater gets it with the next message.
 
-    Only ``on_subscribe``, duck-typed: a subclass of foxglove-sdk's ``ServerListener``
-    Protocol, which brings its other callbacks along, lost the JSON channels' messages on a
-    busy machine (the foxglove test failed 3 of 6 runs beside a busy core; 0 of 6 so)."""
+    Only ``on_subscribe``, duck-typed (cast to foxglove-sdk's ``ServerListener`` Protocol
+    where the server is started), as it has been since the bridge began."""
 
     def __init__(self, scene: LabScene) -> None:
         self.scene = scene
