@@ -23,6 +23,13 @@ def _ephemeral_start() -> int:
         return 32768
 
 
+def listening(port: int) -> bool:
+    """Something accepts connections on the loopback ``port`` (a server has started)."""
+    with socket.socket() as s:
+        s.settimeout(0.5)
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
 def free_port() -> int:
     top = _ephemeral_start()
     for _ in range(500):

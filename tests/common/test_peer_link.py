@@ -37,9 +37,8 @@ def test_robot_samples_go_straight_from_tracker_to_ptz_and_arrive_once() -> None
                 update={"x_mm": x_mm, "measured_s": time.time()}))
 
         wait_for(lambda: send(0.0) or not got.empty(), timeout=5)  # the subscription is known
-        time.sleep(0.3)  # the probes still on their way, each once
-        while not got.empty():
-            got.get()
+        send(-1.0)  # in order behind the probes: once it is taken, so are they
+        wait_for(lambda: got.get(timeout=5).x_mm == -1.0, timeout=10, period=0.0)
         for i in range(20):
             send(float(i + 1))
         wait_for(lambda: got.qsize() >= 20, timeout=5)

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import asyncio
 import itertools
-import socket
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -25,6 +24,7 @@ from services.sim.crane_server import ESTOP_REGISTER, CraneServer
 from services.sim.render import Blob, draw
 from tests.conftest import free_port, poll, wait_for
 from tests.gantry.camera import CAMERA, pixel_of
+from tests.ports import listening
 
 GROUND_MM, MARKER_MM = 100.0, 80.0
 _ids = itertools.count()
@@ -46,14 +46,8 @@ class CraneRig:
         self.loop = asyncio.new_event_loop()
         self.thread = threading.Thread(target=self._run, daemon=True)
         self.thread.start()
-        wait_for(self._accepts, timeout=10, why=lambda: f"no crane server on {self.port}")
-
-    def _accepts(self) -> bool:
-        try:
-            socket.create_connection(("127.0.0.1", self.port), timeout=0.5).close()
-            return True
-        except OSError:
-            return False
+        wait_for(lambda: listening(self.port), timeout=10,
+                 why=lambda: f"no crane server on {self.port}")
 
     def _run(self) -> None:
         asyncio.set_event_loop(self.loop)

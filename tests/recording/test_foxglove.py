@@ -25,7 +25,7 @@ from services.recording.typed import CRATER, SCENE, TF, LabScene, Typed, crater_
 from services.sim.world import CraterShape, generate_crater
 from tests.calib.test_demo_calibration import MOUNTS
 from tests.conftest import stb_process, wait_for
-from tests.ports import free_port
+from tests.ports import free_port, listening
 from tests.recording.typed import message_class
 from tests.services.test_processes import _stop
 
@@ -192,7 +192,7 @@ def test_stb_foxglove_serves_the_typed_scene_images_and_json_series(
                        "--set", f"height_map={crater_file}", "--set", "bus.zenoh.listen=[]",
                        "--set", 'allowed_origins=["https://app.foxglove.dev"]')
     try:
-        wait_for(lambda: proc.poll() is not None or _listening(port), timeout=20, period=0.2)
+        wait_for(lambda: proc.poll() is not None or listening(port), timeout=20, period=0.2)
         assert proc.poll() is None, proc.stderr.read()
         stop = False
 
@@ -267,11 +267,3 @@ async def _handshake(url: str, origin: str) -> int:
             return 101
     except websockets.InvalidStatus as err:
         return err.response.status_code
-
-
-def _listening(port: int) -> bool:
-    import socket
-
-    with socket.socket() as s:
-        s.settimeout(0.2)
-        return s.connect_ex(("127.0.0.1", port)) == 0

@@ -16,7 +16,8 @@ from pymodbus.client import ModbusTcpClient
 from common.crane_registers import DEFAULT_MAP as MAP
 from services.sim.crane import CraneModel, CraneParams
 from services.sim.crane_server import ESTOP_REGISTER, CraneServer
-from tests.conftest import free_port
+from tests.conftest import free_port, wait_for
+from tests.ports import listening
 
 
 @pytest.fixture
@@ -27,13 +28,7 @@ def controller() -> Iterator[int]:
     thread = threading.Thread(target=loop.run_until_complete, args=(server.serve(),),
                               daemon=True)
     thread.start()
-    deadline = time.monotonic() + 5
-    while time.monotonic() < deadline:
-        try:
-            socket.create_connection(("127.0.0.1", port), timeout=0.5).close()
-            break
-        except OSError:
-            time.sleep(0.05)
+    wait_for(lambda: listening(port), timeout=5, period=0.05)
     yield port
     asyncio.run_coroutine_threadsafe(server.close(), loop).result(5)
     thread.join(5)

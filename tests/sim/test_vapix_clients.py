@@ -95,7 +95,7 @@ def test_the_axis_library_moves_the_camera_and_reads_it_back(camera: tuple) -> N
             if (float(at["pan"]), float(at["tilt"]), int(at["zoom"])) == (pan, tilt, zoom) \
                     or time.monotonic() > deadline:
                 return now
-            await asyncio.sleep(0.05)
+            await asyncio.sleep(0.05)  # the poll's period, within the deadline
 
     async def move(device: AxisDevice) -> tuple[bytes, bytes, bytes]:
         ptz = device.vapix.ptz
