@@ -28,7 +28,7 @@ SERVICES: dict[str, ServiceInfo] = {
     "tracker": ServiceInfo("Qualisys QTM in; every frame's markers and the robot's position out",
                            "services.tracker.settings:TrackerSettings"),
     "ptz": ServiceInfo("one AXIS camera follows the robot (--instance ptz1|ptz2); "
-                       "stb ptz aim: eq. 4", "services.ptz.settings:PtzSettings"),
+                       "stb ptz aim: eq. 4", "common.ptz_settings:PtzSettings"),
     "calib": ServiceInfo("camera poses from passpoints (paper §2.2); stb calib solve | collect",
                          "services.calib.settings:CalibSettings"),
     "gantry": ServiceInfo("the crane follows the robot from its tracking camera (paper §3)",

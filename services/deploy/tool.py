@@ -8,6 +8,7 @@ import sys
 
 from common.errors import ConfigError
 from common.files import write_atomically
+from common.ptz_settings import PtzSettings
 from common.settings import read_lab_file
 from services.deploy.render import (
     COMPOSE_FILE,
@@ -18,7 +19,6 @@ from services.deploy.render import (
     router_config,
 )
 from services.entry import ToolError, tool_settings
-from services.ptz.settings import PtzSettings
 
 EXIT_DRIFT = 1
 

@@ -16,9 +16,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         return aim_main(argv[1:])
     args = service_args("ptz", __doc__ or "", argv)
+    from common.ptz_settings import PtzSettings
     from services.entry import run_service
     from services.ptz.service import run
-    from services.ptz.settings import PtzSettings
 
     return run_service("ptz", PtzSettings, run, args)
 

@@ -25,6 +25,7 @@ from common import messages as m
 from common.camera import Intrinsics, PtzLimits
 from common.markers import warm_up
 from common.node import Node, run_every
+from common.ptz_settings import PtzSettings
 from services.ptz.calibration import CalibrationHold
 from services.ptz.camera import AxisPtzCamera, PtzCamera, PtzError, http_client
 from services.ptz.control import PtzControl
@@ -33,7 +34,6 @@ from services.ptz.override import ManualOverride
 from services.ptz.pointing import PointingCheck
 from services.ptz.pose_source import PoseAsking, choose
 from services.ptz.preview import PreviewLoop
-from services.ptz.settings import PtzSettings
 
 log = logging.getLogger(__name__)
 ASK_TICK_S = 0.1  # how often the pose asker looks whether asking is due

@@ -18,9 +18,9 @@ from common.bus import Bus
 from common.camera import Pose
 from common.lab_views import CameraConnection
 from common.node import Node
+from common.ptz_settings import PtzSettings
 from services.ptz.aim import aim_error_deg
 from services.ptz.service import run
-from services.ptz.settings import PtzSettings
 from services.sim.camera_server import CameraServer, SimCamera
 from services.sim.ptz import PtzHead
 from tests.conftest import free_port, wait_for

@@ -1,8 +1,8 @@
 """No service imports another: what two share lives in ``common/``.
 
-What a tool reads of another service's lab-file section is a view in ``common/lab_views.py``.
-Two imports across packages are by design and named here: ``stb deploy render`` checks the
-whole ``[ptz]`` section that the compose file it writes will run (``PtzSettings``), and the
+What a tool reads of another service's lab-file section is a view in ``common/lab_views.py``,
+or the whole section's model in ``common/`` (``stb deploy render`` checks all of ``[ptz]``:
+``common/ptz_settings.py``). One import across packages is by design and named here: the
 experiment harness runs the live gantry against the sim (docs/experiments.md), so it imports
 both.
 """
@@ -13,8 +13,7 @@ import ast
 from pathlib import Path
 
 SERVICES = Path(__file__).resolve().parents[2] / "services"
-BY_DESIGN = {"experiment": {"services.gantry", "services.sim"},
-             "deploy": {"services.ptz.settings"}}
+BY_DESIGN = {"experiment": {"services.gantry", "services.sim"}}
 
 
 def _imported(path: Path) -> list[tuple[int, str]]:

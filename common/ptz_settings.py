@@ -1,4 +1,6 @@
-"""PTZ settings: which camera this instance drives, and how it follows the robot."""
+"""The PTZ service's lab-file section (`[ptz]`): which camera an instance drives, and how it
+follows the robot. In `common/` because `stb deploy render` checks the whole section that
+the compose file it writes will run, and no service imports another (docs/architecture.md)."""
 
 from __future__ import annotations
 
