@@ -10,6 +10,15 @@
 ARG BASE=python:3.11-slim
 
 FROM ${BASE} AS build
+# A C compiler (and Python's headers where the base lacks them), in this stage only: numba
+# links the marker detector's loop with it into a module that needs neither numba nor LLVM at
+# run time (common/markers_aot.py). Without Debian's archive the image still builds, and the
+# detector uses numba's JIT (about 130 MB more in each service that detects).
+RUN command -v cc >/dev/null || { apt-get update -qq && apt-get install -y -qq \
+        --no-install-recommends gcc libc6-dev $(python3 -c "import sysconfig, os; \
+print('' if os.path.isfile(sysconfig.get_paths()['include'] + '/Python.h') else 'python3-dev')") \
+        >/dev/null && rm -rf /var/lib/apt/lists/*; } \
+    || echo "no C compiler: the marker detector will use numba's JIT"
 COPY deploy/docker/build-ca/ /tmp/build-ca/
 COPY pyproject.toml README.md /src/
 COPY common /src/common
@@ -17,15 +26,17 @@ COPY services /src/services
 RUN if [ -f /tmp/build-ca/ca-certificates.crt ]; then \
         export PIP_CERT=/tmp/build-ca/ca-certificates.crt; fi \
  && python3 -m venv /opt/stb \
- && /opt/stb/bin/pip install --no-cache-dir --disable-pip-version-check /src
+ && /opt/stb/bin/pip install --no-cache-dir --disable-pip-version-check /src \
+ && (cd / && /opt/stb/bin/python -m common.markers_aot)
 
 FROM ${BASE}
 COPY --from=build /opt/stb /opt/stb
 ENV PATH=/opt/stb/bin:$PATH PYTHONUNBUFFERED=1 NUMBA_CACHE_DIR=/app/numba-cache \
     MPLCONFIGDIR=/tmp/matplotlib
 WORKDIR /app
-# The marker detector's compiled loop is built into the image (numba's cache is keyed by the
-# installed source file), so no service compiles at start. The folders that compose mounts
+# The marker detector's loop was built ahead in the build stage; where it could not be, the
+# JIT's compile is cached here (numba's cache is keyed by the installed source file), so no
+# service compiles at start. The folders that compose mounts
 # volumes on (docker-compose.yml) exist here, owned by stb: a new volume takes their owner.
 RUN (cd / && python3 -c "from common.markers import warm_up; warm_up()") \
  && useradd --system --uid 10001 --home-dir /app stb \

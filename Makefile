@@ -12,15 +12,22 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
-setup: $(STAMP)
+# The marker detector's loop built ahead of time (common/markers_aot.py; with no C compiler
+# it says so and the detector uses numba's JIT), again whenever the loop changes.
+KERNEL := $(VENV)/.kernel
+$(KERNEL): $(STAMP) common/markers_kernel.py common/markers_aot.py
+	$(BIN)/python -m common.markers_aot
+	touch $(KERNEL)
+
+setup: $(KERNEL)
 
 ## The whole local lab (router + every service that exists) with a live view; Ctrl-C stops it.
-demo: $(STAMP)
+demo: $(KERNEL)
 	$(BIN)/stb up --lab $(or $(LAB),config/demo.toml)
 
 ## Lint and type-check, then the test suite but for the long whole-lab runs (about 6 minutes
 ## on 2 cores).
-test: $(STAMP)
+test: $(KERNEL)
 	$(BIN)/ruff check common services tests benchmarks compose_test
 	$(BIN)/mypy
 	$(BIN)/python -m pytest -q -m "not system"
@@ -29,12 +36,12 @@ test: $(STAMP)
 ## commissioning, collection and recording end to end, the lens at several zooms, the page in a
 ## browser against the whole lab, several hosts):
 ## about 25 minutes on 2 cores. CI runs both.
-test-system: $(STAMP)
+test-system: $(KERNEL)
 	$(BIN)/python -m pytest -q -m system
 
 ## The lab under a real Docker engine (root; installs Debian's docker.io when missing):
 ## build, docker compose up with the sim, crash, router restart, down/up (docs/deployment.md §7).
-compose-test: $(STAMP)
+compose-test: $(KERNEL)
 	$(BIN)/python -m pytest -q -p no:cacheprovider compose_test --timeout 2400
 
 wire-doc: $(STAMP)

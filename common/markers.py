@@ -20,16 +20,19 @@ which nothing reaches the lowest threshold ends there; in the bands that do, eac
 brightest over the band gives the band's bright segments of columns and each row's brightest
 pixel within them, and at each threshold only the rows that reach it are scanned, within
 those segments, by the compiled loop in ``markers_kernel.py`` (run lengths,
-union-find and moments in one go). The first
-call compiles it (a few seconds, then cached on disk): services call ``warm_up()`` at
-start-up.
+union-find and moments in one go): built ahead of time by ``make`` and the Docker image
+(``markers_aot.py``), or else compiled by numba's JIT at the first call (a few seconds, then
+cached on disk). Services call ``warm_up()`` at start-up.
 """
 
 from __future__ import annotations
 
 import functools
+import importlib
+import os
 import threading
 import time
+from collections.abc import Callable
 from typing import Literal, NamedTuple
 
 import numpy as np
@@ -83,11 +86,7 @@ def detect(frame: np.ndarray, *, threshold: int = 230, t_lim: int = 203, step: i
 
     Raises ValueError for anything but a 2-D uint8 array, or inconsistent parameters.
     """
-    # numba loads here, on the first detection, not where the module is imported: the calib
-    # service only draws markers, and loading numba (0.35 s, seconds on a loaded machine)
-    # would delay its restart (docs/reliability.md)
-    from common.markers_kernel import threshold_kernel
-
+    threshold_kernel = _threshold_kernel()
     image = _checked(frame, threshold, t_lim, step, r_lim, l_min, min_area, max_area,
                      max_markers)
     if image.size == 0:
@@ -113,14 +112,41 @@ def detect(frame: np.ndarray, *, threshold: int = 230, t_lim: int = 203, step: i
 
 
 def warm_up() -> float:
-    """Compile the detector's loop now (or load it from numba's cache), not on the first
-    frame: the first compile in a fresh checkout or container takes seconds, holding the
-    interpreter. Services that detect call this at start-up. Returns the seconds it took."""
+    """Load the detector's loop now, not on the first frame: the module built ahead of time
+    (``common/markers_aot.py``), or else numba's JIT, whose first compile in a fresh checkout
+    or container takes seconds, holding the interpreter. Services that detect call this at
+    start-up. Returns the seconds it took."""
     started = time.perf_counter()
     frame = np.zeros((16, 16), np.uint8)
     frame[6:10, 6:10] = 255  # a spot, so that every compiled step runs
     detect(frame)
     return time.perf_counter() - started
+
+
+def kernel_origin() -> str:
+    """Which build of the loop the detector runs, for the services' start-up log."""
+    kernel = _threshold_kernel()
+    return "numba's JIT" if hasattr(kernel, "py_func") else f"built ahead ({kernel.__module__})"
+
+
+@functools.cache
+def _threshold_kernel() -> Callable[..., tuple[int, int]]:
+    """The loop: the module ``common/markers_aot.py`` built from this very kernel source if it
+    is there (no numba, no LLVM in the process), numba's JIT otherwise. Loaded on the first
+    detection, not where this module is imported: the calib service only draws markers, and
+    loading numba (0.35 s, seconds on a loaded machine) would delay its restart
+    (docs/reliability.md)."""
+    from common.markers_aot import module_name
+
+    try:
+        if os.environ.get("NUMBA_DISABLE_JIT") == "1":  # the loop as plain Python, to debug
+            raise ImportError("NUMBA_DISABLE_JIT")
+        module = importlib.import_module(f"common.{module_name()}")
+    except ImportError:
+        from common.markers_kernel import threshold_kernel
+
+        return threshold_kernel
+    return module.threshold_kernel
 
 
 def closest(markers: tuple[Spot, ...] | list[Spot], u: float, v: float,

@@ -31,7 +31,7 @@ import numpy as np
 from common import keys
 from common import messages as m
 from common.heightmap import HeightMap
-from common.markers import to_message, warm_up
+from common.markers import kernel_origin, to_message, warm_up
 from common.node import Node, StartupError, run_every
 from services.gantry.control import Controller, Fix, Step
 from services.gantry.crane import ModbusCrane
@@ -50,7 +50,7 @@ def run(node: Node[GantrySettings]) -> None:
     heights = _height_map(node)
     if heights is None:
         return  # asked to stop while it waited
-    log.info("detector ready (%.1f s)", warm_up())  # before the crane is driven, not mid-run
+    log.info("detector ready (%.1f s, %s)", warm_up(), kernel_origin())  # before it drives
     crane = ModbusCrane(s.crane_host, s.crane_port, s.crane_timeout_s, s.crane,
                         s.crane.frame())
     frames: FrameSource

@@ -23,7 +23,7 @@ import time
 from common import codec, keys
 from common import messages as m
 from common.camera import Intrinsics, PtzLimits
-from common.markers import warm_up
+from common.markers import kernel_origin, warm_up
 from common.node import Node, run_every
 from common.ptz_settings import PtzSettings
 from services.ptz.calibration import CalibrationHold
@@ -51,7 +51,7 @@ def make_camera(settings: PtzSettings) -> AxisPtzCamera:
 
 def run(node: Node[PtzSettings], camera: PtzCamera | None = None) -> None:
     settings = node.settings
-    log.info("detector ready (%.1f s)", warm_up())  # previews and calibration mode detect
+    log.info("detector ready (%.1f s, %s)", warm_up(), kernel_origin())  # previews, calibration
     # Position queries have a client of their own, like previews: a query in flight never
     # holds up a move command (that client is the injected camera's in tests).
     loop = _Loop(node, settings, camera or make_camera(settings),
