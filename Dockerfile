@@ -10,15 +10,15 @@
 ARG BASE=python:3.11-slim
 
 FROM ${BASE} AS build
-# A C compiler (and Python's headers where the base lacks them), in this stage only: numba
-# links the marker detector's loop with it into a module that needs neither numba nor LLVM at
-# run time (common/markers_aot.py). Without Debian's archive the image still builds, and the
-# detector uses numba's JIT (about 130 MB more in each service that detects).
-RUN command -v cc >/dev/null || { apt-get update -qq && apt-get install -y -qq \
-        --no-install-recommends gcc libc6-dev $(python3 -c "import sysconfig, os; \
+# A C/C++ compiler (and Python's headers where the base lacks them), in this stage only:
+# numba links the marker detector's loop with it into a module that needs neither numba nor
+# LLVM at run time (common/markers_aot.py). Without Debian's archive the image still builds,
+# and the detector uses numba's JIT (about 120 MB more in each service that detects).
+RUN command -v c++ >/dev/null || { apt-get update -qq && apt-get install -y -qq \
+        --no-install-recommends g++ $(python3 -c "import sysconfig, os; \
 print('' if os.path.isfile(sysconfig.get_paths()['include'] + '/Python.h') else 'python3-dev')") \
         >/dev/null && rm -rf /var/lib/apt/lists/*; } \
-    || echo "no C compiler: the marker detector will use numba's JIT"
+    || echo "no C++ compiler: the marker detector will use numba's JIT"
 COPY deploy/docker/build-ca/ /tmp/build-ca/
 COPY pyproject.toml README.md /src/
 COPY common /src/common

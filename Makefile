@@ -12,7 +12,7 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
-# The marker detector's loop built ahead of time (common/markers_aot.py; with no C compiler
+# The marker detector's loop built ahead of time (common/markers_aot.py; with no C++ compiler
 # it says so and the detector uses numba's JIT), again whenever the loop changes.
 KERNEL := $(VENV)/.kernel
 $(KERNEL): $(STAMP) common/markers_kernel.py common/markers_aot.py

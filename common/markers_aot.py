@@ -6,9 +6,10 @@ without numba or LLVM (133 MB less in each service that detects: docs/benchmarks
     python -m common.markers_aot [--output-dir DIR]
 
 ``make`` runs it after installing and whenever markers_kernel.py changes, the Docker image's
-build stage too. Numba links the module with the machine's C compiler; without one this says
-so, exits 0, and the detector keeps numba's JIT (the same loop, compiled at the first start
-and cached on disk). The module is built for the architecture's generic CPU, so an image
+build stage too. Numba compiles its helpers (C, and its runtime in C++) and links the module
+with the machine's compiler (``c++``: Debian's g++); without one this says so, exits 0, and
+the detector keeps numba's JIT (the same loop, compiled at the first start and cached on
+disk). The module is built for the architecture's generic CPU, so an image
 built on one machine runs on another. Its name carries a hash of the kernel's source
 (``_markers_kernel_<hash>``): a module built from another version of the kernel is never
 loaded.
@@ -43,8 +44,8 @@ def module_file(folder: Path) -> Path:
 def build(output_dir: Path) -> Path:
     """Compile the kernel into ``output_dir``; old builds of other kernel versions there are
     removed. Raises RuntimeError when there is no C compiler."""
-    if shutil.which("cc") is None and shutil.which("gcc") is None:
-        raise RuntimeError("no C compiler (cc) to link the module")
+    if shutil.which("c++") is None:
+        raise RuntimeError("no C/C++ compiler (c++; numba's runtime is C++) to build the module")
     from numba.pycc import CC
 
     from common import markers_kernel

@@ -55,6 +55,16 @@ def test_every_service_is_alive_and_healthy_on_the_bus(lab: dict, watch: Watch) 
            round(time.monotonic() - lab["up_at"], 1))
 
 
+def test_the_services_that_detect_run_the_loop_built_in_the_image(lab: dict) -> None:
+    """The image's build stage built the marker detector's loop ahead of time: the gantry
+    and the PTZ services load it, not numba's JIT (docs/deployment.md §7)."""
+    for service in ("gantry", "ptz-1", "ptz-2"):
+        logs = lab["engine"].docker("logs", container(service))
+        ready = [line for line in (logs.stdout + logs.stderr).splitlines()
+                 if "detector ready" in line]
+        assert ready and all("built ahead" in line for line in ready), (service, ready)
+
+
 def test_the_cameras_are_calibrated_and_the_crane_follows_the_robot(
         lab: dict, reference_follow_mm: float) -> None:
     bus = lab["client"].bus("monitor")

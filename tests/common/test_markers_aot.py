@@ -17,8 +17,8 @@ from benchmarks.markers import make_frames
 from common import markers, markers_aot
 
 ROOT = Path(__file__).resolve().parents[2]
-needs_a_compiler = pytest.mark.skipif(shutil.which("cc") is None,
-                                      reason="no C compiler: the detector uses numba's JIT")
+needs_a_compiler = pytest.mark.skipif(shutil.which("c++") is None,
+                                      reason="no C++ compiler: the detector uses numba's JIT")
 
 
 @pytest.fixture
