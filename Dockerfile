@@ -40,7 +40,7 @@ WORKDIR /app
 # volumes on (docker-compose.yml) exist here, owned by stb: a new volume takes their owner.
 RUN (cd / && python3 -c "from common.markers import warm_up; warm_up()") \
  && useradd --system --uid 10001 --home-dir /app stb \
- && mkdir -p /app/run/sim /data/calib \
+ && mkdir -p /app/run/sim /data/calib /app/numba-cache \
  && chown -R stb /app/run /data/calib /app/numba-cache
 USER stb
 # A lab file, if any, is named by STB_LAB (see docker-compose.yml).
