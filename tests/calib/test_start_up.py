@@ -17,9 +17,12 @@ def test_the_calib_service_starts_without_numba() -> None:
 
 
 def test_detection_still_loads_its_compiled_loop() -> None:
+    """The loop (built ahead of time, or numba's JIT) loads at the first detection."""
     probe = ("import sys, numpy as np; from common.markers import detect; "
+             "loops = lambda: [m for m in sys.modules if m.startswith(('common._markers_kernel', "
+             "'common.markers_kernel'))]; before = loops(); "
              "f = np.zeros((16, 16), np.uint8); f[6:10, 6:10] = 255; "
-             "print(detect(f).status, 'common.markers_kernel' in sys.modules)")
+             "print(detect(f).status, before, len(loops()))")
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
                          timeout=120, check=True).stdout.strip()
-    assert out == "ok True", out
+    assert out == "ok [] 1", out
