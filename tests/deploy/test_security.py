@@ -27,11 +27,19 @@ def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
         yield {"secrets": secrets, "endpoint": endpoint, "session": session}
 
 
+def _monitors(*envs: dict[str, str]) -> list[subprocess.CompletedProcess]:
+    """``stb monitor`` once with each environment, all at once (a refused one waits out its
+    2 s connect timeout)."""
+    procs = [stb_process("monitor", "--raw", "stb/**", "--duration", "0.5",
+                         env={**env, "STB_BUS__ZENOH__CONNECT_TIMEOUT_MS": "2000"})
+             for env in envs]
+    outputs = [proc.communicate(timeout=60) for proc in procs]
+    return [subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+            for proc, (out, err) in zip(procs, outputs, strict=True)]
+
+
 def _monitor(env: dict[str, str]) -> subprocess.CompletedProcess:
-    env = {**env, "STB_BUS__ZENOH__CONNECT_TIMEOUT_MS": "2000"}
-    proc = stb_process("monitor", "--raw", "stb/**", "--duration", "0.5", env=env)
-    out, err = proc.communicate(timeout=60)
-    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+    return _monitors(env)[0]
 
 
 def test_no_credentials_or_a_wrong_password_is_refused(lab: dict) -> None:
@@ -41,9 +49,8 @@ def test_no_credentials_or_a_wrong_password_is_refused(lab: dict) -> None:
     nobody = {k: v for k, v in good.items() if "USER" not in k and "PASSWORD" not in k}
     wrong = lab["secrets"].parent / "wrong.password"
     wrong.write_text("not-the-password\n")
-    for env in (nobody, {**good, "STB_BUS__ZENOH__PASSWORD_FILE": str(wrong)},
-                {**good, "STB_BUS__ZENOH__USER": "intruder"}):
-        refused = _monitor(env)
+    for refused in _monitors(nobody, {**good, "STB_BUS__ZENOH__PASSWORD_FILE": str(wrong)},
+                             {**good, "STB_BUS__ZENOH__USER": "intruder"}):
         assert refused.returncode != 0
         assert "cannot open a Zenoh client session" in refused.stderr, refused.stderr
 

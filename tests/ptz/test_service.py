@@ -307,9 +307,10 @@ def test_answers_that_disagree_keep_the_pose_and_say_why(service: dict,
 def test_a_wrong_pose_is_caught_by_the_pointing_check(service: dict) -> None:
     """A pose with a wrong rotation (as a poisoned pose message would bring) points the
     camera away from the robot while its own aim error stays small; the infrared previews
-    show it (reported after 4.1 s here: two infrared previews 2 s apart)."""
+    show it (reported after 1.6 s here: two infrared previews 0.7 s apart)."""
     node, states = service["node"], service["states"]
-    node.settings = node.settings.model_copy(update={"preview_hz": 5.0})
+    node.settings = node.settings.model_copy(update={"preview_hz": 5.0,
+                                                     "pointing_infrared_s": 0.7})
     service["servers"].append(_camera_server(service["port"]))
     service["thread"].start()
     wait_for(lambda: states, timeout=5)  # subscribed by now
