@@ -31,6 +31,16 @@ def _save(fig: plt.Figure, path: Path) -> Path:
     return path
 
 
+def _save_time_plot(fig: plt.Figure, ax: plt.Axes, ylabel: str, title: str, path: Path) -> Path:
+    """A plot over the recording's time: its labels, grid and legend, then saved."""
+    ax.set_xlabel("time since the recording started (s)")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper right", fontsize=8)
+    return _save(fig, path)
+
+
 def error_plot(rec: Recording, path: Path) -> Path | None:
     t, error = crane_error(rec)
     if len(t) == 0:
@@ -40,13 +50,10 @@ def error_plot(rec: Recording, path: Path) -> Path | None:
     ax.plot(t - rec.first_s, error[:, 0], lw=0.8, label="x error")
     ax.plot(t - rec.first_s, error[:, 1], lw=0.8, label="y error")
     ax.plot(t - rec.first_s, distance, lw=0.8, color="0.3", label="distance")
-    ax.set_xlabel("time since the recording started (s)")
-    ax.set_ylabel("crane − robot (mm)")
-    ax.set_title(f"crane-to-robot error (paper Fig. 9/11): mean {distance.mean():.0f} mm, "
-                 f"std x {error[:, 0].std():.0f} mm, y {error[:, 1].std():.0f} mm", fontsize=9)
-    ax.grid(alpha=0.3)
-    ax.legend(loc="upper right", fontsize=8)
-    return _save(fig, path)
+    return _save_time_plot(
+        fig, ax, "crane − robot (mm)",
+        f"crane-to-robot error (paper Fig. 9/11): mean {distance.mean():.0f} mm, "
+        f"std x {error[:, 0].std():.0f} mm, y {error[:, 1].std():.0f} mm", path)
 
 
 def track_view(rec: Recording, margin_mm: float = 400.0
@@ -117,12 +124,8 @@ def velocity_plot(rec: Recording, path: Path) -> Path | None:
     algorithm = rec.algorithms.most_common(1)[0][0]
     ax.plot(t[valid] - rec.first_s, estimate[valid, 2], lw=0.9, color="tab:blue",
             label=f"gantry filter ({algorithm}) velocity x")
-    ax.set_xlabel("time since the recording started (s)")
-    ax.set_ylabel("velocity x (mm/s)")
-    ax.set_title("filtered velocity in x (paper Fig. 10)", fontsize=9)
-    ax.grid(alpha=0.3)
-    ax.legend(loc="upper right", fontsize=8)
-    return _save(fig, path)
+    return _save_time_plot(fig, ax, "velocity x (mm/s)",
+                           "filtered velocity in x (paper Fig. 10)", path)
 
 
 def calibration_plot(rec: Recording, path: Path, marker_label: str = "wand") -> Path | None:
@@ -160,9 +163,5 @@ def aim_plot(rec: Recording, path: Path) -> Path | None:
     for camera, series in sorted(rec.aim.items()):
         t, aim = series.arrays()
         ax.plot(t - rec.first_s, aim[:, 0], lw=0.8, label=camera)
-    ax.set_xlabel("time since the recording started (s)")
-    ax.set_ylabel("aim error (deg)")
-    ax.set_title("PTZ cameras: angle between the optical axis and the robot", fontsize=9)
-    ax.grid(alpha=0.3)
-    ax.legend(loc="upper right", fontsize=8)
-    return _save(fig, path)
+    return _save_time_plot(fig, ax, "aim error (deg)",
+                           "PTZ cameras: angle between the optical axis and the robot", path)
