@@ -45,14 +45,19 @@ class Glint:
 
 class NoiseBank:
     """Sensor noise for many frames from a few fields drawn once and cycled: a frame's worth
-    of normal deviates costs milliseconds, and the detector cannot tell the difference."""
+    of normal deviates costs milliseconds, and the detector cannot tell the difference. The
+    fields (10 MB for the tracking camera) are drawn at the first frame: the sim's device
+    processes build the same lab and never draw a frame."""
 
     def __init__(self, sigma: float, width: int, height: int, rng: np.random.Generator,
                  fields: int = 8) -> None:
-        self._fields = rng.normal(0.0, sigma, (fields, height, width)).astype(np.float32)
+        self._draw = lambda: rng.normal(0.0, sigma, (fields, height, width)).astype(np.float32)
+        self._fields: np.ndarray | None = None
         self._next = 0
 
     def add_to(self, image: np.ndarray) -> None:
+        if self._fields is None:
+            self._fields = self._draw()
         image += self._fields[self._next]
         self._next = (self._next + 1) % len(self._fields)
 
