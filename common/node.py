@@ -19,6 +19,7 @@ from typing import Any, Generic, TypeVar
 
 from common import keys
 from common.bus import Bus, BusUnreachable, open_session
+from common.errors import StartupError
 from common.messages import HealthStatus, ServiceHealth
 from common.realtime import use_realtime_priority
 from common.settings import ServiceSettings
@@ -28,10 +29,6 @@ log = logging.getLogger(__name__)
 EXIT_OK = 0
 EXIT_UNREACHABLE = 3
 EXIT_STARTUP = 4
-
-
-class StartupError(RuntimeError):
-    """A service cannot start (a port in use, a device that does not answer, a bad file)."""
 
 
 S = TypeVar("S", bound=ServiceSettings)

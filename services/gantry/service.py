@@ -30,9 +30,10 @@ import numpy as np
 
 from common import keys
 from common import messages as m
+from common.errors import StartupError
 from common.heightmap import HeightMap
 from common.markers import kernel_origin, to_message, warm_up
-from common.node import Node, StartupError, run_every
+from common.node import Node, run_every
 from services.gantry.control import Controller, Fix, Step
 from services.gantry.crane import ModbusCrane
 from services.gantry.frames import FrameInbox, FrameSource, OpenCvFrames

@@ -30,7 +30,7 @@ from multiprocessing.sharedctypes import Synchronized, SynchronizedArray
 
 import numpy as np
 
-from common.node import StartupError
+from common.errors import StartupError
 from services.sim.camera_server import CameraServer
 from services.sim.clock import Clock
 from services.sim.lab import Lab

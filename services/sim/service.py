@@ -24,7 +24,8 @@ import numpy as np
 
 from common import keys
 from common import messages as m
-from common.node import Node, StartupError, run_every
+from common.errors import StartupError
+from common.node import Node, run_every
 from services.sim.camera_server import CameraServer, SimCamera
 from services.sim.clock import Clock
 from services.sim.crane_server import CraneServer

@@ -11,8 +11,9 @@ import zenoh
 
 from common import keys
 from common import messages as m
+from common.errors import StartupError
 from common.keys import Topic
-from common.node import Node, StartupError
+from common.node import Node
 from common.settings import bus_environment
 from services.web.app import build_app
 from services.web.commands import GantryCommander

@@ -17,8 +17,9 @@ from common import keys
 from common import messages as m
 from common.bus import Bus
 from common.crane_registers import FAULT_WATCHDOG
+from common.errors import StartupError
 from common.heightmap import HeightMap
-from common.node import Node, StartupError
+from common.node import Node
 from services.gantry.service import run
 from services.gantry.settings import GantrySettings
 from tests.conftest import free_port, wait_for
@@ -46,6 +47,7 @@ def test_follows_then_holds_when_frames_stop_or_the_marker_is_lost(rig: dict) ->
     with _armed(rig, lambda _t: target):
         wait_for(lambda: np.linalg.norm(rig["crane"].state()[0] - target) < 20.0, timeout=8)
         assert rig["crane"].state()[2] and not rig["setpoints"][-1].hold
+        wait_for(lambda: np.linalg.norm(rig["crane"].state()[1]) < 1.0, timeout=5)  # settled
 
     wait_for(lambda: rig["setpoints"][-1].hold, timeout=5)  # frames stop: the estimate goes stale
     held = rig["crane"].state()[0]
