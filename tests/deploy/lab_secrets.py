@@ -95,7 +95,7 @@ def only_allowed_arrive(session: Callable[[str], zenoh.Session],
     for _ in range(3):
         for account, key, payload in puts:
             sessions[account].put(key, payload)
-        time.sleep(0.05)
+        time.sleep(0.05)  # paces the three rounds of puts
     wait_for(lambda: {p for _, p in got} >= allowed)
     time.sleep(0.5)  # what is denied would have arrived by now
     payloads = {p for _, p in got}

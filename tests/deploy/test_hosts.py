@@ -205,7 +205,7 @@ def test_the_chain_across_hosts_survives_cut_links_and_a_router_restart(lab: dic
         if resumed_at is None and any(s.status == "tracking" and s.measured_s > plugged_at
                                       for s in states):
             resumed_at = time.time()
-        time.sleep(0.02)
+        time.sleep(0.02)  # the watch loop's period
     assert resumed_at is not None, "tracking did not resume"
     print(f"tracking again {resumed_at - plugged_at:.2f} s after the operator armed it")
     assert resumed_at - plugged_at <= 3.0
@@ -220,7 +220,7 @@ def test_the_chain_across_hosts_survives_cut_links_and_a_router_restart(lab: dic
     # --- the router restarts: every service carries on without a restart of its own -----------
     pids = {h.service + "/" + h.instance: h.pid for h in health}
     lab["hosts"]["router"].kill("router")
-    time.sleep(1.0)
+    time.sleep(1.0)  # the router stays away a second: the outage is the subject
     restarted_at = time.time()
     lab["start_router"]()
     for name in ("sim/main", "tracker/main", "gantry/main", "ptz/ptz1"):

@@ -196,7 +196,7 @@ def test_opencv_frames_from_a_video_file(tmp_path: Path) -> None:
         frame = None
         while frame is None and time.monotonic() < deadline:
             frame = source.take()
-            time.sleep(0.01)
+            time.sleep(0.01)  # the poll's period, within the deadline
         assert frame is not None
         captured, image = frame
         assert image.shape == (48, 64) and image.dtype == np.uint8

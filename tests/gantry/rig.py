@@ -106,7 +106,7 @@ class Operator:
                 answer = poll(lambda i=ident: self._reply(i), timeout=3) or answer  # type: ignore[assignment]
                 if answer is not None and answer.accepted:
                     return answer
-            time.sleep(0.5)
+            time.sleep(0.5)  # the operator asks again, within the deadline
         pytest.fail(f"the gantry was not armed within {timeout:g} s: "
                     + (f"last answer {answer.detail!r}" if answer else
                        "it answered nothing" if self.states else "it published no state"))
@@ -167,7 +167,7 @@ def feed(crane: CraneRig, world: Bus, robot: Callable[[float], np.ndarray | None
                     y_mm=float(xy[1]), z_mm=GROUND_MM + MARKER_MM, vx_mm_s=0.0, vy_mm_s=0.0,
                     vz_mm_s=0.0))
         seq += 1
-        time.sleep(0.04)
+        time.sleep(0.04)  # paces the frames (25 Hz)
 
 
 @contextmanager

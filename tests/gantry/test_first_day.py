@@ -53,7 +53,7 @@ def _arm_answer(endpoint: str, until: float) -> str:
                 if reply is not None and (reply.accepted or "no fresh estimate" not in
                                           reply.detail):
                     break
-            time.sleep(1.0)
+            time.sleep(1.0)  # the operator asks again, within the deadline
         if reply is None:
             return "no answer"
         return ("accepted: " if reply.accepted else "refused: ") + reply.detail

@@ -279,7 +279,7 @@ def test_the_robot_is_found_again_from_the_motion_capture_after_it_left_the_view
     began = time.monotonic()
     with feeding(crane, rig["world"], robot, mocap=True, paused=outage):
         wait_for(lambda: rig["operator"].send("arm").accepted, timeout=2, period=0.1)
-        time.sleep(max(6.8 - (time.monotonic() - began), 0.0))
+        time.sleep(max(6.8 - (time.monotonic() - began), 0.0))  # into the outage's end
         held = crane.state()
         assert np.linalg.norm(held[1]) < 1.0, "it holds through the outage"
         u, _v, _r = pixel_of(np.array([*robot(6.8), GROUND_MM + MARKER_MM]), held[0])

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import signal
-import time
 from collections import defaultdict
 from pathlib import Path
 
@@ -20,7 +19,7 @@ from common import messages as m
 from common.bus import Bus
 from common.mcap_file import read_samples, recorded_keys
 from tests.calib.test_demo_calibration import MOUNTS
-from tests.conftest import client_settings, open_when_up, stb_process, wait_for
+from tests.conftest import client_settings, open_when_up, stb_process, until_heard, wait_for
 from tests.operator.conftest import LiveLab
 from tests.ports import free_port
 from tests.recording.typed import decoded_typed
@@ -167,7 +166,12 @@ def test_replaying_the_recording_gives_the_same_messages(recording: Path) -> Non
                   "stb/video/ptz1"]
         for key in chosen:
             bus.subscribe_any(key, lambda item: got[item[0]].append(item[1]))
-        time.sleep(0.5)
+        probe = open_when_up(settings.zenoh)
+        try:  # the subscriptions have reached the router before the replay starts
+            for key in chosen:
+                until_heard(Bus(probe, settings), key)
+        finally:
+            probe.close()
         replay = stb_process("replay", str(recording), "--speed", "4", "--connect", endpoint,
                              *[a for key in chosen for a in ("--keys", key)])
         assert replay.wait(timeout=RECORD_S + 20) == 0, replay.stderr.read()

@@ -98,11 +98,14 @@ def test_the_robot_moves_on_the_page_while_the_sim_runs(page: object, live_lab: 
                                                          tmp_path: Path) -> None:
     canvas = page.locator("#map")  # type: ignore[attr-defined]
     first = wait_for(lambda: canvas.get_attribute("data-robot-px"), timeout=10)
-    time.sleep(1.5)
-    second = canvas.get_attribute("data-robot-px")
-    a, b = (tuple(map(float, p.split(","))) for p in (first, second))
-    moved = ((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2) ** 0.5
-    assert moved > 3, f"robot drawn at {first} then {second}"
+    a = tuple(map(float, first.split(",")))
+
+    def moved_px() -> float:
+        b = tuple(map(float, canvas.get_attribute("data-robot-px").split(",")))
+        return ((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2) ** 0.5
+
+    wait_for(lambda: moved_px() > 3, timeout=10, period=0.2,
+             why=lambda: f"robot drawn at {first}, then {moved_px():.1f} px from there")
     text = page.locator("#robot-xy").inner_text()  # type: ignore[attr-defined]
     assert text.startswith("robot: ") and "mm" in text
     # The page draws what the server says: the robot's canvas position matches its state.
@@ -187,7 +190,7 @@ def _press_until_done(page: object, answer: object, button: str) -> None:
                         and answer.inner_text(), timeout=10)  # type: ignore[attr-defined]
         if not (text.startswith(f"{button}: refused") and "reset first" in text):
             return
-        time.sleep(0.3)
+        time.sleep(0.3)  # an operator's pace between presses
         page.click(f"button[data-command='{button}']")  # type: ignore[attr-defined]
 
 

@@ -283,7 +283,7 @@ def test_event_streams_are_bounded(users_file: Path, tmp_path: Path) -> None:
         deadline = time.monotonic() + 10
         while page.request("GET", "/events", auth=VICTOR)[0] != 200:
             assert time.monotonic() < deadline, "a closed stream frees its place"
-            time.sleep(0.05)
+            time.sleep(0.05)  # the poll's period, within the deadline
         for conn in streams:
             conn.close()
 

@@ -129,7 +129,7 @@ def test_a_hold_command_lost_to_a_timeout_is_sent_again(lab: Lab) -> None:
         deadline = time.monotonic() + 5.0
         while not detections and time.monotonic() < deadline:
             mode.cycle()
-            time.sleep(0.1)
+            time.sleep(0.1)  # the calibration loop's pace, within the deadline
         assert detections, "detections once it stands at its hold"
         assert mode.hold == (6.0, -4.0, 1)
         assert mode._last_position == mode.hold

@@ -47,7 +47,7 @@ def test_position_limits_and_a_move(server: CameraServer) -> None:
     deadline = time.monotonic() + 3
     while camera.position() != vapix.Position(12.5, -7.25, 400, "auto"):
         assert time.monotonic() < deadline, camera.position()
-        time.sleep(0.05)
+        time.sleep(0.05)  # the poll's period, within the deadline
 
 
 def test_ir_cut_filter_and_snapshot(server: CameraServer) -> None:

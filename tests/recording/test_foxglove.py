@@ -209,7 +209,7 @@ def test_stb_foxglove_serves_the_typed_scene_images_and_json_series(
                 bus.publish(keys.GANTRY_OFFLOAD, _offload(t, warning=False))
                 bus.publish(keys.PTZ_STATE, _ptz(t), camera="ptz1")
                 i += 1
-                await asyncio.sleep(0.05)
+                await asyncio.sleep(0.05)  # paces the published messages (20 Hz)
 
         async def run() -> tuple[dict, dict]:
             nonlocal stop

@@ -19,7 +19,7 @@ def test_the_stamp_is_when_the_bytes_arrived_not_when_they_were_read() -> None:
         # (a deferred switch), so the very first segment may come unstamped.
         client.sendall(b"warm-up\r\n")
         assert reader.readline() == b"warm-up\r\n"
-        time.sleep(0.05)
+        time.sleep(0.05)  # gives that deferred switch its time (no event tells it)
         sent = []
         for line in (b"GET /a HTTP/1.1\r\n", b"GET /b HTTP/1.1\r\n", b"GET /c HTTP/1.1\r\n"):
             sent.append(time.time())

@@ -35,13 +35,22 @@ def _run(lab: Lab, client: Callable[[int], Awaitable[object]], *, capturing: boo
     return asyncio.run(main())
 
 
-async def _stream(port: int, seconds: float, components: list[str],
-                  frames: str = "allframes") -> list:
+async def _stream(port: int, components: list[str], frames: str = "allframes", *,
+                  count: int | None = None, seconds: float | None = None) -> list:
+    """The packets streamed until ``count`` came (at most 30 s), or over ``seconds``: a
+    window for a test about the rate, or about nothing coming."""
     conn = await qtm_rt.connect("127.0.0.1", port=port, version="1.25")
     assert conn is not None, "the real client must accept our server"
     packets: list = []
     await conn.stream_frames(frames=frames, components=components, on_packet=packets.append)
-    await asyncio.sleep(seconds)
+    if count is not None:
+        deadline = time.monotonic() + 30
+        while len(packets) < count:
+            assert time.monotonic() < deadline, f"{len(packets)} of {count} packets in 30 s"
+            await asyncio.sleep(0.02)  # polls the list the client's callback fills
+    else:
+        assert seconds is not None
+        await asyncio.sleep(seconds)  # the window itself is the subject
     await conn.stream_frames_stop()
     conn.disconnect()
     return packets
@@ -64,8 +73,7 @@ def test_handshake_labels_and_state(lab: Lab) -> None:
 
 
 def test_streamed_markers_equal_the_truth_within_the_noise(lab: Lab) -> None:
-    packets = _run(lab, lambda port: _stream(port, 1.5, ["3d", "3dnolabels"]))
-    assert len(packets) > 100
+    packets = _run(lab, lambda port: _stream(port, ["3d", "3dnolabels"], count=150))
     numbers = [p.framenumber for p in packets]
     assert numbers == sorted(numbers) and len(set(numbers)) == len(numbers)
     errors, missing = [], 0
@@ -96,7 +104,7 @@ def test_the_server_logs_when_each_frame_left_it(lab: Lab) -> None:
 
     async def client(port: int) -> tuple[list, float]:
         started = time.time()
-        packets = await _stream(port, 0.5, ["3d"])
+        packets = await _stream(port, ["3d"], count=50)
         return packets, started
 
     t0 = time.monotonic()
@@ -133,20 +141,20 @@ def test_dropouts_are_nan_markers(lab: Lab) -> None:
 
 def test_rate_and_frequency_divisor(crater_file, crater) -> None:
     lab = Lab.build(sim_settings(crater_file, mocap={"rate_hz": 500, "port": 0}), crater)
-    packets = _run(lab, lambda port: _stream(port, 1.0, ["3d"], "frequencydivisor:5"))
+    packets = _run(lab, lambda port: _stream(port, ["3d"], "frequencydivisor:5", seconds=1.0))
     gaps = np.diff([p.framenumber for p in packets])
     assert set(gaps) == {5} and 80 <= len(packets) <= 110
 
 
 def test_unlabelled_robot_marker_comes_in_3dnolabels(crater_file, crater) -> None:
     lab = Lab.build(sim_settings(crater_file, mocap={"robot_label": "", "port": 0}), crater)
-    packets = _run(lab, lambda port: _stream(port, 0.5, ["3dnolabels"]))
+    packets = _run(lab, lambda port: _stream(port, ["3dnolabels"], count=50))
     ids = {m.id for p in packets for m in p.get_3d_markers_no_label()[1]}
     assert 1 in ids, "the robot as an unidentified marker with a stable id"
 
 
 def test_no_more_data_while_not_capturing(lab: Lab) -> None:
-    packets = _run(lab, lambda port: _stream(port, 0.5, ["3d"]), capturing=False)
+    packets = _run(lab, lambda port: _stream(port, ["3d"], seconds=0.5), capturing=False)
     assert packets == []
 
 
@@ -165,10 +173,12 @@ def test_master_stops_and_starts_the_capture_with_events(lab: Lab) -> None:
             packets: list = []
             # While stopped the stream request is answered with NoMoreData: no frames.
             await watcher.stream_frames(components=["3d"], on_packet=packets.append)
-            await asyncio.sleep(0.3)
+            await asyncio.sleep(0.3)  # a quiet window: nothing may come while stopped
             idle = len(packets)
             await conn.start()
-            await asyncio.sleep(0.3)
+            deadline = time.monotonic() + 10
+            while len(packets) <= idle + 10 and time.monotonic() < deadline:
+                await asyncio.sleep(0.02)  # polls for the frames after the start
             await watcher.stream_frames_stop()
             return {"events": events, "stopped": stopped, "idle": idle, "running": len(packets)}
         finally:

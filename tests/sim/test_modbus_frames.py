@@ -116,7 +116,7 @@ def test_frames_split_or_joined_in_tcp_are_answered_each(controller: int) -> Non
     second = struct.pack(">HHHB", 2, 0, 6, MAP.unit_id) + _read(4, 0, 1)
     with socket.create_connection(("127.0.0.1", controller), timeout=2) as link:
         link.sendall(first + second[:4])
-        time.sleep(0.1)
+        time.sleep(0.1)  # the rest in a TCP segment of its own: the split is the subject
         link.sendall(second[4:])
         assert _reply(link, 1, MAP.unit_id)[:2] == bytes([3, 4])
         assert _reply(link, 2, MAP.unit_id)[:2] == bytes([4, 2])
