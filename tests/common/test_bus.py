@@ -57,7 +57,11 @@ def test_bad_payload_is_dropped_counted_and_the_next_good_one_arrives(
     until_heard(producer, ROBOT_KEY)
     payload, reason = BAD[case]
     producer.session.put("stb/tracker/robot", payload)
-    wait_for(lambda: consumer.key_stats().get("stb/tracker/robot"))
+    # dropped for its reason (not only received: a good sample that came before the worker
+    # took the bad one would supersede it in the newest-only slot)
+    wait_for(lambda: (stats := consumer.key_stats().get("stb/tracker/robot")) is not None
+             and stats.dropped == {reason: 1},
+             why=lambda: str(consumer.key_stats().get("stb/tracker/robot")))
     producer.publish(keys.TRACKER_ROBOT, _robot(x_mm=7.0))
     assert got.get(timeout=2).x_mm == 7.0
     assert got.empty()
