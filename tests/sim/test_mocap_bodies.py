@@ -20,8 +20,8 @@ def _matrix(rotation: tuple) -> np.ndarray:
 
 
 def test_the_robot_body_follows_the_robot_and_faces_where_it_goes(lab: Lab) -> None:
-    packets = _run(lab, lambda port: _stream(port, 1.5, ["3d", "6d", "6deuler"]), start_s=4.0)
-    assert len(packets) > 100
+    packets = _run(lab, lambda port: _stream(port, ["3d", "6d", "6deuler"], count=150),
+                   start_s=4.0)
     robot_index = [b.name for b in lab.bodies].index("robot")
     errors, turned, lost = [], [], 0
     for packet in packets:
@@ -51,7 +51,7 @@ def test_the_robot_body_follows_the_robot_and_faces_where_it_goes(lab: Lab) -> N
 
 
 def test_the_bodys_markers_in_3d_fit_its_pose(lab: Lab) -> None:
-    packets = _run(lab, lambda port: _stream(port, 0.5, ["3d", "6d"]))
+    packets = _run(lab, lambda port: _stream(port, ["3d", "6d"], count=50))
     labels = lab.labels
     robot_body, names = lab.body_points[0]
     rows = [labels.index(name) for name in names]
@@ -72,7 +72,7 @@ def test_the_bodys_markers_in_3d_fit_its_pose(lab: Lab) -> None:
 
 def test_the_wand_body_is_lost_while_the_robot_runs(lab: Lab) -> None:
     assert lab.wand_position(1.0) is None, "this lab's robot runs from the start"
-    packets = _run(lab, lambda port: _stream(port, 0.3, ["6d"]))
+    packets = _run(lab, lambda port: _stream(port, ["6d"], count=30))
     wand = [b.name for b in lab.bodies].index("wand")
     assert packets and all(np.isnan(p.get_6d()[1][wand][0].x) for p in packets)
 
