@@ -5,7 +5,8 @@ beside one core of extra load, and a tally of how each run ended.
 
 The extra load is one process spinning on one core for the whole tally (``--no-load``: none,
 for the unloaded time). Every run's outcome (passed, or the tests that failed or erred, read
-from pytest's summary) and its wall time are printed as they end, and a table at the end.
+from pytest's summary) and its wall time are printed as they end, and a table at the end;
+a failed run's whole output is kept in ``$TMPDIR/stb-load-tally/<target>-<n>.log``.
 Issue 39's goal: five ``make test`` and three ``make test-system`` in a row pass beside the
 load, and ``make test`` takes ≤ 5 minutes unloaded. A full tally takes about 1 h 45 min on the
 project's 2-core machine. Exit status: 0 if every run passed.
@@ -18,12 +19,14 @@ import multiprocessing
 import re
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass
 from multiprocessing.synchronize import Event as StopEvent
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+LOGS = Path(tempfile.gettempdir()) / "stb-load-tally"  # a failed run's whole output
 FAILED = re.compile(r"^(FAILED|ERROR) (\S+)", re.MULTILINE)
 SUMMARY = re.compile(r"^=+ (.*) in [\d.]+s", re.MULTILINE)
 
@@ -35,6 +38,7 @@ class Outcome:
     passed: bool
     summary: str
     failures: list[str]
+    output: str
 
 
 def _spin(stop: StopEvent) -> None:
@@ -55,7 +59,7 @@ def run(target: str, timeout_s: float) -> Outcome:
     last = out.strip().splitlines()[-1] if out.strip() else ""
     return Outcome(target, time.monotonic() - started, code == 0,
                    summaries[-1] if summaries else last,
-                   [name for _, name in FAILED.findall(out)])
+                   [name for _, name in FAILED.findall(out)], out)
 
 
 def main() -> int:
@@ -79,6 +83,11 @@ def main() -> int:
                 print(f"make {target} #{n}: {'passed' if outcome.passed else 'FAILED'} in "
                       f"{outcome.seconds / 60:.1f} min — {outcome.summary}"
                       + "".join(f"\n    {name}" for name in outcome.failures), flush=True)
+                if not outcome.passed:  # what failed, to read afterwards
+                    log = LOGS / f"{target}-{n}.log"
+                    log.parent.mkdir(parents=True, exist_ok=True)
+                    log.write_text(outcome.output)
+                    print(f"    output: {log}", flush=True)
     finally:
         stop.set()
         if spinner is not None:
