@@ -35,6 +35,15 @@ def _run(lab: Lab, client: Callable[[int], Awaitable[object]], *, capturing: boo
     return asyncio.run(main())
 
 
+async def _packets_until(packets: list, count: int, timeout: float) -> None:
+    """Waits on the event loop until the client's callback has put ``count`` packets in
+    ``packets``; fails after ``timeout`` s."""
+    deadline = time.monotonic() + timeout
+    while len(packets) < count:
+        assert time.monotonic() < deadline, f"{len(packets)} of {count} packets in {timeout} s"
+        await asyncio.sleep(0.02)  # polls the list the client's callback fills
+
+
 async def _stream(port: int, components: list[str], frames: str = "allframes", *,
                   count: int | None = None, seconds: float | None = None) -> list:
     """The packets streamed until ``count`` came (at most 30 s), or over ``seconds``: a
@@ -44,10 +53,7 @@ async def _stream(port: int, components: list[str], frames: str = "allframes", *
     packets: list = []
     await conn.stream_frames(frames=frames, components=components, on_packet=packets.append)
     if count is not None:
-        deadline = time.monotonic() + 30
-        while len(packets) < count:
-            assert time.monotonic() < deadline, f"{len(packets)} of {count} packets in 30 s"
-            await asyncio.sleep(0.02)  # polls the list the client's callback fills
+        await _packets_until(packets, count, timeout=30)
     else:
         assert seconds is not None
         await asyncio.sleep(seconds)  # the window itself is the subject
@@ -176,9 +182,7 @@ def test_master_stops_and_starts_the_capture_with_events(lab: Lab) -> None:
             await asyncio.sleep(0.3)  # a quiet window: nothing may come while stopped
             idle = len(packets)
             await conn.start()
-            deadline = time.monotonic() + 10
-            while len(packets) <= idle + 10 and time.monotonic() < deadline:
-                await asyncio.sleep(0.02)  # polls for the frames after the start
+            await _packets_until(packets, idle + 11, timeout=10)
             await watcher.stream_frames_stop()
             return {"events": events, "stopped": stopped, "idle": idle, "running": len(packets)}
         finally:
