@@ -168,8 +168,9 @@ def test_replaying_the_recording_gives_the_same_messages(recording: Path) -> Non
             bus.subscribe_any(key, lambda item: got[item[0]].append(item[1]))
         probe = open_when_up(settings.zenoh)
         try:  # the subscriptions have reached the router before the replay starts
+            prober = Bus(probe, settings)
             for key in chosen:
-                until_heard(Bus(probe, settings), key)
+                until_heard(prober, key)
         finally:
             probe.close()
         replay = stb_process("replay", str(recording), "--speed", "4", "--connect", endpoint,
