@@ -59,7 +59,7 @@ def _handler(level: str, publishers: list[zenoh.Publisher], labels: list[str]
     fixed = ((1.0, 2.0, 3.0), (0.0, 0.0, 0.0))
 
     def read(packet: qtm_rt.QRTPacket) -> None:
-        measured = sync.measured(packet.timestamp / 1e6, time.time())
+        measured = sync.measured(packet.timestamp / 1e6, time.monotonic(), time.time())
         named = [(label, x, y, z) for label, (x, y, z) in zip(labels, _component(
             packet, QRTComponentType.Component3d, _XYZ), strict=False)
             if finite(x) and finite(y) and finite(z)]

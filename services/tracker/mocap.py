@@ -54,22 +54,32 @@ def bodies_from_xml(xml: bytes | str) -> list[str]:
 
 
 class ClockSync:
-    """Maps QTM's capture time stamps onto the wall clock: the smallest observed
-    (arrival − stamp) is the transport delay floor; it may creep up slowly for clock drift."""
+    """Maps QTM's capture time stamps onto this host's clock. QTM's clock runs on its own:
+    the smallest observed (arrival − stamp), the arrival read on the *monotonic* clock, is the
+    transport delay floor; it may creep up slowly for the two clocks' drift (``creep_per_s``,
+    a crystal's: 100 ppm), never faster — so that a backlog after a stall is not taken for a
+    clock change, and its frames keep their age. The wall clock is read at each arrival and
+    the result moved onto it: a host whose wall clock is being slewed (NTP, chrony; measured
+    on a CI machine: 2 000–5 000 ppm against its monotonic clock) would otherwise make every
+    frame look older by the minute."""
 
     def __init__(self, creep_per_s: float = 1e-4) -> None:
         self._offset: float | None = None
         self._last: float | None = None
         self._creep = creep_per_s
 
-    def measured(self, stamp_s: float, arrived_s: float) -> float:
-        sample = arrived_s - stamp_s
+    def measured(self, stamp_s: float, arrived_monotonic_s: float, wall_now_s: float) -> float:
+        """The wall time at which the frame stamped ``stamp_s`` (QTM's clock) was captured,
+        for a frame that arrived at ``arrived_monotonic_s`` when the wall clock read
+        ``wall_now_s``."""
+        sample = arrived_monotonic_s - stamp_s
         if self._offset is None or self._last is None:
             self._offset = sample
         else:
-            self._offset = min(self._offset + self._creep * (arrived_s - self._last), sample)
-        self._last = arrived_s
-        return stamp_s + self._offset
+            self._offset = min(self._offset + self._creep * (arrived_monotonic_s - self._last),
+                               sample)
+        self._last = arrived_monotonic_s
+        return stamp_s + self._offset + (wall_now_s - arrived_monotonic_s)
 
 
 # a 3D component: its header (marker count, 2D drop rate, out-of-sync rate), then per marker
@@ -129,12 +139,13 @@ class QualisysMocap:
     def __init__(self, host: str = "127.0.0.1", port: int = 22223, *,
                  frames: str = "allframes", timeout_s: float = 5.0,
                  retry_initial_s: float = 0.5, retry_max_s: float = 5.0,
-                 clock: Callable[[], float] = time.time, body: str = "") -> None:
+                 clock: Callable[[], float] = time.time,
+                 monotonic: Callable[[], float] = time.monotonic, body: str = "") -> None:
         """``body``: a 6DOF body to stream (and check QTM has); "" = markers only."""
         self.host, self.port, self.frames, self.body = host, port, frames, body
         self.timeout_s, self.retry_initial_s, self.retry_max_s = (timeout_s, retry_initial_s,
                                                                   retry_max_s)
-        self.clock = clock
+        self.clock, self.monotonic = clock, monotonic
 
     def run(self, on_frame: FrameHandler, stop: threading.Event,
             on_state: StateHandler = lambda connected, why: None) -> None:
@@ -172,7 +183,7 @@ class QualisysMocap:
         sync = ClockSync()
 
         def on_packet(packet: qtm_rt.QRTPacket) -> None:
-            measured = sync.measured(packet.timestamp / 1e6, self.clock())
+            measured = sync.measured(packet.timestamp / 1e6, self.monotonic(), self.clock())
             on_frame(frame_from_packet(packet, labels, measured, bodies))
 
         components = ["3d", "3dnolabels", *(["6d"] if self.body else [])]
