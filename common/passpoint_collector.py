@@ -40,6 +40,12 @@ class Collector:
     coverage: tuple[int, int, int] = (0, 0, 0)
     """(columns, rows, passpoints per cell): done only once every cell of that grid over the
     picture holds that many (the lens's distortion is measured in the corners); 0: none"""
+    corners: tuple[float, int] = (0.0, 0)
+    """(share, passpoints): done only once each corner of the picture — that share of its
+    width and of its height from both edges — holds that many; 0: none. A grid cell is large,
+    its passpoints may all lie on its inner side; the corners are where the distortion is
+    largest and where a fit without passpoints there extrapolates"""
+    in_corners: Counter[str] = field(default_factory=Counter)
     cells: Counter[tuple[int, int]] = field(default_factory=Counter)
     picker: RobotPicker = field(init=False)
     track_t: list[float] = field(default_factory=list)
@@ -61,10 +67,11 @@ class Collector:
     def uncovered(self) -> list[str]:
         """The grid cells still short of passpoints, by name ("top left", "row 2, column 3")."""
         columns, rows, need = self.coverage
-        if need == 0:
-            return []
-        return [_cell_name(c, r, columns, rows) for r in range(rows) for c in range(columns)
-                if self.cells[(c, r)] < need]
+        cells = [] if need == 0 else [_cell_name(c, r, columns, rows) for r in range(rows)
+                                      for c in range(columns) if self.cells[(c, r)] < need]
+        _, per_corner = self.corners
+        return cells + [f"{name} corner" for name in CORNER_NAMES
+                        if per_corner and self.in_corners[name] < per_corner]
 
     def on_frame(self, frame: m.MarkerFrame) -> None:
         found = self.picker.update(frame.measured_s, frame.markers)
@@ -123,6 +130,9 @@ class Collector:
             u, v = moving[0]
             self.cells[(min(int(u / msg.width_px * columns), columns - 1),
                         min(int(v / msg.height_px * rows), rows - 1))] += 1
+        corner = _corner(*moving[0], msg.width_px, msg.height_px, self.corners[0])
+        if corner is not None:
+            self.in_corners[corner] += 1
         return None
 
     def _marker_at(self, t: float) -> np.ndarray | None:
@@ -149,6 +159,16 @@ class Collector:
             return False
         path = np.array(self.track_xyz[lo:hi])
         return float(np.max(np.ptp(path, axis=0))) >= MARKER_MOVED_MM
+
+
+CORNER_NAMES = ("top left", "top right", "bottom left", "bottom right")
+
+
+def _corner(u: float, v: float, width_px: int, height_px: int, share: float) -> str | None:
+    """The picture's corner a pixel is in (``share`` of the width and height from the edges)."""
+    near_u = "left" if u < share * width_px else "right" if u > (1 - share) * width_px else ""
+    near_v = "top" if v < share * height_px else "bottom" if v > (1 - share) * height_px else ""
+    return f"{near_v} {near_u}" if near_u and near_v else None
 
 
 def _cell_name(column: int, row: int, columns: int, rows: int) -> str:

@@ -41,6 +41,7 @@ PROGRESS_S = 0.5
 MOCAP_WAIT_S = 1.0
 SNAPSHOTS_KEPT = 30
 WIDE_COVERAGE = (4, 3, 3)  # at the widest of several zooms: every cell of a 4×3 grid, 3 each
+WIDE_CORNERS = (0.15, 3)  # and each corner (15 % of width and height from the edges), 3 each
 STALL_HINTS = {  # why snapshots gave no passpoint → what to check
     "no marker": "the wand is not in the camera's view (or the IR cut filter is on)",
     "too many": "more bright spots than the wand (reflections, markers)",
@@ -67,11 +68,12 @@ class Session:
         widest = min(self.zooms) if self.zooms else None
         each: list[int | None] = list(self.zooms) if self.zooms else [None]  # None: as it is
         self.collectors = [Collector(count, settings.marker_label, settings.min_spacing_mm,
-                                     settings.min_spacing_px,
-                                     WIDE_COVERAGE if self.zooms and zoom == widest
-                                     else (0, 0, 0),
-                                     track_t=track_t, track_xyz=track_xyz)
+                                     settings.min_spacing_px, track_t=track_t,
+                                     track_xyz=track_xyz)
                            for zoom in each]
+        if widest is not None:  # the lens's distortion is measured at the widest step
+            wide = self.collectors[self.zooms.index(widest)]
+            wide.coverage, wide.corners = WIDE_COVERAGE, WIDE_CORNERS
         self.collector = self.collectors[0]
         self._zoom_index = 0
         self._zoom_since: float | None = None  # the camera's first state at the present zoom

@@ -205,6 +205,18 @@ def test_collector_with_coverage_is_done_only_when_every_cell_has_its_share() ->
     assert collector.done and collector.uncovered() == []
 
 
+def test_collector_with_corners_is_done_only_when_each_corner_has_its_share() -> None:
+    collector = Collector(target=1, marker_label="wand", corners=(0.15, 1))
+    for i in range(600):
+        collector.on_frame(_frame(i / 100, np.array([100.0 + i, 200.0, 300.0])))
+    for t, (u, v) in enumerate([(350.0, 300.0), (100.0, 50.0), (20.0, 30.0), (690.0, 20.0),
+                                (10.0, 560.0)]):  # the second: near the top, not the corner
+        assert collector.on_detections(_detections(t + 0.5, [(u, v)])) is None
+    assert not collector.done and collector.uncovered() == ["bottom right corner"]
+    assert collector.on_detections(_detections(5.5, [(650.0, 540.0)])) is None
+    assert collector.done and collector.uncovered() == []
+
+
 def test_a_binary_passpoint_file_is_named(tmp_path: Path, capsys) -> None:  # noqa: ANN001
     path = tmp_path / "pp.csv"
     path.write_bytes(b"\x89PNG\r\n\x1a\n\x00\xff\xfe")

@@ -27,7 +27,7 @@ from tests.conftest import ROOT, wait_for
 from tests.services.test_processes import _lab_for_up
 
 PTZ1_MOUNT = Pose(3550, 1090, 2190, 180, 30, 165)  # as write_lab configures the sim
-ZOOMS = [1, 3000, 5500, 7000, 8000, 9000, 9999]
+ZOOMS = [1, 1500, 3000, 5500, 7000, 8000, 9000, 9999]
 TRUTH_HZ = 20  # the sim's truth_rate_hz
 
 

@@ -1,0 +1,108 @@
+"""Planning a zoom collection: which zoom steps, and how many passpoints in the picture's
+corners at the widest step, on lenses drawn at random (no sim, no services: the pure fit).
+
+    .venv/bin/python -m benchmarks.zoom_plan [--lenses 200] [--draws 30] [--seed 12]
+
+* **Steps**: the focal length between the measured steps is interpolated (PCHIP), so even a
+  perfect measurement at each step leaves an error between them. For each step list, the
+  largest error anywhere 1–9999 of a curve through the *true* focal lengths at those steps,
+  over ``--lenses`` lenses drawn as ``tests/calib/test_zoom_fit.drawn_lens`` does.
+* **Corners**: the distortion is largest in the corners; a fit with no passpoints there
+  extrapolates. For one drawn lens (``--seed``), ``--draws`` synthetic collections (170
+  passpoints at zoom 1 anywhere but the corners, plus so many in each corner — 15 % of the
+  picture's width and height from its edges —, 90 anywhere at every other step, 0.35 px
+  noise per axis, as the sim's collections' zoom-1 residuals show): the largest difference
+  anywhere in the wide picture between the fitted and the true distortion.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from common.camera import Pose, undistort_pixels
+from common.passpoints import Passpoints
+from common.ptz_lens import PtzLens, ZoomCurve
+from services.calib.solve import Options
+from services.calib.synthetic import PAPER_POSE
+from services.calib.zoom_fit import solve_zooms
+from tests.calib.test_zoom_fit import STEPS, ZOOMS, distortion_error_px, drawn_lens
+
+SEVEN = [1, 3000, 5500, 7000, 8000, 9000, 9999]
+WIDTH_PX, HEIGHT_PX = 704, 576
+CORNER_SHARE = 0.15
+NOISE_PX = 0.35
+
+
+def interpolation_error(lens: PtzLens, zooms: list[int]) -> float:
+    """The largest relative focal-length error 1–9999 of the curve through the true focal
+    lengths at ``zooms``."""
+    through = ZoomCurve(tuple(float(z) for z in zooms), tuple(lens.focal_mm(z) for z in zooms))
+    return max(abs(through.focal_mm(z) / lens.focal_mm(z) - 1) for z in STEPS)
+
+
+def _wide_pixels(rng: np.random.Generator, per_corner: int, anywhere_else: int = 170
+                 ) -> np.ndarray:
+    corner_u, corner_v = CORNER_SHARE * WIDTH_PX, CORNER_SHARE * HEIGHT_PX
+    inside: list[tuple[float, float]] = []
+    while len(inside) < anywhere_else:
+        u, v = rng.uniform(10, WIDTH_PX - 10), rng.uniform(10, HEIGHT_PX - 10)
+        if not (min(u, WIDTH_PX - u) < corner_u and min(v, HEIGHT_PX - v) < corner_v):
+            inside.append((u, v))
+    corners = []
+    for right in (False, True):
+        for bottom in (False, True):
+            u = rng.uniform(7, corner_u, per_corner)
+            v = rng.uniform(7, corner_v, per_corner)
+            corners.append(np.column_stack([WIDTH_PX - u if right else u,
+                                            HEIGHT_PX - v if bottom else v]))
+    return np.concatenate([np.array(inside), *corners])
+
+
+def collection(pose: Pose, lens: PtzLens, rng: np.random.Generator, per_corner: int
+               ) -> dict[int, Passpoints]:
+    by_zoom = {}
+    for zoom in ZOOMS:
+        intr = lens.intrinsics(zoom)
+        seen = (_wide_pixels(rng, per_corner) if zoom == ZOOMS[0] else
+                rng.uniform([1, 1], [WIDTH_PX - 1, HEIGHT_PX - 1], (90, 2)))
+        straight = undistort_pixels(seen, intr)
+        depth = rng.uniform(2000, 7000, len(seen))
+        world = pose.to_world(np.column_stack([
+            depth, (straight[:, 0] - intr.cy_px) / intr.fy_px * depth,
+            (straight[:, 1] - intr.cz_px) / intr.fz_px * depth]))
+        by_zoom[zoom] = Passpoints(world, seen + rng.normal(0, NOISE_PX, seen.shape))
+    return by_zoom
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="benchmarks.zoom_plan", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--lenses", type=int, default=200)
+    parser.add_argument("--draws", type=int, default=30)
+    parser.add_argument("--seed", type=int, default=12)
+    args = parser.parse_args(argv)
+    lenses = [drawn_lens(np.random.default_rng(s)) for s in range(args.lenses)]
+    print(f"focal length between the steps, interpolation alone, {args.lenses} drawn lenses:")
+    print("| steps | median | 95th percentile | largest |\n|---|---:|---:|---:|")
+    for zooms in (SEVEN, ZOOMS):
+        errors = 100 * np.array([interpolation_error(lens, zooms) for lens in lenses])
+        print(f"| {','.join(map(str, zooms))} | {np.median(errors):.2f} % | "
+              f"{np.percentile(errors, 95):.2f} % | {errors.max():.2f} % |", flush=True)
+    truth = drawn_lens(np.random.default_rng(args.seed))
+    print(f"\ndistortion at zoom 1, lens of seed {args.seed}, {args.draws} collections each:")
+    print("| passpoints per corner | median | 90th percentile | largest |\n|---:|---:|---:|---:|")
+    for per_corner in (0, 1, 3, 6):
+        errors = []
+        for draw in range(args.draws):
+            rng = np.random.default_rng((args.seed, per_corner, draw))
+            fit, _ = solve_zooms(collection(PAPER_POSE, truth, rng, per_corner), Options())
+            errors.append(distortion_error_px(fit.lens().intrinsics(1), truth.intrinsics(1)))
+        print(f"| {per_corner} | {np.median(errors):.2f} px | {np.percentile(errors, 90):.2f} px"
+              f" | {max(errors):.2f} px |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
