@@ -59,9 +59,9 @@ class ClockSync:
     transport delay floor; it may creep up slowly for the two clocks' drift (``creep_per_s``,
     a crystal's: 100 ppm), never faster — so that a backlog after a stall is not taken for a
     clock change, and its frames keep their age. The wall clock is read at each arrival and
-    the result moved onto it: a host whose wall clock is being slewed (NTP, chrony; measured
-    on a CI machine: 2 000–5 000 ppm against its monotonic clock) would otherwise make every
-    frame look older by the minute."""
+    the result moved onto it: a host whose wall clock is stepped or slewed (NTP, chrony; seen
+    on a CI machine: a step of ≈ 5 s forward, then 2 000–5 000 ppm against its monotonic
+    clock for minutes) would otherwise make every frame look seconds old."""
 
     def __init__(self, creep_per_s: float = 1e-4) -> None:
         self._offset: float | None = None
