@@ -16,11 +16,17 @@ DELAY_S = 0.002  # QTM's capture to the tracker's read
 
 
 def _ages(sync: ClockSync, seconds: float, slew: float, qtm_drift: float = 0.0,
-          stall: tuple[float, float] | None = None) -> np.ndarray:
+          stall: tuple[float, float] | None = None,
+          step: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
     """Each frame's age as the tracker judges it (wall clock at reading − measured); frames
     captured at QTM's rate, QTM's clock running ``qtm_drift`` fast against the host's monotonic
     clock, the wall clock ``slew`` fast; during ``stall`` (start, length) nothing is read and
-    the backlog is read after it, ten times faster than real time."""
+    the backlog is read after it, ten times faster than real time; at ``step`` (time,
+    seconds) the wall clock steps."""
+
+    def wall_at(monotonic: float) -> float:
+        return wall0 + monotonic * (1 + slew) + (step[1] if monotonic >= step[0] > 0 else 0.0)
+
     wall0 = 1.8e9
     ages, reading_at = [], 0.0
     for n in range(int(seconds * RATE_HZ)):
@@ -29,9 +35,9 @@ def _ages(sync: ClockSync, seconds: float, slew: float, qtm_drift: float = 0.0,
         if stall and stall[0] <= arrival < stall[0] + stall[1]:
             reading_at = max(reading_at, stall[0] + stall[1])
         reading_at = max(arrival, reading_at + (0.1 / RATE_HZ if stall else 0.0))
-        wall = wall0 + reading_at * (1 + slew)
+        wall = wall_at(reading_at)
         measured = sync.measured(captured * (1 + qtm_drift), reading_at, wall)
-        true_wall = wall0 + captured * (1 + slew)
+        true_wall = wall_at(captured)
         ages.append((wall - measured, wall - true_wall))
     return np.array(ages)
 
@@ -40,6 +46,12 @@ def test_a_slewed_wall_clock_leaves_fresh_frames_fresh() -> None:
     ages = _ages(ClockSync(), seconds=300, slew=5e-3, qtm_drift=5e-5)
     judged, true = ages[:, 0], ages[:, 1]
     assert np.max(np.abs(judged - true)) < 0.02  # 300 s at 5 000 ppm: 1.5 s by the old rule
+
+
+def test_a_stepped_wall_clock_leaves_fresh_frames_fresh() -> None:
+    ages = _ages(ClockSync(), seconds=60, slew=0.0, step=(20.005, 5.0))  # 5 s forward
+    judged = ages[:, 0]
+    assert len(judged) == 6000 and np.max(np.abs(judged)) < 0.02  # the old rule: 5 s after it
 
 
 def test_a_backlog_after_a_stall_keeps_its_age_under_a_slewed_wall_clock() -> None:
