@@ -65,7 +65,8 @@ class Collector:
         return len(self.times) >= self.target and not self.uncovered()
 
     def uncovered(self) -> list[str]:
-        """The grid cells still short of passpoints, by name ("top left", "row 2, column 3")."""
+        """The grid cells and the corners still short of passpoints, by name ("top left",
+        "row 2, column 3", "bottom left corner")."""
         columns, rows, need = self.coverage
         cells = [] if need == 0 else [_cell_name(c, r, columns, rows) for r in range(rows)
                                       for c in range(columns) if self.cells[(c, r)] < need]

@@ -12,8 +12,8 @@ class Clock:
     ``t0_monotonic`` lets several processes share one sim time (monotonic time is
     system-wide). The wall time of an instant is read from the wall clock when asked, as a
     device whose clock is kept by NTP stamps what it captures: a host whose wall clock is
-    being slewed against its monotonic one (measured on a CI machine: 2 000–5 000 ppm) would
-    otherwise see the sim's stamps drift from its own by seconds within minutes."""
+    stepped or slewed against its monotonic one (seen on a CI machine: ≈ 5 s, then 2 000–5 000
+    ppm for minutes) would otherwise see the sim's stamps off its own by seconds."""
 
     def __init__(self, t0_monotonic: float | None = None, *,
                  monotonic: Callable[[], float] = time.monotonic,
