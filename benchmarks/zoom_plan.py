@@ -21,11 +21,12 @@ import argparse
 
 import numpy as np
 
-from common.camera import Pose, undistort_pixels
+from common.camera import Pose
+from common.passpoint_collector import corner_of
 from common.passpoints import Passpoints
 from common.ptz_lens import PtzLens, ZoomCurve
 from services.calib.solve import Options
-from services.calib.synthetic import PAPER_POSE
+from services.calib.synthetic import PAPER_POSE, seen_at
 from services.calib.zoom_fit import solve_zooms
 from tests.calib.test_zoom_fit import STEPS, ZOOMS, distortion_error_px, drawn_lens
 
@@ -44,12 +45,12 @@ def interpolation_error(lens: PtzLens, zooms: list[int]) -> float:
 
 def _wide_pixels(rng: np.random.Generator, per_corner: int, anywhere_else: int = 170
                  ) -> np.ndarray:
-    corner_u, corner_v = CORNER_SHARE * WIDTH_PX, CORNER_SHARE * HEIGHT_PX
     inside: list[tuple[float, float]] = []
     while len(inside) < anywhere_else:
         u, v = rng.uniform(10, WIDTH_PX - 10), rng.uniform(10, HEIGHT_PX - 10)
-        if not (min(u, WIDTH_PX - u) < corner_u and min(v, HEIGHT_PX - v) < corner_v):
+        if corner_of(u, v, WIDTH_PX, HEIGHT_PX, CORNER_SHARE) is None:
             inside.append((u, v))
+    corner_u, corner_v = CORNER_SHARE * WIDTH_PX, CORNER_SHARE * HEIGHT_PX
     corners = []
     for right in (False, True):
         for bottom in (False, True):
@@ -67,12 +68,8 @@ def collection(pose: Pose, lens: PtzLens, rng: np.random.Generator, per_corner: 
         intr = lens.intrinsics(zoom)
         seen = (_wide_pixels(rng, per_corner) if zoom == ZOOMS[0] else
                 rng.uniform([1, 1], [WIDTH_PX - 1, HEIGHT_PX - 1], (90, 2)))
-        straight = undistort_pixels(seen, intr)
-        depth = rng.uniform(2000, 7000, len(seen))
-        world = pose.to_world(np.column_stack([
-            depth, (straight[:, 0] - intr.cy_px) / intr.fy_px * depth,
-            (straight[:, 1] - intr.cz_px) / intr.fz_px * depth]))
-        by_zoom[zoom] = Passpoints(world, seen + rng.normal(0, NOISE_PX, seen.shape))
+        at = seen_at(pose, intr, seen, rng, NOISE_PX)
+        by_zoom[zoom] = Passpoints(at.world_mm, at.pixels)
     return by_zoom
 
 

@@ -131,7 +131,7 @@ class Collector:
             u, v = moving[0]
             self.cells[(min(int(u / msg.width_px * columns), columns - 1),
                         min(int(v / msg.height_px * rows), rows - 1))] += 1
-        corner = _corner(*moving[0], msg.width_px, msg.height_px, self.corners[0])
+        corner = corner_of(*moving[0], msg.width_px, msg.height_px, self.corners[0])
         if corner is not None:
             self.in_corners[corner] += 1
         return None
@@ -165,7 +165,7 @@ class Collector:
 CORNER_NAMES = ("top left", "top right", "bottom left", "bottom right")
 
 
-def _corner(u: float, v: float, width_px: int, height_px: int, share: float) -> str | None:
+def corner_of(u: float, v: float, width_px: int, height_px: int, share: float) -> str | None:
     """The picture's corner a pixel is in (``share`` of the width and height from the edges)."""
     near_u = "left" if u < share * width_px else "right" if u > (1 - share) * width_px else ""
     near_v = "top" if v < share * height_px else "bottom" if v > (1 - share) * height_px else ""

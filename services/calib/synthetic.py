@@ -76,9 +76,17 @@ def zoom_passpoints(pose: Pose, lens: PtzLens, zooms: list[int], rng: np.random.
     for zoom in zooms:
         intr = lens.intrinsics(zoom)
         seen = rng.uniform([1.0, 1.0], [intr.width_px - 1.0, intr.height_px - 1.0], (count, 2))
-        straight = undistort_pixels(seen, intr)
-        d = rng.uniform(*depth_mm, count)
-        world = pose.to_world(np.column_stack([d, (straight[:, 0] - intr.cy_px) / intr.fy_px * d,
-                                               (straight[:, 1] - intr.cz_px) / intr.fz_px * d]))
-        sets.append(AtZoom(zoom, world, seen + rng.normal(0.0, noise_px, (count, 2))))
+        sets.append(seen_at(pose, intr, seen, rng, noise_px, depth_mm, zoom))
     return sets
+
+
+def seen_at(pose: Pose, intr: Intrinsics, seen: np.ndarray, rng: np.random.Generator,
+            noise_px: float, depth_mm: tuple[float, float] = (2000.0, 7000.0),
+            zoom: int = 0) -> AtZoom:
+    """Passpoints whose markers the camera sees at the pixels ``seen`` through ``intr`` (its
+    distortion too), ``depth_mm`` along its axis, with Gaussian pixel noise."""
+    straight = undistort_pixels(seen, intr)
+    d = rng.uniform(*depth_mm, len(seen))
+    world = pose.to_world(np.column_stack([d, (straight[:, 0] - intr.cy_px) / intr.fy_px * d,
+                                           (straight[:, 1] - intr.cz_px) / intr.fz_px * d]))
+    return AtZoom(zoom, world, seen + rng.normal(0.0, noise_px, seen.shape))
