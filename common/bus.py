@@ -50,6 +50,8 @@ def zenoh_config(z: ZenohSettings) -> zenoh.Config:
     if z.listen:
         put("listen/endpoints", z.listen)
     put("scouting/multicast/enabled", z.multicast_scouting)
+    put("transport/shared_memory/transport_optimization/pool_size",
+        int(z.shm_pool_mib * 1024 * 1024))
     put("transport/link/tx/lease", z.lease_ms)
     put("connect/retry", {"period_init_ms": z.retry_init_ms, "period_max_ms": z.retry_max_ms,
                           "period_increase_factor": 2})

@@ -77,6 +77,11 @@ class ZenohSettings(_Strict):
     )
     retry_init_ms: int = Field(100, ge=10)
     retry_max_ms: int = Field(500, ge=10)
+    shm_pool_mib: float = Field(
+        4.0, gt=0, description="the shared-memory pool a node sends its large messages (over "
+        "3 kB) to other processes of its host through; every receiver maps each sender's pool "
+        "(Zenoh's default, 16 MiB, held 64 MiB in the router alone). 4 MiB holds 13 of the "
+        "largest message, the tracking camera's 307 kB frame (docs/benchmarks.md, Memory)")
 
     @field_validator("connect", "listen")
     @classmethod

@@ -16,7 +16,6 @@ import threading
 import time
 from collections import Counter, OrderedDict, deque
 from collections.abc import Callable
-from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -29,11 +28,10 @@ from common.markers import Detection, annotate, marker_of
 from common.node import Node
 from common.passpoint_collector import Collector
 from common.passpoints import CalibrationError, Passpoints
+from services.calib.options import Options
 from services.calib.settings import CalibSettings
 from services.calib.store import PoseStore
-
-if TYPE_CHECKING:
-    from services.calib.zoom_fit import ZoomFit
+from services.calib.worker import in_worker, solve_one_zoom, solve_zooms_and_plot
 
 log = logging.getLogger(__name__)
 TICK_S = 0.05
@@ -255,14 +253,12 @@ class Session:
         with self.lock:
             points, track = self.collector.passpoints(), self.collector.track()
         self.store.save_inputs(self.camera, points, track)
-        from services.calib.solve import Options, solve  # scipy and OpenCV: only to solve
-
         s = self.settings
         options = Options(focal_mm=state.focal_mm, fit_focal=s.fit_focal, track=track,
                           max_time_offset_s=s.max_time_offset_s, inlier_px=s.inlier_px,
                           max_mean_error_px=s.max_mean_error_px)
         try:
-            solution = solve(points, options)
+            solution = in_worker(solve_one_zoom, points, options)
         except CalibrationError as err:
             self._finish("failed", str(err))
             return
@@ -287,19 +283,18 @@ class Session:
                                                           strict=True)}
             track = self.collector.track()
         self.store.save_inputs(self.camera, Passpoints.joined(by_zoom), track)
-        from services.calib.solve import Options
-        from services.calib.zoom_fit import solve_zooms  # scipy: only to solve
-
         s = self.settings
         options = Options(track=track, max_time_offset_s=s.max_time_offset_s,
                           inlier_px=s.inlier_px, max_mean_error_px=s.max_mean_error_px)
         try:
-            fit, first = solve_zooms(by_zoom, options)
+            fit, first, not_drawn = in_worker(solve_zooms_and_plot, by_zoom, options,
+                                              self.store.camera_dir(self.camera) / "lens.png")
         except CalibrationError as err:
             self._finish("failed", str(err))
             return
+        if not_drawn is not None:  # a picture that cannot be drawn is only missed
+            log.warning("%s: no lens.png: %s", self.camera, not_drawn)
         mount = mount_pose(fit.pose, state.pan_deg, state.tilt_deg)
-        self._plot_lens(fit)
         lens = [m.LensAtZoom.model_validate(at) for at in fit.at_zoom()]
         used = sum(len(k) for k in fit.inliers)
         pose = m.CameraPose(
@@ -311,15 +306,6 @@ class Session:
         self._take(pose, report, f"{used} passpoints at {len(fit.zooms)} zoom steps, focal "
                    f"{fit.focals_mm[0]:.2f}–{fit.focals_mm[-1]:.2f} mm, clock offset "
                    f"{1e3 * (first.time_offset_s or 0.0):.1f} ms")
-
-    def _plot_lens(self, fit: ZoomFit) -> None:
-        """``lens.png`` beside the stored pose: the curve, the distortion, the residuals."""
-        try:
-            from services.calib.plot import write_lens_plot  # matplotlib: only to draw
-
-            write_lens_plot(fit, self.store.camera_dir(self.camera) / "lens.png")
-        except (OSError, ValueError) as err:  # a picture that cannot be drawn is only missed
-            log.warning("%s: no lens.png: %s", self.camera, err)
 
     def _take(self, pose: m.CameraPose, report: dict, summary: str) -> None:
         """The solved pose: held for review if asked, then versioned, stored and published

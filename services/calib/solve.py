@@ -16,7 +16,6 @@ from __future__ import annotations
 import contextlib
 import time
 from dataclasses import dataclass, field
-from typing import Literal
 
 import numpy as np
 
@@ -24,28 +23,14 @@ from common.camera import Intrinsics, Pose, reprojection_px
 from common.passpoints import CalibrationError, Passpoints, Track
 from services.calib.cost import Fitness
 from services.calib.joint import best_offset_on_grid, refine_jointly
+from services.calib.options import Options
 from services.calib.pnp import pose_std, ransac_seed, robust_refine
 from services.calib.search import SearchMethod, search
 
-Method = Literal["auto", "cmaes", "simplex"]
 MIN_PASSPOINTS = 6
 JOINT_ROUNDS = 4
 FOCAL_SEARCH_MM = (3.0, 60.0)
 FOCAL_SEARCH_STEPS = 32
-
-
-@dataclass(frozen=True)
-class Options:
-    method: Method = "auto"
-    initial: Pose | None = None
-    focal_mm: float = 3.8
-    fit_focal: bool = False
-    track: Track | None = None
-    max_time_offset_s: float = 0.5
-    inlier_px: float = 10.0
-    max_mean_error_px: float = 20.0
-    min_inlier_fraction: float = 0.5
-    seed: int = 1
 
 
 @dataclass(frozen=True)
