@@ -83,6 +83,7 @@ def sample(pids: dict[str, int], seconds: float) -> dict[str, dict[str, float]]:
 
 
 def measure(lab: Path, settle_s: float, seconds: float) -> dict[str, dict[str, float]]:
+    started = time.time()
     with tempfile.TemporaryDirectory() as folder, \
             open(Path(folder) / "up.log", "w") as log:
         up = subprocess.Popen([sys.executable, "-m", "services.cli", "up", "--lab", str(lab),
@@ -99,6 +100,9 @@ def measure(lab: Path, settle_s: float, seconds: float) -> dict[str, dict[str, f
             peak = sample(processes(up.pid), seconds)
             restarts = (Path(folder) / "up.log").read_text().count(" exited with ")
             print(f"restarts while it ran: {restarts}", file=sys.stderr)
+            print(f"cameras calibrated while it ran: {solved_since(started)}" + (
+                "" if solved_since(started) else " (their stored poses in run/calib/ were "
+                "loaded; delete that folder to measure a lab that solves)"), file=sys.stderr)
             return peak
         finally:
             up.send_signal(signal.SIGINT)
@@ -107,6 +111,12 @@ def measure(lab: Path, settle_s: float, seconds: float) -> dict[str, dict[str, f
             except subprocess.TimeoutExpired:
                 up.kill()
                 up.wait()
+
+
+def solved_since(started: float) -> int:
+    """How many camera poses the calib service stored (solved) since ``started``."""
+    return sum(path.stat().st_mtime >= started
+               for path in (ROOT / "run" / "calib").glob("*/pose.json"))
 
 
 def table(peak: dict[str, dict[str, float]]) -> str:
