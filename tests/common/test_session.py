@@ -74,3 +74,10 @@ def test_scouting_is_off_and_reconnection_is_fast_by_default() -> None:
     assert json.loads(cfg.get_json("scouting/multicast/enabled")) is False
     assert json.loads(cfg.get_json("connect/retry"))["period_max_ms"] == 500
     assert json.loads(cfg.get_json("mode")) == "client"
+
+
+def test_the_shared_memory_pool_is_sized_from_the_settings() -> None:
+    """Every receiver maps each sender's pool: 4 MiB by default, not Zenoh's 16 MiB."""
+    path = "transport/shared_memory/transport_optimization/pool_size"
+    assert json.loads(zenoh_config(ZenohSettings()).get_json(path)) == 4 * 1024 * 1024
+    assert json.loads(zenoh_config(ZenohSettings(shm_pool_mib=1.5)).get_json(path)) == 1572864
