@@ -39,7 +39,7 @@ PROGRESS_S = 0.5
 MOCAP_WAIT_S = 1.0
 SNAPSHOTS_KEPT = 30
 WIDE_COVERAGE = (4, 3, 3)  # at the widest of several zooms: every cell of a 4×3 grid, 3 each
-WIDE_CORNERS = (0.08, 3)  # and each corner (8 % of width and height from the edges), 3 each
+WIDE_CORNERS = (0.15, 3)  # and each corner (15 % of width and height from the edges), 3 each
 STALL_HINTS = {  # why snapshots gave no passpoint → what to check
     "no marker": "the wand is not in the camera's view (or the IR cut filter is on)",
     "too many": "more bright spots than the wand (reflections, markers)",
