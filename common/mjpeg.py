@@ -1,7 +1,9 @@
 """A camera's video as an AXIS camera streams it: VAPIX MJPEG (``/axis-cgi/mjpg/video.cgi``),
 read by ``stb record --video CAMERA`` and by ``stb camera`` for the observation camera, each
 JPEG stamped when it arrived (the same clock as every recorded bus sample, so that video,
-mocap and gantry line up).
+mocap and gantry line up), each stamp later than the one before (``ArrivalStamps``: two JPEGs
+that came in one read — a busy machine's backlog — would otherwise share one, and a video's
+frames must follow each other in time).
 
 ``MjpegParts`` splits the multipart stream (pure); ``CameraVideo`` keeps a connection to one
 camera — Digest, Basic or no auth as its ``CameraConnection`` says — and reconnects after a
@@ -25,6 +27,22 @@ VIDEO_PATH = "/axis-cgi/mjpg/video.cgi"
 MAX_PART_BYTES = 4 * 1024 * 1024
 _BOUNDARY = re.compile(r'boundary="?([^";]+)"?', re.IGNORECASE)
 _LENGTH = re.compile(rb"^content-length:\s*(\d+)\s*$", re.IGNORECASE | re.MULTILINE)
+
+
+class ArrivalStamps:
+    """When each frame arrived, by ``clock``, and always later than the frame before: a frame
+    that arrived in the same read as the one before it (or after the wall clock was set back)
+    is stamped ``STEP_S`` after that one."""
+
+    STEP_S = 1e-6
+
+    def __init__(self, clock: Callable[[], float] = time.time) -> None:
+        self._clock = clock
+        self._last_s = float("-inf")
+
+    def next(self) -> float:
+        self._last_s = max(self._clock(), self._last_s + self.STEP_S)
+        return self._last_s
 
 
 class VideoError(Exception):
@@ -105,6 +123,7 @@ class CameraVideo:
         self.timeout_s = timeout_s
         self.frames = 0
         self.problem = ""
+        self._stamps = ArrivalStamps()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=f"video-{name}", daemon=True)
 
@@ -141,9 +160,8 @@ class CameraVideo:
                 log.info("video of %s: streaming again", self.name)
                 self.problem = ""
             for chunk in reply.iter_raw():
-                received = time.time()
                 for jpeg in parts.feed(chunk):
                     self.frames += 1
-                    self.on_frame(self.name, jpeg, received)
+                    self.on_frame(self.name, jpeg, self._stamps.next())
                 if self._stop.is_set():
                     return

@@ -4,7 +4,9 @@ VAPIX into a recording of the whole lab: tests/operator/test_recording_e2e.py.)"
 
 from __future__ import annotations
 
+import threading
 import time
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
 import pytest
@@ -12,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from common.lab_views import CameraConnection
-from common.mjpeg import CameraVideo, MjpegParts, VideoError, boundary_of
+from common.mjpeg import ArrivalStamps, CameraVideo, MjpegParts, VideoError, boundary_of
 from tests.conftest import stb_process, wait_for
 from tests.ports import free_port
 
@@ -65,6 +67,46 @@ def test_a_camera_that_is_not_there_is_tried_again_and_ends_nothing() -> None:
         started = time.monotonic()
         video.stop()
         assert time.monotonic() - started < 3
+
+
+def test_frames_that_arrive_together_or_after_the_clock_went_back_keep_their_order() -> None:
+    readings = iter([10.0, 10.0, 10.0, 9.5, 10.2])
+    stamps = ArrivalStamps(clock=lambda: next(readings))
+    got = [stamps.next() for _ in range(5)]
+    assert got[0] == 10.0 and got[4] == 10.2
+    assert all(later > earlier for earlier, later in zip(got, got[1:], strict=False))
+    assert got[3] - got[0] == pytest.approx(3 * ArrivalStamps.STEP_S)
+
+
+def test_a_camera_that_sends_several_frames_in_one_write_gets_them_in_order() -> None:
+    """A busy machine reads a camera's backlog: here five JPEGs in one write, each stamped
+    after the one before (a recording's video once had two frames with one time stamp)."""
+    body = _stream(JPEGS)
+
+    class Camera(BaseHTTPRequestHandler):
+        def do_GET(self) -> None:  # noqa: N802 - http.server's name
+            self.send_response(200)
+            self.send_header("Content-Type", "multipart/x-mixed-replace; boundary=myboundary")
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args: object) -> None:
+            pass
+
+    server = ThreadingHTTPServer(("127.0.0.1", 0), Camera)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    got: list[tuple[bytes, float]] = []
+    video = CameraVideo("ptz9", CameraConnection(url=f"http://127.0.0.1:{server.server_port}"),
+                        5.0, "704x576", lambda _, jpeg, at: got.append((jpeg, at)),
+                        timeout_s=2.0).start()
+    try:
+        wait_for(lambda: len(got) >= len(JPEGS), timeout=10, why=lambda: f"{len(got)} frames")
+    finally:
+        video.stop()
+        server.shutdown()
+    assert [jpeg for jpeg, _ in got[:len(JPEGS)]] == JPEGS
+    times = [at for _, at in got]
+    assert all(later > earlier for earlier, later in zip(times, times[1:], strict=False))
 
 
 def test_stb_record_names_a_camera_it_does_not_know(tmp_path: Path) -> None:
