@@ -100,8 +100,9 @@ def measure(lab: Path, settle_s: float, seconds: float) -> dict[str, dict[str, f
             peak = sample(processes(up.pid), seconds)
             restarts = (Path(folder) / "up.log").read_text().count(" exited with ")
             print(f"restarts while it ran: {restarts}", file=sys.stderr)
-            print(f"cameras calibrated while it ran: {solved_since(started)}" + (
-                "" if solved_since(started) else " (their stored poses in run/calib/ were "
+            solved = solved_since(started)
+            print(f"cameras calibrated while it ran: {solved}" + (
+                "" if solved else " (their stored poses in run/calib/ were "
                 "loaded; delete that folder to measure a lab that solves)"), file=sys.stderr)
             return peak
         finally:
