@@ -1,6 +1,6 @@
 """A solve in a short-lived worker process: scipy, cma and matplotlib load there and leave with
-it, so the calib service holds only what it needs between calibrations (about 75 MB instead of
-165–190 MB once it has solved: docs/benchmarks.md, "Memory").
+it, so the calib service holds only what it needs between calibrations (114 MB instead of
+190 MB once the demo had solved: docs/benchmarks.md, "Memory").
 
 The worker is a fresh interpreter (``python -m services.calib.worker``: nothing of the service's
 threads or bus session is copied into it, and no helper process stays behind) that reads the
