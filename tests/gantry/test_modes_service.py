@@ -226,7 +226,7 @@ def test_the_gantry_drives_a_crane_with_the_labs_register_map(rig: dict) -> None
         _moving(rig)
         wait_for(lambda: np.linalg.norm(crane.state()[0] - TARGET) < 20.0, timeout=8)
         # and its position read back right, once the crane has settled: on the way the loop
-        # can overshoot the robot (±70 mm for a few seconds, more on a busy machine), and the
+        # can overshoot the robot (up to 75 mm for 1–3 s, longer on a busy machine), and the
         # gantry's reading is a control period old; a wrong map reads metres off, never 25 mm
         states = rig["operator"].states
 
