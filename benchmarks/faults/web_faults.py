@@ -1,16 +1,23 @@
-"""Faults that come to the operator's page: many live views at once."""
+"""Faults that come to the operator's page: many live views at once; a flood of wrong
+sign-ins while an operator presses Stop."""
 
 from __future__ import annotations
 
 import http.client
 import json
+import threading
 import time
 
 from benchmarks.faults.lab import wait_until
-from tests.uplab import VIEWER
+from benchmarks.faults.rows import Row
+from tests.uplab import OPERATOR, VIEWER
 from tests.webpage import PageClient, basic
 
 STREAMS = 200
+SIGN_IN_ADDRESSES, SIGN_IN_TRIES = 40, 5
+"""200 wrong sign-ins: 40 client addresses (127.0.0.2…) × 5, each within the brake's free
+tries, so that every one of them costs a password check."""
+GOAL_STOP_S = 0.5
 
 
 class WebFaults:
@@ -50,3 +57,55 @@ class WebFaults:
         ok = answers and freed and statuses.get(200, 0) + statuses.get(503, 0) == count
         self._survived(f"{count} event streams at once", f"{count} live views opened and "
                        "held, then closed", start, pids, [(memory, during)], extra, ok)
+
+    def sign_in_flood(self) -> None:
+        """200 wrong sign-ins at once, each within its address's free tries, while a
+        signed-in operator presses Stop and a signed-in viewer asks for the state: both
+        answered at once (a Stop once waited 16.6 s behind the password checks)."""
+        page = PageClient(self.web_url)
+        cookie, csrf, _ = page.sign_in(OPERATOR)
+        viewer, _, _ = page.sign_in(VIEWER)
+        answers: list[int] = []
+
+        def wrong(address: str) -> None:
+            for i in range(SIGN_IN_TRIES):
+                conn = http.client.HTTPConnection(page.host, page.port, timeout=60,
+                                                  source_address=(address, 0))
+                try:
+                    conn.request("POST", "/signin", json.dumps(
+                        {"user": OPERATOR[0], "password": f"guess-{i}"}),
+                        {"Content-Type": "application/json"})
+                    answers.append(conn.getresponse().status)
+                except OSError:
+                    answers.append(0)
+                finally:
+                    conn.close()
+
+        flood = [threading.Thread(target=wrong, args=(f"127.0.0.{2 + n}",))
+                 for n in range(SIGN_IN_ADDRESSES)]
+        start = time.monotonic()
+        for thread in flood:
+            thread.start()
+        wait_until(lambda: len(answers) >= SIGN_IN_ADDRESSES, 30, 0.01)  # under way
+        asked = time.monotonic()
+        status, answer = page.command("stop", cookie, csrf)
+        stop_s = time.monotonic() - asked
+        asked = time.monotonic()
+        state_status = page.request("GET", "/state.json", cookie=viewer)[0]
+        state_s = time.monotonic() - asked
+        for thread in flood:
+            thread.join(120)
+        flood_s = time.monotonic() - start
+        stopped = status == 200 and bool(answer.get("accepted"))
+        counts = {code: answers.count(code) for code in sorted(set(answers))}
+        misses = ([] if stopped and stop_s <= GOAL_STOP_S else ["stop"]) + \
+            ([] if state_status == 200 and state_s <= GOAL_STOP_S else ["state"])
+        self.rows.append(Row(
+            "wrong sign-ins", f"a signed-in operator's Stop answered ≤ {GOAL_STOP_S} s "
+            f"during {SIGN_IN_ADDRESSES * SIGN_IN_TRIES} wrong sign-ins",
+            f"{len(answers)} wrong sign-ins from {SIGN_IN_ADDRESSES} addresses in "
+            f"{flood_s:.1f} s (answers {counts}); Stop answered in {stop_s:.2f} s "
+            f"({'accepted' if stopped else answer.get('detail')}), /state.json in "
+            f"{state_s:.2f} s ({state_status})", not misses,
+            {"stop_s": stop_s, "state_s": state_s, "answers": counts}, misses))
+        self.log(f"wrong sign-ins: {self.rows[-1].measured}")

@@ -35,6 +35,7 @@ from common.names import GANTRY_COMMANDS
 from services.web.console import Console, console_routes
 from services.web.crater_image import CraterImage
 from services.web.gate import COOKIE, Caller, Gate, command_refusal
+from services.web.lanes import Busy, command_lane, password_lane
 
 log = logging.getLogger(__name__)
 CAMERA = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
@@ -90,11 +91,19 @@ def build_app(gate: Gate, view: Callable[[], dict[str, Any]],
     """The page's application; ``command(name, caller_label)`` sends a gantry command;
     ``console``: the calibration, camera and recording controls (``console.py``)."""
     live = LiveView(view, push_period_s, max_streams)
+    passwords, commands = password_lane(), command_lane()
 
-    def who(request: Request) -> Caller | None:
+    async def who(request: Request) -> Caller | None:
+        """The caller: at once from a session, or after a password check in its lane."""
         address = request.client.host if request.client else "?"
-        return gate.caller(request.cookies.get(COOKIE), request.headers.get("authorization"),
-                           address)
+        asked = (request.cookies.get(COOKIE), request.headers.get("authorization"), address)
+        known, needs_check = gate.caller_at_once(*asked)
+        return await passwords.run(gate.caller, *asked) if needs_check else known
+
+    async def busy(request: Request, exc: Exception) -> Response:
+        assert isinstance(exc, Busy)
+        return JSONResponse({"accepted": False, "detail": exc.detail}, 503, headers={
+            "Retry-After": str(int(exc.retry_after_s + 0.999)), **NO_STORE})
 
     def unauthorised() -> Response:
         return JSONResponse({"detail": "sign in first"}, status_code=401, headers={
@@ -102,20 +111,20 @@ def build_app(gate: Gate, view: Callable[[], dict[str, Any]],
 
     def signed_in(handler: Callable[[Request], Any]) -> Callable[[Request], Any]:
         async def guarded(request: Request) -> Response:
-            if await anyio.to_thread.run_sync(who, request) is None:
+            if await who(request) is None:
                 return unauthorised()
             return await handler(request)
         return guarded
 
     async def page(request: Request) -> Response:
-        caller = await anyio.to_thread.run_sync(who, request)
+        caller = await who(request)
         return _static("signin.html" if caller is None else "index.html")
 
     async def static(request: Request) -> Response:
         return _static(request.url.path.lstrip("/"))
 
     async def session_info(request: Request) -> Response:
-        caller = await anyio.to_thread.run_sync(who, request)
+        caller = await who(request)
         if caller is None:
             return unauthorised()
         return JSONResponse({"user": caller.user.name, "role": str(caller.user.role),
@@ -131,7 +140,7 @@ def build_app(gate: Gate, view: Callable[[], dict[str, Any]],
         except (ValueError, KeyError, TypeError):
             return JSONResponse({"detail": 'send {"user": ..., "password": ...}'}, 400)
         address = request.client.host if request.client else "?"
-        outcome = await anyio.to_thread.run_sync(gate.sign_in, name, password, address)
+        outcome = await passwords.run(gate.sign_in, name, password, address)
         headers = dict(NO_STORE)
         if outcome.retry_after_s:
             headers["Retry-After"] = str(int(outcome.retry_after_s + 1))
@@ -180,7 +189,7 @@ def build_app(gate: Gate, view: Callable[[], dict[str, Any]],
 
     async def authorize(request: Request) -> Caller | Response:
         """The operator behind a command, or the refusal (401, 403) to answer with."""
-        caller = await anyio.to_thread.run_sync(who, request)
+        caller = await who(request)
         refusal = command_refusal(caller, request.headers.get("x-csrf-token"),
                                   request.headers.get("origin"), request.headers.get("host"))
         if refusal is None:
@@ -197,7 +206,7 @@ def build_app(gate: Gate, view: Callable[[], dict[str, Any]],
         caller = await authorize(request)
         if isinstance(caller, Response):
             return caller
-        answer = await anyio.to_thread.run_sync(command, name, caller.label)
+        answer = await commands.run(command, name, caller.label)
         log.info("command %s by %s: %s (%s)", name, caller.label,
                  "accepted" if answer.get("accepted") else "refused", answer.get("detail"))
         return JSONResponse(answer, headers=NO_STORE)
@@ -216,4 +225,4 @@ def build_app(gate: Gate, view: Callable[[], dict[str, Any]],
     ]
     if console is not None:
         routes += console_routes(console, authorize, signed_in)
-    return Starlette(routes=routes)
+    return Starlette(routes=routes, exception_handlers={Busy: busy})

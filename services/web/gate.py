@@ -26,7 +26,6 @@ log = logging.getLogger(__name__)
 COOKIE = "stb_session"
 LOCAL = User("local", Role.OPERATOR)
 BASIC_REMEMBERED_S = 60.0  # a script's Basic credentials, checked once a minute, not per request
-VERIFYING_AT_ONCE = 2  # argon2 takes 64 MiB and ~0.2 s of a core per check
 
 
 @dataclass(frozen=True)
@@ -67,7 +66,6 @@ class Gate:
         self.brake = brake or SignInBrake()
         self.open_csrf = secrets.token_urlsafe(24)
         self._lock = threading.Lock()
-        self._verifying = threading.Semaphore(VERIFYING_AT_ONCE)
         self._salt = secrets.token_bytes(16)
         self._basic: dict[bytes, tuple[User, float]] = {}
 
@@ -77,18 +75,34 @@ class Gate:
 
     def caller(self, cookie: str | None, authorization: str | None, address: str
                ) -> Caller | None:
-        """Who sent a request, or None (not signed in; wrong or braked Basic credentials)."""
+        """Who sent a request, or None (not signed in; wrong or braked Basic credentials).
+        May check a password (argon2: run it in the password lane, ``lanes.py``)."""
+        known, needs_check = self.caller_at_once(cookie, authorization, address)
+        if not needs_check:
+            return known
+        credentials = basic_credentials(authorization)
+        assert credentials is not None
+        user = self._basic_user(authorization or "", credentials, address)
+        return None if user is None else Caller(user, address, "basic")
+
+    def caller_at_once(self, cookie: str | None, authorization: str | None, address: str
+                       ) -> tuple[Caller | None, bool]:
+        """Who sent a request as far as it is known without checking a password: (the caller
+        or None, whether Basic credentials still need a check — then ask ``caller``)."""
         if self.users is None:
-            return Caller(LOCAL, address, "open", self.open_csrf)
+            return Caller(LOCAL, address, "open", self.open_csrf), False
         with self._lock:
             session = self.sessions.get(cookie, self.clock())
         if session is not None:
-            return Caller(session.user, address, "session", session.csrf)
-        credentials = basic_credentials(authorization)
-        if credentials is None:
-            return None
-        user = self._basic_user(authorization or "", credentials, address)
-        return None if user is None else Caller(user, address, "basic")
+            return Caller(session.user, address, "session", session.csrf), False
+        if basic_credentials(authorization) is None:
+            return None, False
+        digest = self._digest(authorization or "")
+        with self._lock:
+            remembered = self._basic.get(digest)
+            if remembered is not None and self.clock() < remembered[1]:
+                return Caller(remembered[0], address, "basic"), False
+        return None, True
 
     def sign_in(self, name: str, password: str, address: str) -> SignIn:
         if self.users is None:
@@ -120,12 +134,7 @@ class Gate:
 
     def _basic_user(self, header: str, credentials: tuple[str, str], address: str
                     ) -> User | None:
-        digest = hashlib.sha256(self._salt + header.encode()).digest()
-        now = self.clock()
-        with self._lock:
-            remembered = self._basic.get(digest)
-            if remembered is not None and now < remembered[1]:
-                return remembered[0]
+        digest, now = self._digest(header), self.clock()
         user = self._check_password(*credentials, address)
         if user is not None:
             with self._lock:
@@ -133,13 +142,15 @@ class Gate:
                 self._basic[digest] = (user, now + BASIC_REMEMBERED_S)
         return user
 
+    def _digest(self, header: str) -> bytes:
+        return hashlib.sha256(self._salt + header.encode()).digest()
+
     def _check_password(self, name: str, password: str, address: str) -> User | None:
         assert self.users is not None
         with self._lock:
             if self.brake.wait_s(address, self.clock()) > 0:
                 return None
-        with self._verifying:
-            user = self.users.verify(name[:64], password[:1024])
+        user = self.users.verify(name[:64], password[:1024])
         with self._lock:
             if user is not None:
                 self.brake.succeeded(address)

@@ -7,6 +7,7 @@ import base64
 import http.client
 import json
 import subprocess
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -17,6 +18,7 @@ from services.web.access import Sessions, SignInBrake, basic_credentials
 from services.web.app import build_app
 from services.web.crater_image import CraterImage
 from services.web.gate import Caller, Gate, command_refusal
+from services.web.lanes import PASSWORDS_QUEUED
 from services.web.server import WebServer
 from services.web.settings import WebSettings
 from services.web.users import Role, User, Users, UsersFileError
@@ -267,6 +269,57 @@ def test_twenty_wrong_passwords_end_refused_outright(page: Page) -> None:
                         )[0] == 429, "the right password waits too"
     assert page.request("POST", "/signin", body="x", headers={"Content-Type": "text/plain"}
                         )[0] == 415, "another site's form cannot post a sign-in"
+
+
+class HeldUsers(Users):
+    """The users file whose password checks wait until ``release`` is set (as argon2 under a
+    flood of sign-ins keeps them busy), once ``hold`` is set."""
+
+    hold = threading.Event()
+    release = threading.Event()
+    started = threading.Semaphore(0)
+
+    def verify(self, name: str, password: str) -> User | None:
+        if self.hold.is_set():
+            self.started.release()
+            assert self.release.wait(60), "released by the test"
+        return super().verify(name, password)
+
+
+def test_a_stop_never_waits_behind_password_checks(users_file: Path, tmp_path: Path) -> None:
+    users = HeldUsers.load(users_file)
+    assert isinstance(users, HeldUsers)
+    for page, _ in _serve(users, tmp_path):
+        cookie, csrf, _ = page.sign_in(ALICE)
+        users.hold.set()
+        answers: list[tuple[int, dict[str, str]]] = []
+
+        def wrong(i: int) -> None:
+            status, headers, _ = page.request(
+                "POST", "/signin", body={"user": "alice", "password": f"guess{i}"},
+                timeout_s=90)
+            answers.append((status, headers))
+
+        flood = [threading.Thread(target=wrong, args=(i,)) for i in range(60)]
+        for thread in flood:
+            thread.start()
+        assert users.started.acquire(timeout=30), "a password check is under way"
+        try:
+            status, answer = page.command("stop", cookie, csrf)
+            assert status == 200 and answer["accepted"], "the Stop, while checks are held"
+            assert page.request("GET", "/state.json", cookie=cookie)[0] == 200
+            refused = [h for s, h in answers if s == 503]
+            assert len(refused) >= 60 - PASSWORDS_QUEUED, "past the lane's bound: refused"
+            assert all(int(h["retry-after"]) >= 1 for h in refused)
+            assert not users.release.is_set() and not any(s == 401 for s, _ in answers)
+        finally:
+            users.release.set()
+            for thread in flood:
+                thread.join(90)
+        checked = [s for s, _ in answers if s != 503]
+        assert checked and set(checked) <= {401, 429}, "the queued ones, checked or braked"
+        assert len(checked) == PASSWORDS_QUEUED
+        assert page.commands == [("stop", "alice (web 127.0.0.1)")]
 
 
 def test_event_streams_are_bounded(users_file: Path, tmp_path: Path) -> None:
