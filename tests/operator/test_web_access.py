@@ -290,36 +290,39 @@ def test_a_stop_never_waits_behind_password_checks(users_file: Path, tmp_path: P
     users = HeldUsers.load(users_file)
     assert isinstance(users, HeldUsers)
     for page, _ in _serve(users, tmp_path):
-        cookie, csrf, _ = page.sign_in(ALICE)
-        users.hold.set()
-        answers: list[tuple[int, dict[str, str]]] = []
+        _stop_during_held_checks(page, users)
 
-        def wrong(i: int) -> None:
-            status, headers, _ = page.request(
-                "POST", "/signin", body={"user": "alice", "password": f"guess{i}"},
-                timeout_s=90)
-            answers.append((status, headers))
 
-        flood = [threading.Thread(target=wrong, args=(i,)) for i in range(60)]
+def _stop_during_held_checks(page: Page, users: HeldUsers) -> None:
+    cookie, csrf, _ = page.sign_in(ALICE)
+    users.hold.set()
+    answers: list[tuple[int, dict[str, str]]] = []
+
+    def wrong(i: int) -> None:
+        status, headers, _ = page.request(
+            "POST", "/signin", body={"user": "alice", "password": f"guess{i}"}, timeout_s=90)
+        answers.append((status, headers))
+
+    flood = [threading.Thread(target=wrong, args=(i,)) for i in range(60)]
+    for thread in flood:
+        thread.start()
+    assert users.started.acquire(timeout=30), "a password check is under way"
+    try:
+        status, answer = page.command("stop", cookie, csrf)
+        assert status == 200 and answer["accepted"], "the Stop, while checks are held"
+        assert page.request("GET", "/state.json", cookie=cookie)[0] == 200
+        refused = [h for s, h in answers if s == 503]
+        assert len(refused) >= 60 - PASSWORDS_QUEUED, "past the lane's bound: refused"
+        assert all(int(h["retry-after"]) >= 1 for h in refused)
+        assert not users.release.is_set() and not any(s == 401 for s, _ in answers)
+    finally:
+        users.release.set()
         for thread in flood:
-            thread.start()
-        assert users.started.acquire(timeout=30), "a password check is under way"
-        try:
-            status, answer = page.command("stop", cookie, csrf)
-            assert status == 200 and answer["accepted"], "the Stop, while checks are held"
-            assert page.request("GET", "/state.json", cookie=cookie)[0] == 200
-            refused = [h for s, h in answers if s == 503]
-            assert len(refused) >= 60 - PASSWORDS_QUEUED, "past the lane's bound: refused"
-            assert all(int(h["retry-after"]) >= 1 for h in refused)
-            assert not users.release.is_set() and not any(s == 401 for s, _ in answers)
-        finally:
-            users.release.set()
-            for thread in flood:
-                thread.join(90)
-        checked = [s for s, _ in answers if s != 503]
-        assert checked and set(checked) <= {401, 429}, "the queued ones, checked or braked"
-        assert len(checked) == PASSWORDS_QUEUED
-        assert page.commands == [("stop", "alice (web 127.0.0.1)")]
+            thread.join(90)
+    checked = [s for s, _ in answers if s != 503]
+    assert checked and set(checked) <= {401, 429}, "the queued ones, checked or braked"
+    assert len(checked) == PASSWORDS_QUEUED
+    assert page.commands == [("stop", "alice (web 127.0.0.1)")]
 
 
 def test_event_streams_are_bounded(users_file: Path, tmp_path: Path) -> None:
