@@ -13,7 +13,7 @@ import json
 import logging
 import threading
 import time
-from collections import deque
+from collections import OrderedDict, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
@@ -31,6 +31,8 @@ M = TypeVar("M", bound=Message)
 HANDLER_ERROR = "handler_error"
 QUEUE_FULL = "queue_full"
 SUPERSEDED = "superseded"  # a newer sample of the same key came before the handler was free
+MAX_QUEUED_KEYS = 256
+"""Keys with samples waiting in one ``per_key`` subscription at most."""
 
 
 class BusUnreachable(ConnectionError):
@@ -167,13 +169,20 @@ def _stats_of(table: dict[str, _Stats], key: str) -> _Stats:
 
 class Subscription:
     """Samples of one key expression, checked by ``accept`` and handed to ``handler`` on a
-    worker thread of their own, so a slow handler never blocks Zenoh or other subscriptions."""
+    worker thread of their own, so a slow handler never blocks Zenoh or other subscriptions.
+
+    Queued (not ``latest``) samples are kept in arrival order, at most ``queue_size``; with
+    ``per_key`` each key has a queue of its own of that size and the keys take turns, so that
+    a flood on one key (one sender's commands) can neither push another key's samples out nor
+    hold them back (at most ``MAX_QUEUED_KEYS`` keys wait at once)."""
 
     def __init__(self, bus: Bus, key_expr: str, accept: Callable[[str, bytes], Any | None],
-                 handler: Callable[[Any], None], *, latest: bool, queue_size: int) -> None:
+                 handler: Callable[[Any], None], *, latest: bool, queue_size: int,
+                 per_key: bool = False) -> None:
         self._bus, self._accept, self._handler, self._latest = bus, accept, handler, latest
         self._pending: dict[str, bytes] = {}
-        self._queue: deque[tuple[str, bytes]] = deque(maxlen=queue_size)
+        self._queue_size, self._per_key = queue_size, per_key
+        self._queues: OrderedDict[str, deque[tuple[str, bytes]]] = OrderedDict()
         self._wake = threading.Condition()
         self._closed = False
         self._worker = threading.Thread(target=self._run, name=f"sub:{key_expr}", daemon=True)
@@ -191,21 +200,37 @@ class Subscription:
                     self._bus.count_drop(key, SUPERSEDED, "", log_it=False)
                 self._pending[key] = payload
             else:
-                if len(self._queue) == self._queue.maxlen:
-                    self._bus.count_drop(key, QUEUE_FULL, "subscriber queue full, oldest dropped")
-                self._queue.append((key, payload))
+                self._enqueue(key, payload)
             self._wake.notify()
+
+    def _enqueue(self, key: str, payload: bytes) -> None:
+        turn = key if self._per_key else ""
+        queue = self._queues.get(turn)
+        if queue is None:
+            if len(self._queues) >= MAX_QUEUED_KEYS:
+                self._bus.count_drop(key, QUEUE_FULL, "too many keys waiting: dropped")
+                return
+            queue = self._queues[turn] = deque(maxlen=self._queue_size)
+        if len(queue) == queue.maxlen:
+            self._bus.count_drop(key, QUEUE_FULL, "subscriber queue full, oldest dropped")
+        queue.append((key, payload))
 
     def _next(self) -> tuple[str, bytes] | None:
         with self._wake:
-            while not self._closed and not self._pending and not self._queue:
+            while not self._closed and not self._pending and not self._queues:
                 self._wake.wait()
             if self._closed:
                 return None
             if self._latest:
                 key = next(iter(self._pending))
                 return key, self._pending.pop(key)
-            return self._queue.popleft()
+            turn, queue = next(iter(self._queues.items()))
+            item = queue.popleft()
+            if queue:
+                self._queues.move_to_end(turn)  # the next key's turn
+            else:
+                del self._queues[turn]
+            return item
 
     def _run(self) -> None:
         while (item := self._next()) is not None:
@@ -294,6 +319,23 @@ class Bus:
             topic.pattern(self.prefix, **params),
             lambda key, payload: self.accept(topic, key, payload, max_age_s=max_age_s),
             handler, latest=latest, queue_size=queue_size)
+
+    def subscribe_keyed(self, topic: Topic[M], handler: Callable[[dict[str, str], M], None], *,
+                        queue_size: int = 1000) -> Subscription:
+        """Call ``handler(params, msg)`` for every valid sample, in order per key, ``params``
+        the key's parameters (who sent it, where the key names the sender: the router's access
+        control lets each identity put only on its own key). Each key has a queue of its own
+        and the keys take turns: a flood from one sender neither drops nor delays another's."""
+        def accept(key: str, payload: bytes) -> tuple[dict[str, str], M] | None:
+            params = topic.match(self.prefix, key)
+            msg = self.accept(topic, key, payload)
+            return None if msg is None or params is None else (params, msg)
+
+        sub = Subscription(self, topic.pattern(self.prefix), accept,
+                           lambda item: handler(*item), latest=False, queue_size=queue_size,
+                           per_key=True)
+        self._subscriptions.append(sub)
+        return sub
 
     def subscribe_any(self, key_expr: str,
                       handler: Callable[[tuple[str, Message | dict[str, Any]]], None],

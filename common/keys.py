@@ -119,8 +119,10 @@ GANTRY_SETPOINT = Topic("gantry/setpoint", m.CraneSetpoint,
 GANTRY_STATE = Topic("gantry/state", m.CraneState, "crane position and the gantry's status")
 GANTRY_OFFLOAD = Topic("gantry/offload", m.GravityOffload,
                        "gravity offload: vertical force lost and sideways pull of the cable")
-GANTRY_COMMAND = Topic("gantry/command", m.GantryCommand,
-                       "arm, disarm, stop, reset: only operators may send them", stream=False)
+GANTRY_COMMAND = Topic("gantry/command/by/{sender}", m.GantryCommand,
+                       "arm, disarm, stop, reset: only operators may send them, each on the key "
+                       "of its bus identity (the router lets it put there only); the gantry "
+                       "limits and audits them by that identity", stream=False)
 GANTRY_COMMAND_REPLY = Topic("gantry/command/reply", m.GantryCommandReply,
                              "the gantry's answer to each command", stream=False)
 VIDEO = Topic("video/{camera}", m.CameraFrame,

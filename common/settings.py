@@ -62,7 +62,8 @@ class ZenohSettings(_Strict):
     connect: list[str] = Field(default_factory=lambda: ["tcp/127.0.0.1:7447"])
     listen: list[str] = Field(default_factory=list)
     multicast_scouting: bool = False
-    user: str | None = None
+    user: str | None = Field(None, pattern=r"^[A-Za-z0-9_.-]{1,64}$", description="the "
+                             "router's user name: this node's identity on the bus")
     password: SecretStr | None = None
     password_file: Path | None = Field(
         None, description="read the password from this file (a Docker secret), not the config")
@@ -91,6 +92,11 @@ class ZenohSettings(_Strict):
             if not sep or not proto or not addr:
                 raise ValueError(f"endpoint {endpoint!r} is not '<proto>/<address>:<port>'")
         return endpoints
+
+    def identity(self, default: str) -> str:
+        """Who this node is on the bus: its user (the router's access control knows it), else
+        ``default`` (an open bus, where nothing checks it)."""
+        return self.user or default
 
     @model_validator(mode="after")
     def _password_file_is_readable(self) -> ZenohSettings:

@@ -62,7 +62,7 @@ class Campaign(BusFaults, ProcessFaults, WebFaults, TrustFaults):
         ident = f"campaign-{self.commands}"
         self.bus.publish(keys.GANTRY_COMMAND, m.GantryCommand(
             measured_s=time.time(), command=command, operator="fault campaign",  # type: ignore[arg-type]
-            reason="fault campaign", id=ident))
+            reason="fault campaign", id=ident), sender="operator")
         found: list[m.GantryCommandReply] = []
         wait_until(lambda: found.extend(r for r in self.meters.replies if r.id == ident)
                    or found, timeout=3)

@@ -57,13 +57,16 @@ def _send(args: argparse.Namespace) -> int:
     session = tool_session(settings)
     bus = Bus(session, settings.bus)
     try:
-        return send(bus, args.command, args.operator[:128], args.reason[:500], args.timeout)
+        return send(bus, args.command, args.operator[:128], args.reason[:500], args.timeout,
+                    settings.bus.zenoh.identity("operator"))
     finally:
         bus.close()
         session.close()
 
 
-def send(bus: Bus, command: str, operator: str, reason: str, timeout_s: float) -> int:
+def send(bus: Bus, command: str, operator: str, reason: str, timeout_s: float,
+         sender: str) -> int:
+    """Send ``command`` on ``sender``'s key (this host's bus identity) and print the answer."""
     from common import keys
     from common import messages as m
 
@@ -73,7 +76,7 @@ def send(bus: Bus, command: str, operator: str, reason: str, timeout_s: float) -
     time.sleep(0.2)  # let the subscription reach the router before the command goes out
     bus.publish(keys.GANTRY_COMMAND, m.GantryCommand.model_validate({
         "measured_s": time.time(), "command": command, "operator": operator,
-        "reason": reason, "id": ident}))
+        "reason": reason, "id": ident}), sender=sender)
     deadline = time.monotonic() + timeout_s
     while (left := deadline - time.monotonic()) > 0:
         try:

@@ -47,10 +47,17 @@ MAX_REFUSALS_QUEUED = 100
 @dataclass(frozen=True)
 class Request:
     command: GantryCommandName
-    by: str
+    by: str  # the audit's name for the sender
     reason: str = ""
     id: str = ""
     sent_s: float | None = None  # when the operator sent it (None: now)
+    sender: str | None = None
+    """Who really sent it, as its command rate counts it (None: ``by``, for commands from
+    within the process)."""
+
+    @property
+    def rate_key(self) -> str:
+        return self.by if self.sender is None else self.sender
 
 
 @dataclass(frozen=True)
@@ -96,8 +103,7 @@ class GantryLoop:
         self._error: CraneError | None = None  # of the last tick's setpoint
         self._requests: deque[Request] = deque()
         self._too_many: deque[Request] = deque()  # refused by the rate, answered at the poll
-        self.rate = CommandRate(settings.command_per_s, settings.command_burst,
-                                5 * settings.command_per_s, 5 * settings.command_burst)
+        self.rate = CommandRate(settings.command_per_s, settings.command_burst)
         self.clock = clock
         self.last_reply: tuple[float, Reply] | None = None  # (when, the last command's answer)
         self._lock = threading.Lock()
@@ -110,7 +116,7 @@ class GantryLoop:
         """An operator's command, carried out at the next poll (from any thread) if its
         sender has not sent too many (``CommandRate``)."""
         with self._lock:
-            admission = self.rate.admit(request.by, self.clock(),
+            admission = self.rate.admit(request.rate_key, self.clock(),
                                         always=request.command == "stop")
             if admission.admitted:
                 self._requests.append(request)
@@ -119,7 +125,7 @@ class GantryLoop:
         if admission.report:
             log.warning("too many commands from %r: at most %g a second after %d at once; "
                         "the rest of this flood is answered \"too many\" without more log",
-                        request.by[:128], self.rate.per_s, self.rate.burst)
+                        request.rate_key[:128], self.rate.per_s, self.rate.burst)
 
     def poll(self, now_s: float, monotonic_s: float | None = None) -> Tick | None:
         """Read the controller's report, carry out commands and stops, tick when due.
@@ -153,7 +159,7 @@ class GantryLoop:
             too_many, self._too_many = list(self._too_many), deque()
         replies = tuple(Reply(r, self._carry_out(r, now_s)) for r in requests) + tuple(
             Reply(r, Decision(False, self.modes.mode, Action.NONE,
-                              f"too many commands from {r.by[:64]!r}: at most "
+                              f"too many commands from {r.rate_key[:64]!r}: at most "
                               f"{self.rate.per_s:g} a second; send it again later"))
             for r in too_many)
         if replies:

@@ -5,7 +5,7 @@ Reads:      tracking-camera frames (stb/gantry/camera/frame, or a camera via Ope
             to cross-check the tracking camera's fix) and the marker on the crane's carriage
             (stb/tracker/markers, label [gantry] crane_marker: to cross-check the crane's
             frame),
-            operators' commands (stb/gantry/command: arm, disarm, stop, reset),
+            operators' commands (stb/gantry/command/by/{sender}: arm, disarm, stop, reset),
             the crane controller over Modbus/TCP (position, status, faults, safety circuit)
 Publishes:  stb/gantry/detections, stb/gantry/estimate, stb/gantry/setpoint, stb/gantry/state
             (with the mode: disarmed, armed, stopped; who changed it and why),
@@ -66,7 +66,7 @@ def run(node: Node[GantrySettings]) -> None:
         node.bus.subscribe(keys.TRACKER_MARKERS, crane_marker.put)
     control = Control(node, s, GantryLoop(s, crane, frames, Controller(s, heights),
                                           time.time(), fix, crane_marker))
-    node.bus.subscribe(keys.GANTRY_COMMAND, control.command, latest=False)
+    node.bus.subscribe_keyed(keys.GANTRY_COMMAND, control.command)
     threading.Thread(target=run_every, args=(1 / s.heartbeat_hz, node.stop, control.heartbeat,
                                              "heartbeat"), name="heartbeat", daemon=True).start()
     log.info("disarmed: the crane moves once an operator arms the gantry (stb gantry arm)")
@@ -146,9 +146,16 @@ class Control:
         self.offload_warned = False
         self.last_tick = time.monotonic()
 
-    def command(self, msg: m.GantryCommand) -> None:
-        self.loop.request(Request(msg.command, msg.operator, msg.reason, msg.id,
-                                  msg.measured_s))
+    def command(self, key: dict[str, str], msg: m.GantryCommand) -> None:
+        """A command on its sender's key: limited and audited by that bus identity, or — for
+        an identity that signs in its own users (the page) — by the user it names."""
+        sender = key["sender"]
+        if sender in self.s.command_delegates:
+            by, rate_key = msg.operator, f"{sender}/{msg.operator}"
+        else:
+            by, rate_key = f"{sender} (as {msg.operator})", sender
+        self.loop.request(Request(msg.command, by[:128], msg.reason, msg.id, msg.measured_s,
+                                  rate_key))
 
     def heartbeat(self) -> None:
         if not heartbeat_due(self.loop.armed, time.monotonic() - self.last_tick,

@@ -119,7 +119,11 @@ class GantrySettings(ServiceSettings):
                                  "from one sender after its burst; the rest are answered "
                                  "\"too many\" (a stop is always taken)")
     command_burst: int = Field(5, ge=1, le=1000, description="commands one sender may send "
-                               "at once (all senders together: five times both)")
+                               "at once")
+    command_delegates: list[str] = Field(["web"], max_length=16, description="bus identities "
+                                         "that sign in their own users (the page): their "
+                                         "commands are limited per user they name; any other "
+                                         "identity's per identity, whatever name it writes")
     seed: int = 0
     pf_position: ParticleFilterSettings = Field(
         ParticleFilterSettings(), description="pf-position and pf-position-gauss")

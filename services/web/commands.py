@@ -1,6 +1,7 @@
-"""The page's gantry buttons: each press is an operator's command on the bus
-(stb/gantry/command, naming the signed-in user and their address: ``alice (web 10.0.0.5)``)
-and the gantry's answer comes back."""
+"""The page's gantry buttons: each press is an operator's command on the bus, on the page's
+own command key (stb/gantry/command/by/web: the router lets only the page put there), naming
+the signed-in user and their address (``alice (web 10.0.0.5)``: the gantry limits the page's
+commands per user it names), and the gantry's answer comes back."""
 
 from __future__ import annotations
 
@@ -16,8 +17,9 @@ from common.names import GANTRY_COMMANDS
 
 
 class GantryCommander:
-    def __init__(self, bus: Bus, timeout_s: float = 3.0) -> None:
-        self.bus, self.timeout_s = bus, timeout_s
+    def __init__(self, bus: Bus, sender: str, timeout_s: float = 3.0) -> None:
+        """``sender``: the page's bus identity (its router user)."""
+        self.bus, self.sender, self.timeout_s = bus, sender, timeout_s
         self._replies: dict[str, m.GantryCommandReply] = {}
         self._changed = threading.Condition()
         self._ids = itertools.count()
@@ -38,7 +40,7 @@ class GantryCommander:
         ident = f"web-{os.getpid()}-{next(self._ids)}"
         self.bus.publish(keys.GANTRY_COMMAND, m.GantryCommand(
             measured_s=time.time(), command=command, operator=operator[:128],
-            reason="from the operator page", id=ident))
+            reason="from the operator page", id=ident), sender=self.sender)
         with self._changed:
             answered = self._changed.wait_for(lambda: ident in self._replies, self.timeout_s)
             reply = self._replies.get(ident)

@@ -104,7 +104,7 @@ def run(node: Node[WebSettings]) -> None:
     crater = CraterImage(settings.height_map)
     app = build_app(gate, view, preview, video, crater,
                     push_period_s=1 / settings.push_hz, max_streams=settings.max_streams,
-                    command=GantryCommander(node.bus).send,
+                    command=GantryCommander(node.bus, settings.bus.zenoh.identity("web")).send,
                     console=Console(node.bus, desk, settings.calibration_count))
     try:
         server = WebServer(app, settings.host, settings.port, settings.tls)

@@ -81,18 +81,21 @@ def test_only_the_gantry_puts_setpoints_and_only_a_ptz_its_own_camera(lab: dict)
 
 def test_only_operators_and_the_web_page_command_the_gantry(lab: dict) -> None:
     only_allowed_arrive(lab["session"], [
-        ("operator", "stb/gantry/command", b"operator arms"),
-        ("web", "stb/gantry/command", b"web page stops"),
-        ("monitor", "stb/gantry/command", b"monitor arms"),
-        ("gantry", "stb/gantry/command", b"gantry arms itself"),
-        ("sim", "stb/gantry/command", b"sim arms"),
+        ("operator", "stb/gantry/command/by/operator", b"operator arms"),
+        ("web", "stb/gantry/command/by/web", b"web page stops"),
+        ("operator", "stb/gantry/command/by/web", b"operator poses as the page"),
+        ("web", "stb/gantry/command/by/operator", b"web page poses as an operator"),
+        ("monitor", "stb/gantry/command/by/monitor", b"monitor arms"),
+        ("monitor", "stb/gantry/command/by/operator", b"monitor poses as an operator"),
+        ("gantry", "stb/gantry/command/by/gantry", b"gantry arms itself"),
+        ("sim", "stb/gantry/command/by/operator", b"sim arms"),
         ("gantry", "stb/gantry/command/reply", b"gantry replies"),
         ("operator", "stb/gantry/command/reply", b"forged reply"),
         ("camera", "stb/gantry/camera/frame", b"camera frame"),
         ("camera", "stb/gantry/setpoint", b"camera setpoint"),
         ("observation", "stb/video/observation", b"bird's-eye view"),
         ("observation", "stb/video/ptz1", b"observation plays ptz1"),
-        ("observation", "stb/gantry/command", b"observation arms"),
+        ("observation", "stb/gantry/command/by/observation", b"observation arms"),
     ], allowed={b"operator arms", b"web page stops", b"gantry replies", b"camera frame",
                 b"bird's-eye view"})
 

@@ -115,7 +115,7 @@ class Operator:
         ident = f"test-{next(_ids)}"
         self.bus.publish(keys.GANTRY_COMMAND, m.GantryCommand(
             measured_s=time.time(), command=command, operator="test operator",  # type: ignore[arg-type]
-            reason="test", id=ident))
+            reason="test", id=ident), sender="operator")
         return ident
 
     def _reply(self, ident: str) -> m.GantryCommandReply | None:

@@ -43,7 +43,7 @@ def test_it_starts_disarmed_and_moves_the_crane_only_once_armed(rig: dict) -> No
         assert reply.accepted and reply.mode == "armed"
         wait_for(lambda: np.linalg.norm(crane.state()[0] - TARGET) < 20.0, timeout=8)
     state = operator.states[-1]
-    assert state.mode == "armed" and state.mode_by == "test operator"
+    assert state.mode == "armed" and state.mode_by == "operator (as test operator)"
 
 
 def test_arming_needs_a_fresh_estimate(rig: dict) -> None:
@@ -56,7 +56,7 @@ def test_arming_needs_a_fresh_estimate(rig: dict) -> None:
     audited = wait_for(lambda: next((s for s in reversed(operator.states)
                                      if s.command_s >= before), None), timeout=5)
     assert (audited.command, audited.command_by, audited.command_accepted) == (
-        "arm", "test operator", False)
+        "arm", "operator (as test operator)", False)
     assert "no fresh estimate" in audited.command_detail and audited.mode_by == "gantry"
 
 
@@ -248,13 +248,14 @@ def test_the_command_line_says_what_the_gantry_made_of_a_command(
     from services.gantry.command_cli import send
 
     wait_for(lambda: rig["operator"].states, timeout=10)  # the gantry is up
-    assert send(make_bus(), "arm", "night shift", "", 3.0) == 1, "refused: nothing in view"
+    assert send(make_bus(), "arm", "night shift", "", 3.0, "operator") == 1, \
+        "refused: nothing in view"
     assert "arm: refused — no fresh estimate" in capsys.readouterr().out
-    assert send(make_bus(), "stop", "night shift", "coffee", 3.0) == 0
+    assert send(make_bus(), "stop", "night shift", "coffee", 3.0, "operator") == 0
     assert "stop: done — coffee (gantry stopped)" in capsys.readouterr().out
     state = wait_for(lambda: rig["operator"].states[-1].mode == "stopped"
                      and rig["operator"].states[-1])
-    assert state.mode_by == "night shift" and state.mode_reason == "coffee"
+    assert state.mode_by == "operator (as night shift)" and state.mode_reason == "coffee"
 
 
 def test_stb_sim_estop_presses_and_releases_the_sims_e_stop(rig: dict) -> None:
