@@ -26,6 +26,7 @@ from common.lab_paths import DEFAULT_HEIGHT_MAP
 from common.names import ALGORITHMS
 from services.args import Parser, plain
 from services.experiment.paper import TABLES
+from services.sim.scenarios import FOLLOWED
 
 if TYPE_CHECKING:  # imported once the flags are parsed: --help answers at once
     from services.gantry.settings import GantrySettings
@@ -64,7 +65,8 @@ def _parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", metavar="gantry|identify")
     g = commands.add_parser("gantry", help="the gantry experiments: Tables 3 and 4",
                             description="Run the paper's gantry experiment on a simulated clock.")
-    g.add_argument("--scenario", choices=["locomotive", "walker"], default="locomotive")
+    g.add_argument("--scenario", choices=FOLLOWED, default="locomotive",
+                   help="the paper's locomotive or walker, or one of our paths (docs/sim.md)")
     path = g.add_mutually_exclusive_group()
     path.add_argument("--trajectory", type=Path, metavar="FILE.csv",
                       help="a robot path instead of the scenario's: CSV t,x,y (s, mm)")

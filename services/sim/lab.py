@@ -36,8 +36,9 @@ from services.sim.render import (
     NoiseBank,
     draw,
 )
-from services.sim.robots import Trajectory, make_trajectory, railway_keep_clear, wand_point
+from services.sim.robots import Trajectory, railway_keep_clear, wand_point
 from services.sim.settings import SimSettings
+from services.sim.trajectories import make_trajectory
 from services.sim.wand import View, WandCarrier
 from services.sim.world import CraterMap, CraterShape, generate_crater
 

@@ -11,13 +11,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from services.sim.scenarios import Scenario
 from services.sim.world import CraterMap
 
 SAMPLE_HZ = 100.0
 MARKER_DIAMETER_MM = 19.0
-MARKER_HEIGHT_MM = {"locomotive": 80.0, "walker": 350.0}
-"""How high above the ground each robot carries its marker (what the gantry's look-up needs)."""
+MARKER_HEIGHT_MM = {"locomotive": 80.0, "walker": 350.0, "slides": 350.0, "figure8": 80.0,
+                    "stop-and-go": 80.0, "zigzag": 80.0, "wander": 80.0}
+"""How high above the ground each scenario's robot carries its marker (what the gantry's
+look-up needs): the walker's body high, a wheeled robot's low."""
 
 
 @dataclass(frozen=True)
@@ -235,17 +236,6 @@ def parked(world: CraterMap, *, at_mm: tuple[float, float] = (0.0, 0.0),
     z = float(world.height_at(*at_mm)) + marker_height_mm
     return Trajectory("parked", np.array([0.0, duration_s]),
                       np.array([[*at_mm, z], [*at_mm, z]]))
-
-
-def make_trajectory(scenario: Scenario, world: CraterMap, rng: np.random.Generator, *,
-                    railway: Railway = Railway(), walk: Walk = Walk()) -> Trajectory:
-    if scenario == "locomotive":
-        return locomotive(world, railway)
-    if scenario == "walker":
-        return walker(world, rng, walk)
-    if scenario == "parked":
-        return parked(world)
-    return calibration(world, rng)
 
 
 def railway_keep_clear(oval: Oval = Railway().oval, margin_mm: float = 350.0
