@@ -53,14 +53,18 @@ class SimFrames:
         self._taken = -1
 
     def take(self) -> Frame | None:
-        number, captured = self.lab.newest_capture(self.clock())
-        if number <= self._taken or captured < 0:
-            return None
+        recent = self.take_recent(1)
+        return recent[0] if recent else None
+
+    def take_recent(self, keep: int = 8) -> list[Frame]:
+        """The frames that arrived since the last take, newest first (at most ``keep``, as
+        the bus's ``FrameInbox`` keeps), each rendered as it is taken."""
+        number, _ = self.lab.newest_capture(self.clock())
+        first = max(self._taken + 1, number - keep + 1, 0)
+        if number < first:
+            return []
         self._taken = number
         self.lab.crane.advance_to(self.clock())
-        return captured, self.lab.tracking_frame(captured, self.rng)
-
-    def take_recent(self) -> list[Frame]:
-        """The newest only: older frames are not rendered (the experiment has no spoofer)."""
-        frame = self.take()
-        return [] if frame is None else [frame]
+        rate = self.lab.settings.tracking_camera.rate_hz
+        return [(n / rate, self.lab.tracking_frame(n / rate, self.rng))
+                for n in range(number, first - 1, -1)]

@@ -94,8 +94,8 @@ class Oracle:
     ahead_s: float
     name: str = "oracle"
 
-    def update(self, t_s: float, measured: np.ndarray | None, horizon_s: float | None = None
-               ) -> Estimate:
+    def update(self, t_s: float, measured: np.ndarray | None, horizon_s: float | None = None,
+               noise_mm: float | None = None) -> Estimate:
         now, then = self.truth(t_s)[:2], self.truth(t_s + self.ahead_s)[:2]
         return Estimate(now, (then - now) / self.ahead_s, then)
 

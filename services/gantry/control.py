@@ -25,9 +25,11 @@ import numpy as np
 
 from common.heightmap import HeightMap
 from common.markers import Detection, Spot, closest, detect
+from services.gantry.algorithms import make_predictor
+from services.gantry.crane_track import CraneTrack, MarkerTrack, Paired
 from services.gantry.crosscheck import CrossCheck
 from services.gantry.locate import locate
-from services.gantry.predict import Estimate, Predictor, make_predictor, prediction_horizon
+from services.gantry.predict import Estimate, Predictor
 from services.gantry.safety import SetpointGuard, Workspace
 from services.gantry.settings import GantrySettings
 
@@ -35,6 +37,13 @@ if TYPE_CHECKING:  # OpenCV's capture stays out of the core
     from common.capture import Frame
 
 MAX_MARKERS = 20
+PAPER_ALGORITHMS = frozenset({"basic", "pf-position", "pf-position-gauss", "pf-velocity"})
+"""They keep eq. 8 as the paper computes it: the newest picture's offset added to the crane's
+latest report, one position per control period. The others get every picture since the last
+step, each with the crane's position when it was taken (``crane_track.py``)."""
+MAX_EXTRAPOLATE_S = 0.1
+"""A picture taken longer than this after the crane's newest report is not used: the crane's
+position then is a guess (its velocity carried on), and at 2 m/s² off by up to 10 mm."""
 
 
 @dataclass(frozen=True)
@@ -87,13 +96,16 @@ class Controller:
         s = settings
         self.settings, self.heights = s, heights
         self.camera, self.frame = s.tracking_camera, s.crane.frame()
-        self.predictor = predictor or make_predictor(s.algorithm, seed=s.seed, horizon_s=min(
-            prediction_horizon(s.reaction_s, 1 / s.control_hz), s.max_horizon_s),
+        self.predictor = predictor or make_predictor(
+            s.algorithm, seed=s.seed, max_horizon_s=s.max_horizon_s,
             particle=(s.pf_velocity if s.algorithm == "pf-velocity" else s.pf_position).options(),
-            kalman=s.default_filter.options())
+            follow=s.default_filter.options())
         self.guard = SetpointGuard(
             Workspace(s.x_min_mm, s.x_max_mm, s.y_min_mm, s.y_max_mm, s.workspace_margin_mm),
             s.max_speed_mm_s, s.max_accel_mm_s2, s.stale_after_s)
+        self.track = CraneTrack()
+        self.marker_track = MarkerTrack()
+        self.paired = self.predictor.name not in PAPER_ALGORITHMS
         self.estimate: Estimate | None = None
         self.estimate_s: float | None = None
         self.last_pixel: tuple[float, float] | None = None
@@ -125,7 +137,10 @@ class Controller:
             else None
         seen: dict[str, Any] = {}
         if frame is not None:
-            seen = self._measure([frame, *older], crane_xy, self._horizon(timing))
+            seen = (self._measure_paired([frame, *older], crane_xy, self._aim(now_s, timing))
+                    if self.paired else
+                    self._measure([frame, *older], crane_xy, self._horizon(timing)))
+        if seen:
             failing = self.tracking_check.failing(seen["frame_s"])
             seen["disagreement"] = "" if failing is None else failing.text(seen["frame_s"])
         if self._reacquire(now_s):
@@ -156,6 +171,63 @@ class Controller:
         period = 1 / self.settings.control_hz
         return (timing.report_age_s + timing.taken_in_s + self.settings.reaction_s
                 + 0.5 * period)
+
+    def _aim(self, now_s: float, timing: Timing | None) -> float:
+        """When the crane will be where this step's setpoint sends it: the wait until the
+        controller takes it, the crane's reaction, and half a period (the setpoint stands for
+        one); before the controller's cycle is known, as if a period away."""
+        s = self.settings
+        period = 1 / s.control_hz
+        taken_in = period if timing is None else timing.taken_in_s
+        return now_s + min(taken_in + s.reaction_s + 0.5 * period, s.max_horizon_s)
+
+    def _measure_paired(self, frames: Sequence[Frame], crane_xy: np.ndarray, aim_s: float
+                        ) -> dict[str, Any]:
+        """Every picture since the last step, oldest first, each located from where the crane
+        was when it was taken; of pictures taken at the same moment (one sent again, changed)
+        the one the motion capture agrees with. Each position found feeds the predictor."""
+        looked: list[_Looked] = []
+        noise: dict[float, float] = {}
+        for captured, image in sorted(frames, key=lambda f: f[0]):
+            paired, spread_s = self._crane_at(captured)
+            if paired is not None and paired.extrapolated_s > MAX_EXTRAPOLATE_S:
+                continue
+            crane = crane_xy if paired is None else paired.xy_mm
+            speed = 0.0 if paired is None else float(np.hypot(*paired.v_mm_s))
+            noise[captured] = float(np.hypot(self.settings.default_filter.measurement_noise_mm,
+                                             speed * spread_s))
+            found = detect(image, max_markers=MAX_MARKERS)
+            xyz, rejected, pixel = self._locate(found, crane, captured)
+            looked.append(_Looked(captured, image, found, xyz, rejected, pixel,
+                                  self._mocap_off(xyz, captured)))
+            if xyz is not None:
+                self._seen = [*self._seen[-1:], (captured, xyz[:2])]
+                self.last_pixel = pixel
+        if not looked:  # every picture newer than the crane's reports
+            return {}
+        chosen = [_agreeing(group, self.tracking_check.tolerance_mm) for group in
+                  _by_capture(looked)]
+        used = [c for c in chosen if c is not None]
+        for c in used:
+            assert c.xyz is not None
+            self.estimate = self.predictor.update(c.captured, c.xyz[:2], aim_s - c.captured,
+                                                  noise[c.captured])
+        if not used:
+            self.estimate = self.predictor.update(looked[-1].captured, None, None)
+        newest = used[-1] if used else looked[-1]
+        self.estimate_s = newest.captured if self.estimate is not None else None
+        return {"frame_s": newest.captured, "frame_shape": newest.image.shape,
+                "detection": newest.found, "measured_xyz": newest.xyz,
+                "rejected_mm": newest.rejected}
+
+    def _crane_at(self, t_s: float) -> tuple[Paired | None, float]:
+        """Where the crane was at ``t_s``: from the motion capture's marker on its carriage
+        where that covers it, else from the controller's reports; and how far off in time
+        that may be (the reports' ``report_spread_s``, the marker's none)."""
+        marked = self.marker_track.at(t_s, ahead_s=MAX_EXTRAPOLATE_S)
+        if marked is not None:
+            return marked, 0.0
+        return self.track.at(t_s), self.settings.report_spread_s
 
     def _measure(self, frames: Sequence[Frame], crane_xy: np.ndarray, horizon_s: float | None
                  ) -> dict[str, Any]:
@@ -268,6 +340,14 @@ class _Looked:
     rejected: float | None
     pixel: tuple[float, float] | None
     mocap_off_mm: float | None
+
+
+def _by_capture(looked: Sequence[_Looked]) -> list[list[_Looked]]:
+    """The pictures grouped by their capture time, in order."""
+    groups: dict[float, list[_Looked]] = {}
+    for f in looked:
+        groups.setdefault(f.captured, []).append(f)
+    return list(groups.values())
 
 
 def _agreeing(looked: Sequence[_Looked], tolerance_mm: float) -> _Looked | None:

@@ -1,12 +1,21 @@
 """When the gantry ticks: a fixed time after the crane controller publishes its position (pure).
 
-The controller reports its position once per cycle (4 Hz), like a PLC's process image. How
-old that report is when a tick reads it decides how much of the crane's own last move shows
-up as robot motion in eq. 8: past ~0.15 s every algorithm makes the crane chase itself
-(docs/experiments.md). So the gantry polls the report faster than the cycle, notes when it
-changes, and puts its ticks ``offset_s`` after the report — whatever the phase between its
-clock and the controller's. While the crane stands still the report does not change: the
-ticks keep the phase learnt last, or run free at the period until one is learnt.
+The controller reports its position once per cycle (4 Hz), like a PLC's process image, and
+takes the setpoint registers at the same moment. The gantry polls the report faster than the
+cycle, notes when it changes, and puts its ticks ``offset_s`` after the report — whatever the
+phase between its clock and the controller's. Which offset depends on how the picture is
+paired with the crane's position:
+
+* the paper's algorithms add the newest picture's offset to the report read at the tick
+  (eq. 8): the older that report, the more of the crane's own last move shows up as robot
+  motion — past ~0.15 s every one of them makes the crane chase itself (docs/experiments.md)
+  — so they tick ``AFTER_REPORT_S`` after it;
+* ``default`` pairs every picture with the crane's position when it was taken, so the report's
+  age does not matter: it ticks ``WRITE_MARGIN_S`` before the controller takes the setpoint,
+  with the freshest pictures, 0.125 s less behind the robot.
+
+While the crane stands still the report does not change: the ticks keep the phase learnt
+last, or run free at the period until one is learnt.
 """
 
 from __future__ import annotations
@@ -16,8 +25,18 @@ from collections import deque
 from dataclasses import dataclass, field
 
 AFTER_REPORT_S = 0.075
-"""Ticks this long after the controller's report: then ~0.1 s old when read, in the middle of
-the range where the default does best (docs/experiments.md)."""
+"""The paper's algorithms tick this long after the controller's report: then ~0.1 s old when
+read, in the middle of the range where they do best (docs/experiments.md)."""
+WRITE_MARGIN_S = 0.05
+"""``default`` ticks this long before the controller takes the setpoint: a poll period (the
+tick waits for the first poll after its time) and the Modbus write, with room to spare."""
+
+
+def tick_offset_s(after_report_s: float | None, period_s: float, paired: bool) -> float:
+    """The tick's offset after the report: the lab file's, else by how the picture is paired."""
+    if after_report_s is not None:
+        return after_report_s
+    return period_s - WRITE_MARGIN_S if paired else AFTER_REPORT_S
 
 
 @dataclass
@@ -39,13 +58,30 @@ class CycleSync:
             raise ValueError(f"offset_s {self.offset_s} must lie in [0, {self.period_s})")
         self._report_phases = deque(maxlen=self.remembered)
 
-    def observe(self, now_s: float, reported_xy: tuple[float, float]) -> None:
-        """One poll of the controller's reported position, read at ``now_s``."""
-        if self._last_poll is not None and reported_xy != self._last_poll[1]:
+    def observe(self, now_s: float, reported_xy: tuple[float, float]) -> bool:
+        """One poll of the controller's reported position, read at ``now_s``; whether it
+        changed since the last poll."""
+        changed = self._last_poll is not None and reported_xy != self._last_poll[1]
+        if changed:
+            assert self._last_poll is not None
             changed_s = 0.5 * (self._last_poll[0] + now_s)  # between the two polls
             self._report_phases.append(changed_s % self.period_s)
             self.last_report_s = changed_s
         self._last_poll = (now_s, reported_xy)
+        return changed
+
+    def published_s(self, now_s: float, changed: bool, margin_s: float) -> float | None:
+        """When the controller published the report read at ``now_s``: the cycle it changed
+        in (``changed``), else the last cycle at least ``margin_s`` (a poll) before — a report
+        that stays the same is published again each cycle. None before the phase is known
+        (the crane has not moved yet)."""
+        phase = self.report_phase_s
+        if phase is None:
+            return self.last_report_s if changed else None
+        if changed:
+            assert self.last_report_s is not None
+            return phase + round((self.last_report_s - phase) / self.period_s) * self.period_s
+        return phase + math.floor((now_s - margin_s - phase) / self.period_s) * self.period_s
 
     @property
     def report_phase_s(self) -> float | None:

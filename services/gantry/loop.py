@@ -24,7 +24,7 @@ from common.names import GantryCommandName
 from services.gantry.command_rate import CommandRate
 from services.gantry.control import Controller, Fix, Step, Timing
 from services.gantry.crosscheck import CrossCheck
-from services.gantry.cycle import CycleSync
+from services.gantry.cycle import CycleSync, tick_offset_s
 from services.gantry.modes import Action, Decision, Facts, ModeKeeper
 from services.gantry.reading import Crane, CraneError, CraneReading
 from services.gantry.safety import TargetCheck
@@ -95,7 +95,9 @@ class GantryLoop:
             settings.check_window_s, settings.mocap_max_age_s,
             f"is the frame this crane's, and the motion capture's marker "
             f"{settings.crane_marker!r} on its carriage? run stb gantry commission")
-        self.sync = CycleSync(1 / settings.control_hz, settings.after_report_s)
+        period = 1 / settings.control_hz
+        self.sync = CycleSync(period, tick_offset_s(settings.after_report_s, period,
+                                                    controller.paired))
         self.modes = ModeKeeper(now_s)
         self.targets = TargetCheck(settings.target_check_mm)
         self.reachable = True
@@ -141,7 +143,7 @@ class GantryLoop:
         replies = self._carry_out_requests(now_s)
         changes = self._observe(now_s)
         if self.reading is not None:
-            self.sync.observe(mono, (self.reading.x_mm, self.reading.y_mm))
+            self._track(now_s, mono, self.reading)
         due = self.sync.due(mono)
         if not due and not replies and not changes:
             return None
@@ -199,6 +201,8 @@ class GantryLoop:
         marker on its carriage, both taken to the marker's time: each new marker sample once,
         and only a fresh one (the report's velocity carries it a short way only)."""
         marker = self.crane_marker()
+        if marker is not None and self.settings.crane_check_mm > 0:
+            self.controller.marker_track.add(marker.t_s, marker.xy_mm)
         if self.reading is None or marker is None or now_s - marker.t_s > MARKER_FRESH_S \
                 or marker.t_s <= self._marker_compared_s:
             return
@@ -280,6 +284,17 @@ class GantryLoop:
             return None
         return Timing(next_report - mono_s,
                       self.settings.report_age_s + (mono_s - last_report))
+
+    def _track(self, now_s: float, mono_s: float, reading: CraneReading) -> None:
+        """Learn the controller's cycle from its report; keep the report with the time it was
+        measured (its cycle less ``report_age_s``) for the frames' pairing."""
+        xy = (reading.x_mm, reading.y_mm)
+        changed = self.sync.observe(mono_s, xy)
+        published = self.sync.published_s(mono_s, changed, 1 / self.settings.poll_hz)
+        if published is not None:
+            measured = now_s - (mono_s - published) - self.settings.report_age_s
+            self.controller.track.add(measured, np.array(xy),
+                                      np.array([reading.vx_mm_s, reading.vy_mm_s]))
 
     def _unreachable(self, err: CraneError) -> CraneError:
         self.controller.restart()  # the crane may have stopped meanwhile: start afresh

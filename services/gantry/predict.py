@@ -16,12 +16,12 @@ trustworthy to say (the safety layer then holds the crane).
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal, Protocol
 
 import numpy as np
 
-from common.names import ALGORITHMS, AlgorithmName
+from common.names import AlgorithmName
 
 if TYPE_CHECKING:  # filterpy (with scipy.stats) takes 0.8 s to import: only the IMM needs it
     from filterpy.kalman import IMMEstimator, KalmanFilter
@@ -43,10 +43,11 @@ class Predictor(Protocol):
     def name(self) -> str:
         """The algorithm's name (``AlgorithmName``; the experiments' bound is ``oracle``)."""
 
-    def update(self, t_s: float, measured: np.ndarray | None, horizon_s: float | None = None
-               ) -> Estimate | None:
+    def update(self, t_s: float, measured: np.ndarray | None, horizon_s: float | None = None,
+               noise_mm: float | None = None) -> Estimate | None:
         """The estimate after a frame taken at ``t_s``; ``horizon_s``: how far ahead of it the
-        crane will act on this setpoint (only ``default`` uses it)."""
+        crane will act on this setpoint, ``noise_mm`` how far the position may be off (only
+        ``default`` uses them)."""
 
 
 @dataclass
@@ -56,8 +57,8 @@ class Basic:
     name: AlgorithmName = "basic"
     _last: tuple[float, np.ndarray] | None = None
 
-    def update(self, t_s: float, measured: np.ndarray | None, horizon_s: float | None = None
-               ) -> Estimate | None:
+    def update(self, t_s: float, measured: np.ndarray | None, horizon_s: float | None = None,
+               noise_mm: float | None = None) -> Estimate | None:
         if measured is None:
             self._last = None
             return None
@@ -96,8 +97,8 @@ class ParticleFilter:
     def __post_init__(self) -> None:
         self._rng = np.random.default_rng(self.seed)
 
-    def update(self, t_s: float, measured: np.ndarray | None, horizon_s: float | None = None
-               ) -> Estimate | None:
+    def update(self, t_s: float, measured: np.ndarray | None, horizon_s: float | None = None,
+               noise_mm: float | None = None) -> Estimate | None:
         if measured is None:
             self._pos = self._last = None
             return None
@@ -201,8 +202,8 @@ class KalmanPredictor:
         import filterpy.kalman  # noqa: F401
         import scipy.linalg  # noqa: F401
 
-    def update(self, t_s: float, measured: np.ndarray | None, horizon_s: float | None = None
-               ) -> Estimate | None:
+    def update(self, t_s: float, measured: np.ndarray | None, horizon_s: float | None = None,
+               noise_mm: float | None = None) -> Estimate | None:
         if measured is None:
             return None
         from filterpy.common import Q_discrete_white_noise
@@ -259,25 +260,3 @@ class ParticleOptions:
     particles: int = 500
     velocity_noise_mm_s: float = 13.8
     diff_max_mm: float = 103.0
-
-
-def make_predictor(name: AlgorithmName, *, seed: int = 0, horizon_s: float = PAPER_HORIZON_S,
-                   particle: ParticleOptions = ParticleOptions(),
-                   kalman: KalmanOptions = _KALMAN) -> Predictor:
-    def pf(output: Literal["position", "velocity"],
-           model: Literal["linear", "gauss"]) -> ParticleFilter:
-        return ParticleFilter(name, output, model, particles=particle.particles, seed=seed,
-                              velocity_noise_mm_s=particle.velocity_noise_mm_s,
-                              diff_max_mm=particle.diff_max_mm)
-
-    if name == "basic":
-        return Basic()
-    if name == "pf-position":
-        return pf("position", "linear")
-    if name == "pf-position-gauss":
-        return pf("position", "gauss")
-    if name == "pf-velocity":
-        return pf("velocity", "linear")
-    if name == "default":
-        return KalmanPredictor(horizon_s=horizon_s, **asdict(kalman))
-    raise ValueError(f"unknown algorithm {name!r}; choose one of {', '.join(ALGORITHMS)}")

@@ -11,11 +11,11 @@ from common.lab_paths import DEFAULT_HEIGHT_MAP
 from common.names import AlgorithmName
 from common.settings import ServiceSettings, above_its_minimum
 from common.tracking_camera import TrackingCameraModel
-from services.gantry.cycle import AFTER_REPORT_S
-from services.gantry.predict import KalmanOptions, ParticleOptions
+from services.gantry.kalman import FollowOptions
+from services.gantry.predict import ParticleOptions
 
 _PF = ParticleOptions()
-_KF = KalmanOptions()
+_KF = FollowOptions()
 
 
 class ParticleFilterSettings(BaseModel):
@@ -33,25 +33,46 @@ class ParticleFilterSettings(BaseModel):
 
 
 class DefaultFilterSettings(BaseModel):
-    """``default``'s filter (ours: two constant-velocity Kalman filters mixed by an IMM,
-    docs/experiments.md). The defaults suit both of the paper's robots in the sim; a lab may
-    set them for its own robot and compare with ``stb experiment gantry --lab FILE``."""
+    """``default``'s filter (ours: an IMM of calm to agile motion models with the gait's
+    sway, ``services/gantry/kalman.py``, docs/experiments.md). The defaults suit every robot
+    of the sim; a lab may set them for its own robot and compare with
+    ``stb experiment gantry --lab FILE``."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
     measurement_noise_mm: float = Field(
         _KF.measurement_noise_mm, gt=0, le=1000,
-        description="how far a located position may be off (the crane's report included)")
-    calm_accel_mm_s2: float = Field(
-        _KF.calm_accel_mm_s2, gt=0, le=10_000,
-        description="the calm model's acceleration noise: it does not chase a robot's sway")
-    agile_accel_mm_s2: float = Field(
-        _KF.agile_accel_mm_s2, gt=0, le=10_000,
-        description="the agile model's acceleration noise: a fast robot's turns")
+        description="how far a located position may be off with the crane at rest (a moving "
+        "crane adds its speed times report_spread_s)")
+    accels_mm_s2: tuple[float, ...] = Field(
+        _KF.accels_mm_s2, min_length=1, max_length=5,
+        description="the motion models' acceleration noise, calm (a walk: its sway goes to "
+        "the gait) to agile (a slide, a corner)")
+    bursts_s: tuple[float, ...] = Field(
+        _KF.bursts_s, min_length=1, max_length=5,
+        description="for each model, how long a speed lasts (0: it goes on): an agile model "
+        "whose speed comes in bursts does not carry a slide on past its end")
     stay: float = Field(_KF.stay, gt=0.5, lt=1,
                         description="chance a model stays in charge from one period to the next")
+    sway_drift_mm_s: float = Field(_KF.sway_drift_mm_s, ge=0, le=1000,
+                                   description="how fast the gait's sway may change")
 
-    def options(self) -> KalmanOptions:
-        return KalmanOptions(**self.model_dump())
+    @field_validator("accels_mm_s2")
+    @classmethod
+    def _positive(cls, accels: tuple[float, ...]) -> tuple[float, ...]:
+        if any(not 0 < a <= 100_000 for a in accels):
+            raise ValueError("each must be in (0, 100000] mm/s²")
+        return accels
+
+    @model_validator(mode="after")
+    def _a_burst_per_model(self) -> DefaultFilterSettings:
+        if len(self.bursts_s) != len(self.accels_mm_s2) or any(
+                not 0 <= b <= 60 for b in self.bursts_s):
+            raise ValueError(f"bursts_s: one per model in accels_mm_s2 "
+                             f"({len(self.accels_mm_s2)}), each 0…60 s")
+        return self
+
+    def options(self) -> FollowOptions:
+        return FollowOptions(**self.model_dump())
 
 
 class GantrySettings(ServiceSettings):
@@ -73,8 +94,11 @@ class GantrySettings(ServiceSettings):
     heartbeat_hz: float = Field(10.0, gt=0, le=100, description="crane watchdog heartbeat")
     poll_hz: float = Field(40.0, gt=0, le=200, description="reads of the crane's reported "
                            "position, to tick a fixed time after each new one")
-    after_report_s: float = Field(AFTER_REPORT_S, ge=0, description="ticks this long after "
-                                  "the controller reports its position")
+    after_report_s: float | None = Field(
+        None, ge=0, description="ticks this long after the controller reports its position; "
+        "default: 0.075 s for the paper's algorithms (eq. 8 adds the picture's offset to that "
+        "report), 0.05 s before the controller takes the setpoint for default (it pairs each "
+        "picture with the crane's position when it was taken)")
     target_check_mm: float = Field(5.0, ge=0, description="the crane's target must be within "
                                    "this of a setpoint the gantry wrote, or it stops the crane "
                                    "(another Modbus client writes setpoints); 0: no check")
@@ -84,6 +108,10 @@ class GantrySettings(ServiceSettings):
                               "setpoint to the crane following it (stb gantry identify)")
     report_age_s: float = Field(0.05, ge=0, le=2, description="how old the position the "
                                 "controller reports is when it reports it (stb gantry identify)")
+    report_spread_s: float = Field(0.0225, ge=0, le=1, description="how much that age varies "
+                                   "(standard deviation): a moving crane's position at a "
+                                   "moment is that uncertain times its speed "
+                                   "(stb gantry identify)")
     max_horizon_s: float = Field(1.0, gt=0, le=3, description="never extrapolate further")
     height_map: Path = Field(DEFAULT_HEIGHT_MAP, description="laser scan (.npz)")
     marker_height_mm: float = Field(80.0, ge=0, description="marker above the ground")
@@ -170,8 +198,9 @@ class GantrySettings(ServiceSettings):
 
     @field_validator("after_report_s")
     @classmethod
-    def _after_report_within_a_period(cls, after_s: float, info: ValidationInfo) -> float:
+    def _after_report_within_a_period(cls, after_s: float | None, info: ValidationInfo
+                                      ) -> float | None:
         control_hz = info.data.get("control_hz")
-        if control_hz is not None and after_s >= 1 / control_hz:
+        if after_s is not None and control_hz is not None and after_s >= 1 / control_hz:
             raise ValueError(f"must be shorter than a control period ({1 / control_hz:g} s)")
         return after_s
