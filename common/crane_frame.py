@@ -16,6 +16,7 @@ direction, not a rotation: a camera on the carriage is not mirrored by it. One f
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -40,12 +41,12 @@ class CraneFrame(BaseModel):
         """Only the frame (of a settings model that adds more fields to it)."""
         return CraneFrame(**{name: getattr(self, name) for name in CraneFrame.model_fields})
 
-    @property
+    @functools.cached_property
     def rotation(self) -> np.ndarray:
         a = math.radians(self.yaw_deg)
         return np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
 
-    @property
+    @functools.cached_property
     def linear(self) -> np.ndarray:
         """R · F: a crane-frame vector (a velocity, an offset on the carriage) in the world."""
         return self.rotation @ np.diag([-1.0 if self.flip_x else 1.0,

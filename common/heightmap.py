@@ -39,6 +39,8 @@ class HeightMap:
     def height_at(self, x_mm: np.ndarray | float, y_mm: np.ndarray | float) -> np.ndarray:
         """Surface height (mm) by bilinear interpolation; outside the grid: the nearest edge."""
         rows, cols = self.heights_mm.shape
+        if isinstance(x_mm, float | int) and isinstance(y_mm, float | int):
+            return np.asarray(self._height_at_point(float(x_mm), float(y_mm), rows, cols))
         fx = np.clip((np.asarray(x_mm, float) - self.origin_x_mm) / self.resolution_mm,
                      0, cols - 1.000001)
         fy = np.clip((np.asarray(y_mm, float) - self.origin_y_mm) / self.resolution_mm,
@@ -48,6 +50,16 @@ class HeightMap:
         h = self.heights_mm
         return ((h[r0, c0] * (1 - dx) + h[r0, c0 + 1] * dx) * (1 - dy)
                 + (h[r0 + 1, c0] * (1 - dx) + h[r0 + 1, c0 + 1] * dx) * dy)
+
+    def _height_at_point(self, x: float, y: float, rows: int, cols: int) -> float:
+        """``height_at`` of one point in plain floats (the gantry's eq. 5–8, per frame)."""
+        fx = min(max((x - self.origin_x_mm) / self.resolution_mm, 0.0), cols - 1.000001)
+        fy = min(max((y - self.origin_y_mm) / self.resolution_mm, 0.0), rows - 1.000001)
+        c0, r0 = int(fx), int(fy)
+        dx, dy = fx - c0, fy - r0
+        h = self.heights_mm
+        return float((h[r0, c0] * (1 - dx) + h[r0, c0 + 1] * dx) * (1 - dy)
+                     + (h[r0 + 1, c0] * (1 - dx) + h[r0 + 1, c0 + 1] * dx) * dy)
 
     def slope_deg(self) -> np.ndarray:
         """Steepest slope at every grid point, degrees."""

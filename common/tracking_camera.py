@@ -77,6 +77,10 @@ class TrackingCameraModel(BaseModel):
     def chip_px(self, depth_mm: np.ndarray | float) -> np.ndarray:
         """b(z) / pixel: the lens-to-chip distance in pixels when focused at depth z (eq. 5,
         1/b = 1/f − 1/z); NaN at or inside the focal length."""
+        if isinstance(depth_mm, float | int):
+            if depth_mm <= self.focal_mm:
+                return np.asarray(np.nan)
+            return np.asarray(1.0 / (1.0 / self.focal_mm - 1.0 / depth_mm) / self.pixel_mm)
         depth = np.asarray(depth_mm, dtype=float)
         with np.errstate(divide="ignore", invalid="ignore"):
             b = 1.0 / (1.0 / self.focal_mm - 1.0 / depth)

@@ -26,7 +26,7 @@ class GaitMeter:
     every_s: float = 1.0
     low_hz: float = 0.4
     high_hz: float = 3.0
-    step_hz: float = 0.02
+    step_hz: float = 0.05
     min_amplitude_mm: float = 2.0
     prominence: float = 8.0
     share: float = 0.5
@@ -71,8 +71,14 @@ class GaitMeter:
         power = (amplitude ** 2).sum(axis=1)
         best = int(np.argmax(power))
         strongest = float(np.sqrt(power[best]))
+        freq = float(freqs[best])
+        if 0 < best < len(freqs) - 1:  # the peak between the grid's steps (a parabola)
+            before, at, after = power[best - 1: best + 2]
+            bend = before - 2 * at + after
+            if bend < 0:  # to 0.01 Hz: the filter keeps its matrices per gait
+                freq = round(freq + 0.5 * (before - after) / bend * self.step_hz, 2)
         explained = 0.5 * power[best] / max(float((residual ** 2).sum(axis=1).mean()), 1e-9)
         if strongest < self.min_amplitude_mm or power[best] < self.prominence * np.median(power) \
                 or best in (0, len(freqs) - 1) or explained < self.share:
             return 0.0, strongest
-        return 2 * np.pi * float(freqs[best]), strongest
+        return 2 * np.pi * freq, strongest

@@ -339,23 +339,26 @@ class Lab:
         cam, exposure = self.tracking, self.settings.tracking_camera.exposure_s
         frame = self.crane_frame
         crane, crane_before = self.crane_world_at(t), self.crane_world_at(t - exposure)
-        pixels, scale = cam.project(self.robot(t), crane, frame)
+        targets, glints = len(self.targets), self._glint_points
+        pixels, scales = cam.project(np.vstack([self.robot(t), self.targets, glints]), crane,
+                                     frame)
         now, before = pixels[0], cam.project(self.robot(t - exposure), crane_before, frame)[0][0]
-        blobs = [Blob(now[0], now[1], MARKER_RADIUS_MM * scale[0], MARKER_RADIUS_MM * scale[0],
+        blobs = [Blob(now[0], now[1], MARKER_RADIUS_MM * scales[0], MARKER_RADIUS_MM * scales[0],
                       smear_u=now[0] - before[0], smear_v=now[1] - before[1])]
-        if len(self.targets):
-            pixels, scales = cam.project(self.targets, crane, frame)
-            blobs += [Blob(u, v, MARKER_RADIUS_MM * k, MARKER_RADIUS_MM * k)
-                      for (u, v), k in zip(pixels, scales, strict=True)
-                      if -20 < u < cam.width_px + 20 and -20 < v < cam.height_px + 20]
-        if self.ground_glints:
-            spots = np.array([[g.x_mm, g.y_mm, g.z_mm] for g in self.ground_glints])
-            pixels, scales = cam.project(spots, crane, frame)
-            for g, (gu, gv), k in zip(self.ground_glints, pixels, scales, strict=True):
-                if -50 < gu < cam.width_px + 50 and -50 < gv < cam.height_px + 50:
-                    blobs.append(Blob(gu, gv, max(g.long_mm * k, 1.5), max(g.short_mm * k, 0.6),
-                                      g.angle_rad, 230.0))
+        blobs += [Blob(u, v, MARKER_RADIUS_MM * k, MARKER_RADIUS_MM * k)
+                  for (u, v), k in zip(pixels[1:1 + targets], scales[1:1 + targets], strict=True)
+                  if -20 < u < cam.width_px + 20 and -20 < v < cam.height_px + 20]
+        for g, (gu, gv), k in zip(self.ground_glints, pixels[1 + targets:],
+                                  scales[1 + targets:], strict=True):
+            if -50 < gu < cam.width_px + 50 and -50 < gv < cam.height_px + 50:
+                blobs.append(Blob(gu, gv, max(g.long_mm * k, 1.5), max(g.short_mm * k, 0.6),
+                                  g.angle_rad, 230.0))
         return draw(blobs, cam.width_px, cam.height_px, rng, noise=self.noise)
+
+    @functools.cached_property
+    def _glint_points(self) -> np.ndarray:
+        """The ground glints' points (N, 3)."""
+        return np.array([[g.x_mm, g.y_mm, g.z_mm] for g in self.ground_glints]).reshape(-1, 3)
 
 
 def _on_ground(crater: CraterMap, rng: np.random.Generator, count: int, r_min: float,

@@ -7,6 +7,7 @@ there and its intensity centroid is (u, v).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,19 +48,36 @@ class NoiseBank:
     """Sensor noise for many frames from a few fields drawn once and cycled: a frame's worth
     of normal deviates costs milliseconds, and the detector cannot tell the difference. The
     fields (10 MB for the tracking camera) are drawn at the first frame: the sim's device
-    processes build the same lab and never draw a frame."""
+    processes build the same lab and never draw a frame. On a uniform background each field
+    is also kept as a finished 8-bit picture, so that a frame costs a copy and its blobs'
+    patches."""
 
     def __init__(self, sigma: float, width: int, height: int, rng: np.random.Generator,
                  fields: int = 8) -> None:
         self._draw = lambda: rng.normal(0.0, sigma, (fields, height, width)).astype(np.float32)
         self._fields: np.ndarray | None = None
+        self._baked: dict[tuple[int, float], np.ndarray] = {}
         self._next = 0
 
-    def add_to(self, image: np.ndarray) -> None:
+    def take(self) -> np.ndarray:
+        """The next field (height × width, float32)."""
         if self._fields is None:
             self._fields = self._draw()
-        image += self._fields[self._next]
+        index = self._next
         self._next = (self._next + 1) % len(self._fields)
+        return self._fields[index]
+
+    def add_to(self, image: np.ndarray) -> None:
+        image += self.take()
+
+    def on(self, background: float) -> tuple[np.ndarray, np.ndarray]:
+        """The next field, and a copy of it on ``background`` as the 8-bit picture."""
+        index = self._next
+        field = self.take()
+        baked = self._baked.get((index, background))
+        if baked is None:
+            baked = self._baked[(index, background)] = _to_gray(field + np.float32(background))
+        return field, baked.copy()
 
 
 def draw(blobs: list[Blob], width: int, height: int, rng: np.random.Generator, *,
@@ -68,6 +86,8 @@ def draw(blobs: list[Blob], width: int, height: int, rng: np.random.Generator, *
     """An 8-bit gray image of ``blobs`` on a background (a gray level, or a picture: float32,
     height × width), with noise (``noise`` if given, else ``noise_sigma`` drawn from ``rng``),
     edges anti-aliased, moving blobs smeared."""
+    if noise is not None and not isinstance(background, np.ndarray):
+        return _on_uniform(blobs, width, height, float(background), noise)
     if isinstance(background, np.ndarray):
         image = background.astype(np.float32, copy=True)
     else:
@@ -78,39 +98,81 @@ def draw(blobs: list[Blob], width: int, height: int, rng: np.random.Generator, *
         noise.add_to(image)
     elif noise_sigma > 0:
         image += rng.normal(0.0, noise_sigma, size=image.shape).astype(np.float32)
+    return _to_gray(image)
+
+
+def _to_gray(image: np.ndarray) -> np.ndarray:
     np.rint(image, out=image)
     return np.clip(image, 0, 255, out=image).astype(np.uint8)
 
 
-def _draw_blob(image: np.ndarray, blob: Blob) -> None:
+def _on_uniform(blobs: list[Blob], width: int, height: int, background: float,
+                noise: NoiseBank) -> np.ndarray:
+    """``draw`` on a uniform background: the noise field's finished picture, and only the
+    blobs' patches drawn again — each with every blob that reaches into it, in order, so that
+    overlapping blobs come out as on a whole canvas."""
+    field, image = noise.on(background)
+    boxes = [_box(blob, width, height) for blob in blobs]
+    for box in boxes:
+        if box is None:
+            continue
+        r0, r1, c0, c1 = box
+        canvas = np.full((r1 - r0, c1 - c0), background, dtype=np.float32)
+        for blob, other in zip(blobs, boxes, strict=True):
+            if other is not None and other[0] < r1 and r0 < other[1] and other[2] < c1 \
+                    and c0 < other[3]:
+                _draw_blob(canvas, blob, origin=(r0, c0))
+        canvas += field[r0:r1, c0:c1]
+        image[r0:r1, c0:c1] = _to_gray(canvas)
+    return image
+
+
+def _box(blob: Blob, width: int, height: int) -> tuple[int, int, int, int] | None:
+    """The pixels (rows r0:r1, columns c0:c1) a blob may touch over its exposure, or None."""
     reach = max(blob.a_px, blob.b_px) + 2
     u_lo, u_hi = min(blob.u, blob.u - blob.smear_u), max(blob.u, blob.u - blob.smear_u)
     v_lo, v_hi = min(blob.v, blob.v - blob.smear_v), max(blob.v, blob.v - blob.smear_v)
-    c0, c1 = int(np.floor(u_lo - reach)), int(np.ceil(u_hi + reach)) + 1
-    r0, r1 = int(np.floor(v_lo - reach)), int(np.ceil(v_hi + reach)) + 1
+    if not all(map(math.isfinite, (u_lo, u_hi, v_lo, v_hi, reach))):
+        return None
+    c0, c1 = max(math.floor(u_lo - reach), 0), min(math.ceil(u_hi + reach) + 1, width)
+    r0, r1 = max(math.floor(v_lo - reach), 0), min(math.ceil(v_hi + reach) + 1, height)
+    return None if c0 >= c1 or r0 >= r1 else (r0, r1, c0, c1)
+
+
+def _draw_blob(image: np.ndarray, blob: Blob, origin: tuple[int, int] = (0, 0)) -> None:
+    """``blob`` onto ``image``, whose pixel [0, 0] is the picture's ``origin`` (row, column)."""
     height, width = image.shape
-    c0, c1, r0, r1 = max(c0, 0), min(c1, width), max(r0, 0), min(r1, height)
+    box = _box(blob, origin[1] + width, origin[0] + height)
+    if box is None:
+        return
+    r0, r1 = max(box[0], origin[0]), box[1]
+    c0, c1 = max(box[2], origin[1]), box[3]
     if c0 >= c1 or r0 >= r1:
         return
-    cols, rows = np.meshgrid(np.arange(c0, c1, dtype=float), np.arange(r0, r1, dtype=float))
-    samples = max(1, int(np.ceil(np.hypot(blob.smear_u, blob.smear_v) * 2)))
-    coverage = np.zeros_like(cols)
-    for k in range(samples):  # the exposure, as the mean of where the blob was
-        back = (samples - 1 - k) / max(samples - 1, 1) if samples > 1 else 0.0
+    cols = np.arange(c0, c1, dtype=float)[None, :]
+    rows = np.arange(r0, r1, dtype=float)[:, None]
+    samples = max(1, math.ceil(math.hypot(blob.smear_u, blob.smear_v) * 2))
+    coverage = _coverage(cols - blob.u, rows - blob.v, blob)
+    for k in range(samples - 1):  # the exposure, as the mean of where the blob was
+        back = (samples - 1 - k) / (samples - 1)
         coverage += _coverage(cols - (blob.u - back * blob.smear_u),
                               rows - (blob.v - back * blob.smear_v), blob)
-    coverage /= samples
-    patch = image[r0:r1, c0:c1]
+    if samples > 1:
+        coverage /= samples
+    patch = image[r0 - origin[0]:r1 - origin[0], c0 - origin[1]:c1 - origin[1]]
     np.maximum(patch, patch + coverage * (blob.peak - patch), out=patch)
 
 
 def _coverage(du: np.ndarray, dv: np.ndarray, blob: Blob) -> np.ndarray:
     """How much of each pixel the blob covers, centred at offsets (du, dv): distance to the
     ellipse's edge in pixels (exact for a circle), a 1 px wide soft edge."""
-    cos, sin = np.cos(blob.angle_rad), np.sin(blob.angle_rad)
-    along, across = du * cos + dv * sin, -du * sin + dv * cos
     scale = min(blob.a_px, blob.b_px)
-    rho = np.sqrt((along / blob.a_px) ** 2 + (across / blob.b_px) ** 2)
+    if blob.a_px == blob.b_px:  # a disc: no need to turn it
+        rho = np.sqrt(du * du + dv * dv) / blob.a_px
+    else:
+        cos, sin = math.cos(blob.angle_rad), math.sin(blob.angle_rad)
+        along, across = du * cos + dv * sin, -du * sin + dv * cos
+        rho = np.sqrt((along / blob.a_px) ** 2 + (across / blob.b_px) ** 2)
     return np.clip((1.0 - rho) * scale + 0.5, 0.0, 1.0)
 
 
