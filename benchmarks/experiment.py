@@ -24,7 +24,7 @@ import numpy as np
 import services.gantry.control as control
 from services.args import Parser
 from services.experiment import gantry as experiment
-from services.gantry.predict import ALGORITHMS
+from common.names import ALGORITHMS
 from services.gantry.settings import GantrySettings
 from services.sim.lab import Lab
 from services.sim.robots import MARKER_HEIGHT_MM

@@ -41,9 +41,12 @@ PAPER_ALGORITHMS = frozenset({"basic", "pf-position", "pf-position-gauss", "pf-v
 """They keep eq. 8 as the paper computes it: the newest picture's offset added to the crane's
 latest report, one position per control period. The others get every picture since the last
 step, each with the crane's position when it was taken (``crane_track.py``)."""
-MAX_EXTRAPOLATE_S = 0.1
-"""A picture taken longer than this after the crane's newest report is not used: the crane's
-position then is a guess (its velocity carried on), and at 2 m/s² off by up to 10 mm."""
+MAX_EXTRAPOLATE_S = 0.05
+"""A picture taken longer than this after the newest position of the crane (report or marker)
+waits for the next step, when a newer one covers it: carried on from the last, the crane's
+position is a guess — starting at 2 m/s² after the report, off by up to 2.6 mm here."""
+PENDING_S = 0.5
+"""A picture still waiting after this long is dropped (older than the bus lets one be)."""
 
 
 @dataclass(frozen=True)
@@ -105,6 +108,8 @@ class Controller:
             s.max_speed_mm_s, s.max_accel_mm_s2, s.stale_after_s)
         self.track = CraneTrack()
         self.marker_track = MarkerTrack()
+        self._pending: list[Frame] = []  # pictures the crane's known positions do not cover yet
+        self._fed_s = -float("inf")  # the newest picture looked at
         self.paired = self.predictor.name not in PAPER_ALGORITHMS
         self.estimate: Estimate | None = None
         self.estimate_s: float | None = None
@@ -136,10 +141,11 @@ class Controller:
         self._fix = fix if fix is not None and abs(now_s - fix.t_s) <= s.mocap_max_age_s \
             else None
         seen: dict[str, Any] = {}
-        if frame is not None:
-            seen = (self._measure_paired([frame, *older], crane_xy, self._aim(now_s, timing))
-                    if self.paired else
-                    self._measure([frame, *older], crane_xy, self._horizon(timing)))
+        if self.paired:
+            fresh = [] if frame is None else [frame, *older]
+            seen = self._measure_paired(now_s, fresh, crane_xy, self._aim(now_s, timing))
+        elif frame is not None:
+            seen = self._measure([frame, *older], crane_xy, self._horizon(timing))
         if seen:
             failing = self.tracking_check.failing(seen["frame_s"])
             seen["disagreement"] = "" if failing is None else failing.text(seen["frame_s"])
@@ -181,16 +187,21 @@ class Controller:
         taken_in = period if timing is None else timing.taken_in_s
         return now_s + min(taken_in + s.reaction_s + 0.5 * period, s.max_horizon_s)
 
-    def _measure_paired(self, frames: Sequence[Frame], crane_xy: np.ndarray, aim_s: float
-                        ) -> dict[str, Any]:
+    def _measure_paired(self, now_s: float, frames: Sequence[Frame], crane_xy: np.ndarray,
+                        aim_s: float) -> dict[str, Any]:
         """Every picture since the last step, oldest first, each located from where the crane
-        was when it was taken; of pictures taken at the same moment (one sent again, changed)
-        the one the motion capture agrees with. Each position found feeds the predictor."""
+        was when it was taken (one taken after the crane's newest known position waits for
+        the next step); of pictures taken at the same moment (one sent again, changed) the one
+        the motion capture agrees with. Each position found feeds the predictor."""
         looked: list[_Looked] = []
         noise: dict[float, float] = {}
-        for captured, image in sorted(frames, key=lambda f: f[0]):
+        waiting, self._pending = self._pending, []
+        for captured, image in sorted([*waiting, *frames], key=lambda f: f[0]):
+            if captured <= self._fed_s or captured < now_s - PENDING_S:
+                continue  # came too late: the predictor is past it
             paired, spread_s = self._crane_at(captured)
             if paired is not None and paired.extrapolated_s > MAX_EXTRAPOLATE_S:
+                self._pending.append((captured, image))
                 continue
             crane = crane_xy if paired is None else paired.xy_mm
             speed = 0.0 if paired is None else float(np.hypot(*paired.v_mm_s))
@@ -212,6 +223,7 @@ class Controller:
             assert c.xyz is not None
             self.estimate = self.predictor.update(c.captured, c.xyz[:2], aim_s - c.captured,
                                                   noise[c.captured])
+        self._fed_s = looked[-1].captured
         if not used:
             self.estimate = self.predictor.update(looked[-1].captured, None, None)
         newest = used[-1] if used else looked[-1]

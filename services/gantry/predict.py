@@ -1,7 +1,7 @@
 """Where the crane shall go next (paper §3.2; pure, seeded).
 
-A predictor is fed once per control period (4 Hz) with the robot's measured (x, y) — or None
-when the marker is lost — and returns the desired crane position, or None when it has nothing
+A predictor is fed with the robot's measured (x, y) — or None when the marker is lost — and
+returns the desired crane position, or None when it has nothing
 trustworthy to say (the safety layer then holds the crane).
 
 * ``basic`` — eq. 9–10: velocity from the last two measurements, one period ahead.
@@ -9,23 +9,21 @@ trustworthy to say (the safety layer then holds the crane).
   (eq. 12) or a Gaussian perceptual model and systematic resampling; the desired position is
   the mean of the believed particle positions.
 * ``pf-velocity`` — the same filter's weighted mean velocity in eq. 10.
-* ``default`` — ours: two constant-velocity Kalman filters (calm and agile) mixed by an
-  IMM, predicting over the crane's reaction time and its cycle (bounded): it neither chases
-  a walker's sway nor lags in a locomotive's turns.
+* ``default`` — ours (``kalman.py``): every picture, each paired with the crane's position
+  when it was taken, into an IMM of calm to agile motion with the walker's gait.
+
+The paper's algorithms are fed as the paper feeds them: one position per control period, the
+newest picture's offset added to the crane's latest report (eq. 8).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal, Protocol
+from typing import Literal, Protocol
 
 import numpy as np
 
 from common.names import AlgorithmName
-
-if TYPE_CHECKING:  # filterpy (with scipy.stats) takes 0.8 s to import: only the IMM needs it
-    from filterpy.kalman import IMMEstimator, KalmanFilter
-
 
 
 @dataclass(frozen=True)
@@ -146,100 +144,6 @@ the filter again (the linear model's weights are all zero then). Without it the 
 cloud that has lost the robot are still normalised, and the cloud flies on with its own
 velocities: on the locomotive with σ_v = 13.8 mm/s it left the track in a turn and took the
 crane 3.2 m off."""
-
-
-def prediction_horizon(reaction_s: float, period_s: float) -> float:
-    """How far ahead ``default`` aims: the crane's reaction time, up to one control period
-    until its controller samples the setpoint, and half a period for the setpoints' staircase
-    (0.875 s for the paper's crane: 0.5 s reaction, 4 Hz)."""
-    return reaction_s + 1.5 * period_s
-
-
-PAPER_HORIZON_S = prediction_horizon(0.5, 0.25)  # the paper's crane: 0.5 s reaction, 4 Hz
-
-
-@dataclass(frozen=True)
-class KalmanOptions:
-    """``default``'s filter: its measurement noise, its two models' acceleration noise and how
-    readily the mix switches between them (``[gantry.default_filter]``). The values: the best
-    least margin on both of the sim's robots in a sweep on seeds 11–13 (docs/experiments.md
-    §2), the seeds the published tables do not use."""
-
-    measurement_noise_mm: float = 15.0
-    calm_accel_mm_s2: float = 20.0
-    agile_accel_mm_s2: float = 150.0
-    stay: float = 0.97  # chance a model stays in charge from one period to the next
-
-
-_KALMAN = KalmanOptions()
-
-
-@dataclass
-class KalmanPredictor:
-    """Two constant-velocity Kalman filters mixed by an IMM (filterpy): a calm one (small
-    acceleration noise: it does not chase a walking robot's sway) and an agile one (a
-    locomotive's turns); the mix follows whichever explains the measurements. The desired
-    position is the mixed position plus velocity · horizon (``prediction_horizon``, bounded).
-    The measurement noise is set above the detector's few millimetres: the measured position
-    also carries the crane's, which is up to a cycle old and jumps with the crane's speed."""
-
-    name: AlgorithmName = "default"
-    horizon_s: float = PAPER_HORIZON_S
-    max_horizon_s: float = 1.0
-    measurement_noise_mm: float = _KALMAN.measurement_noise_mm
-    calm_accel_mm_s2: float = _KALMAN.calm_accel_mm_s2
-    agile_accel_mm_s2: float = _KALMAN.agile_accel_mm_s2
-    stay: float = _KALMAN.stay
-    max_gap_s: float = 1.0
-    """A marker lost for up to this long is picked up again with the filters' state (the
-    crane holds meanwhile: the safety layer sees no estimate); after longer, start afresh."""
-    _imm: IMMEstimator | None = None
-    _t: float = 0.0
-
-    def __post_init__(self) -> None:
-        # Loaded now, when the gantry starts, not at the first update: that one may come while
-        # the crane is armed, and 0.8 s of importing starves the heartbeat (watchdog trip).
-        import filterpy.kalman  # noqa: F401
-        import scipy.linalg  # noqa: F401
-
-    def update(self, t_s: float, measured: np.ndarray | None, horizon_s: float | None = None,
-               noise_mm: float | None = None) -> Estimate | None:
-        if measured is None:
-            return None
-        from filterpy.common import Q_discrete_white_noise
-        from filterpy.kalman import IMMEstimator
-        from scipy.linalg import block_diag
-
-        z = np.asarray(measured, dtype=float)
-        if self._imm is None or t_s <= self._t or t_s - self._t > self.max_gap_s:
-            filters = [self._new_filter(z, q) for q in (self.calm_accel_mm_s2,
-                                                        self.agile_accel_mm_s2)]
-            switch = np.array([[self.stay, 1 - self.stay], [1 - self.stay, self.stay]])
-            self._imm = IMMEstimator(filters, np.array([0.5, 0.5]), switch)
-            self._t = t_s
-            return Estimate(z, np.zeros(2), z)
-        dt = t_s - self._t
-        self._t = t_s
-        for kf, accel in zip(self._imm.filters, (self.calm_accel_mm_s2,
-                                                 self.agile_accel_mm_s2), strict=True):
-            kf.F = np.array([[1, 0, dt, 0], [0, 1, 0, dt], [0, 0, 1, 0], [0, 0, 0, 1]], float)
-            q = Q_discrete_white_noise(dim=2, dt=dt, var=accel ** 2)
-            kf.Q = block_diag(q, q)[[0, 2, 1, 3]][:, [0, 2, 1, 3]]  # order (x, y, vx, vy)
-        self._imm.predict()
-        self._imm.update(z)
-        position, velocity = self._imm.x[:2].copy(), self._imm.x[2:].copy()
-        horizon = min(self.horizon_s if horizon_s is None else horizon_s, self.max_horizon_s)
-        return Estimate(position, velocity, position + velocity * horizon)
-
-    def _new_filter(self, z: np.ndarray, accel: float) -> KalmanFilter:
-        from filterpy.kalman import KalmanFilter
-
-        kf = KalmanFilter(dim_x=4, dim_z=2)
-        kf.x = np.array([z[0], z[1], 0.0, 0.0])
-        kf.H = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
-        kf.R = np.eye(2) * self.measurement_noise_mm ** 2
-        kf.P = np.diag([self.measurement_noise_mm ** 2] * 2 + [300.0 ** 2] * 2)
-        return kf
 
 
 def systematic_resample(weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:

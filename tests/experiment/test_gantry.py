@@ -133,12 +133,13 @@ def test_the_lab_files_default_filter_is_the_one_run(tmp_path: Path, crater_file
     as_shipped = json.loads(capsys.readouterr().out)["results"][0]
     lab = tmp_path / "lab.toml"
     lab.write_text("[gantry.default_filter]\nmeasurement_noise_mm = 800.0\n"
-                   "calm_accel_mm_s2 = 5.0\nagile_accel_mm_s2 = 10.0\n")
+                   "accels_mm_s2 = [5.0, 10.0]\nbursts_s = [0.0, 0.0]\n")
     assert main([*args, "--lab", str(lab)]) == 0
     sluggish = json.loads(capsys.readouterr().out)["results"][0]
     assert sluggish["rms_mm"] > 1.5 * as_shipped["rms_mm"], (as_shipped, sluggish)
     for text, field in (("stay = 1.0", "gantry.default_filter.stay"),
-                        ("calm_accel_mm_s2 = 0", "gantry.default_filter.calm_accel_mm_s2"),
+                        ("accels_mm_s2 = [0, 10]", "gantry.default_filter.accels_mm_s2"),
+                        ("bursts_s = [0.2]", "gantry.default_filter"),
                         ("noise_mm = 3", "gantry.default_filter.noise_mm")):
         lab.write_text(f"[gantry.default_filter]\n{text}\n")
         assert main([*args, "--lab", str(lab)]) == 2

@@ -17,7 +17,9 @@ from common.heightmap import HeightMap
 from common.tracking_camera import TrackingCameraModel
 from services.gantry.frames import FrameInbox
 from services.gantry.locate import locate
-from services.gantry.predict import ALGORITHMS, ParticleOptions, make_predictor
+from common.names import ALGORITHMS
+from services.gantry.algorithms import make_predictor
+from services.gantry.predict import ParticleOptions
 from services.gantry.reading import CraneReading
 from services.gantry.safety import SetpointGuard, TargetCheck, Workspace
 from tests.gantry.camera import pixel_of
@@ -79,7 +81,8 @@ def test_predictors_lead_the_robot_on_simple_paths(algorithm: str, kind: str) ->
     errors = []
     ahead = 4 if algorithm == "default" else 1  # its 1 s horizon, or one period
     for i, (ti, xy) in enumerate(zip(t, truth, strict=True)):
-        estimate = predictor.update(ti, xy + rng.normal(0, 3.0, 2))
+        estimate = predictor.update(ti, xy + rng.normal(0, 3.0, 2),
+                                    0.25 * ahead if algorithm == "default" else None)
         assert estimate is not None and np.all(np.isfinite(estimate.desired))
         if i > 20 and i + ahead < len(t):  # where the robot will be then
             errors.append(np.linalg.norm(estimate.desired - truth[i + ahead]))
@@ -242,14 +245,18 @@ def test_the_target_check_stops_on_targets_the_gantry_never_wrote() -> None:
     assert TargetCheck(tolerance_mm=0.0).observe(_reading(1, (0.0, 0.0))) is None
 
 
-def test_the_imm_loads_its_libraries_when_made_not_at_its_first_update() -> None:
-    """Importing filterpy and scipy takes 0.8 s with the GIL held: at the first update, while
-    the crane is armed, it starved the heartbeat and tripped the crane's watchdog."""
+def test_the_default_needs_no_library_to_load_at_its_first_update() -> None:
+    """An import at the first update, while the crane is armed, holds the GIL (filterpy and
+    scipy took 0.8 s: the heartbeat starved and the crane's watchdog tripped): the default's
+    filter is numpy only."""
     _in_a_fresh_python("import sys\n"
-                       "from services.gantry.predict import make_predictor\n"
-                       "assert 'filterpy.kalman' not in sys.modules, 'the CLI stays fast'\n"
-                       "make_predictor('default')\n"
-                       "assert {'filterpy.kalman', 'scipy.linalg'} <= set(sys.modules)\n")
+                       "import numpy as np\n"
+                       "from services.gantry.algorithms import make_predictor\n"
+                       "before = set(sys.modules)\n"
+                       "p = make_predictor('default')\n"
+                       "for i in range(40): p.update(i * 0.04, np.array([i * 1.0, 0.0]), 0.5)\n"
+                       "assert not {m for m in set(sys.modules) - before if '.' not in m}, "
+                       "set(sys.modules) - before\n")
 
 
 def test_the_cores_load_no_io_library() -> None:
