@@ -22,9 +22,9 @@ from typing import Any
 import numpy as np
 
 import services.gantry.control as control
+from common.names import ALGORITHMS
 from services.args import Parser
 from services.experiment import gantry as experiment
-from common.names import ALGORITHMS
 from services.gantry.settings import GantrySettings
 from services.sim.lab import Lab
 from services.sim.robots import MARKER_HEIGHT_MM

@@ -4,10 +4,13 @@ the bus (after their exposure and a delay), no sockets and no waiting."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from common.crane_frame import CRANE_COUNTS_IN_THE_WORLD, CraneFrame
 from common.crane_registers import RegisterMap
+from services.gantry.control import Fix
 from services.gantry.crane import RegisterCrane
 from services.gantry.frames import Frame
 from services.sim.crane_server import input_registers, write_holding
@@ -68,3 +71,25 @@ class SimFrames:
         rate = self.lab.settings.tracking_camera.rate_hz
         return [(n / rate, self.lab.tracking_frame(n / rate, self.rng))
                 for n in range(number, first - 1, -1)]
+
+
+class SimCraneMarker:
+    """The motion capture's marker on the crane's carriage as the gantry's loop asks for it:
+    the newest motion-capture frame by now (``[sim.mocap] rate_hz``), with its noise and its
+    dropouts (the frame's marker lost: the last one seen stays)."""
+
+    def __init__(self, lab: Lab, clock: SimClock, rng: np.random.Generator) -> None:
+        self.lab, self.clock, self.rng = lab, clock, rng
+        self._number = -1
+        self._fix: Fix | None = None
+
+    def __call__(self) -> Fix | None:
+        mocap = self.lab.settings.mocap
+        number = math.floor(self.clock() * mocap.rate_hz + 1e-9)
+        if number != self._number:
+            self._number = number
+            if self.rng.random() >= mocap.dropout:
+                t = number / mocap.rate_hz
+                xy = self.lab.crane_marker(t)[:2] + self.rng.normal(0.0, mocap.noise_mm, 2)
+                self._fix = Fix(t, xy)
+        return self._fix

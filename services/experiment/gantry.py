@@ -21,8 +21,8 @@ import numpy as np
 from common.heightmap import HeightMap
 from common.markers import warm_up
 from common.names import AlgorithmName
-from services.experiment.devices import ModelCrane, SimClock, SimFrames
-from services.gantry.control import Controller, Fix
+from services.experiment.devices import ModelCrane, SimClock, SimCraneMarker, SimFrames
+from services.gantry.control import Controller
 from services.gantry.loop import GantryLoop, Request
 from services.gantry.predict import Estimate
 from services.gantry.settings import GantrySettings
@@ -116,7 +116,8 @@ def run(lab: Lab, settings: GantrySettings, *, end_s: float | None = None,
     loop = GantryLoop(settings, ModelCrane(lab, clock, settings.crane, settings.crane.frame()),
                       SimFrames(lab, clock, np.random.default_rng((settings.seed, 2))),
                       controller, START_S,
-                      crane_marker=lambda: Fix(clock.now_s, lab.crane_marker(clock.now_s)[:2]))
+                      crane_marker=SimCraneMarker(lab, clock,
+                                                  np.random.default_rng((settings.seed, 3))))
     arm_asked = False
     end = lab.trajectory.duration_s if end_s is None else end_s
     name = settings.algorithm if oracle_ahead_s is None else f"oracle {oracle_ahead_s:.2f} s"

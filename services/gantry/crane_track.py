@@ -7,9 +7,10 @@ the recent reports with the times they were measured and asks for the crane at a
 capture time: between two reports the crane's path is the cubic through both positions with
 both velocities (Hermite); after the newest it is carried on with the newest velocity and the
 last two reports' acceleration, and how far it was carried is said
-(``Paired.extrapolated_s``), so that the caller can trust it less or not at all. Adding a stale picture's offset to the crane's current position instead
-made the gantry swing ±35–75 mm around a robot standing still (the estimate ran ahead by the
-crane's speed times the picture's age).
+(``Paired.extrapolated_s``), so that the caller can trust it less or not at all. Adding a
+stale picture's offset to the crane's current position instead made the gantry swing
+±35–75 mm around a robot standing still (the estimate ran ahead by the crane's speed times
+the picture's age).
 """
 
 from __future__ import annotations

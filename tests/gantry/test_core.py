@@ -14,11 +14,11 @@ from hypothesis import strategies as st
 from common.crane_frame import CraneFrame
 from common.crane_registers import FAULT_CLAMPED
 from common.heightmap import HeightMap
+from common.names import ALGORITHMS
 from common.tracking_camera import TrackingCameraModel
+from services.gantry.algorithms import make_predictor
 from services.gantry.frames import FrameInbox
 from services.gantry.locate import locate
-from common.names import ALGORITHMS
-from services.gantry.algorithms import make_predictor
 from services.gantry.predict import ParticleOptions
 from services.gantry.reading import CraneReading
 from services.gantry.safety import SetpointGuard, TargetCheck, Workspace
