@@ -47,6 +47,8 @@ waits for the next step, when a newer one covers it: carried on from the last, t
 position is a guess — starting at 2 m/s² after the report, off by up to 2.6 mm here."""
 PENDING_S = 0.5
 """A picture still waiting after this long is dropped (older than the bus lets one be)."""
+MARKER_LOST_S = 0.25
+"""The carriage's marker unseen this long before a picture: the reports pair it instead."""
 
 
 @dataclass(frozen=True)
@@ -200,7 +202,8 @@ class Controller:
             if captured <= self._fed_s or captured < now_s - PENDING_S:
                 continue  # came too late: the predictor is past it
             paired, spread_s = self._crane_at(captured)
-            if paired is not None and paired.extrapolated_s > MAX_EXTRAPOLATE_S:
+            if paired is not None and paired.extrapolated_s > MAX_EXTRAPOLATE_S \
+                    or self._marker_due(captured):
                 self._pending.append((captured, image))
                 continue
             crane = crane_xy if paired is None else paired.xy_mm
@@ -231,6 +234,13 @@ class Controller:
         return {"frame_s": newest.captured, "frame_shape": newest.image.shape,
                 "detection": newest.found, "measured_xyz": newest.xyz,
                 "rejected_mm": newest.rejected}
+
+    def _marker_due(self, t_s: float) -> bool:
+        """Whether the motion capture's marker on the carriage, seen lately, has not yet come
+        for ``t_s``: then the picture waits for it rather than take the roughly timed reports."""
+        newest = self.marker_track.newest_s
+        return newest is not None and newest < t_s - MAX_EXTRAPOLATE_S and \
+            t_s - newest < MARKER_LOST_S
 
     def _crane_at(self, t_s: float) -> tuple[Paired | None, float]:
         """Where the crane was at ``t_s``: from the motion capture's marker on its carriage

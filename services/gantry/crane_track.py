@@ -111,10 +111,15 @@ class MarkerTrack:
             self._t.popleft()
             self._xy.popleft()
 
+    @property
+    def newest_s(self) -> float | None:
+        """When the marker was seen last."""
+        return self._t[-1] if self._t else None
+
     def at(self, t_s: float, *, ahead_s: float) -> Paired | None:
         """The carriage at ``t_s`` between two samples at most ``max_gap_s`` apart, or after
         the newest by at most ``ahead_s`` (carried on with the last two samples' velocity);
-        None otherwise (the marker not seen then: ask the reports)."""
+        None otherwise (the marker not seen then, or not yet)."""
         if len(self._t) < 2 or t_s < self._t[0] or t_s > self._t[-1] + ahead_s:
             return None
         after = min(bisect_right(self._t, t_s), len(self._t) - 1)

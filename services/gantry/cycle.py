@@ -73,11 +73,11 @@ class CycleSync:
     def published_s(self, now_s: float, changed: bool, margin_s: float) -> float | None:
         """When the controller published the report read at ``now_s``: the cycle it changed
         in (``changed``), else the last cycle at least ``margin_s`` (a poll) before — a report
-        that stays the same is published again each cycle. None before the phase is known
-        (the crane has not moved yet)."""
+        that stays the same is published again each cycle. Before the phase is known (the
+        crane has not moved yet) a period before: a report is never older than that."""
         phase = self.report_phase_s
         if phase is None:
-            return self.last_report_s if changed else None
+            return self.last_report_s if changed else now_s - self.period_s
         if changed:
             assert self.last_report_s is not None
             return phase + round((self.last_report_s - phase) / self.period_s) * self.period_s

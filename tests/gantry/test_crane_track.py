@@ -83,7 +83,8 @@ def test_a_report_is_timed_by_the_controllers_cycle() -> None:
     """The cycle it changed in, or — unchanged, standing — the last cycle a poll before."""
     sync = CycleSync(0.25)
     t, xy = 0.013, (0.0, 0.0)
-    assert sync.published_s(t, sync.observe(t, xy), 0.025) is None, "phase not known yet"
+    assert sync.published_s(t, sync.observe(t, xy), 0.025) == pytest.approx(t - 0.25), \
+        "before the phase is known: at most a period ago"
     for cycle in range(1, 9):  # the controller publishes at 0.25 k + 0.1
         for poll in np.arange(0.0, 0.25, 0.025):
             t = cycle * 0.25 + poll + 0.013
