@@ -5,6 +5,8 @@ the bus (after their exposure and a delay), no sockets and no waiting."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
+from typing import overload
 
 import numpy as np
 
@@ -59,9 +61,10 @@ class SimFrames:
         recent = self.take_recent(1)
         return recent[0] if recent else None
 
-    def take_recent(self, keep: int = 8) -> list[Frame]:
+    def take_recent(self, keep: int = 8) -> Sequence[Frame]:
         """The frames that arrived since the last take, newest first (at most ``keep``, as
-        the bus's ``FrameInbox`` keeps), each rendered as it is taken."""
+        the bus's ``FrameInbox`` keeps), each rendered when it is first looked at (the
+        paper's algorithms look at the newest only, unless it does not show the robot)."""
         number, _ = self.lab.newest_capture(self.clock())
         first = max(self._taken + 1, number - keep + 1, 0)
         if number < first:
@@ -69,8 +72,34 @@ class SimFrames:
         self._taken = number
         self.lab.crane.advance_to(self.clock())
         rate = self.lab.settings.tracking_camera.rate_hz
-        return [(n / rate, self.lab.tracking_frame(n / rate, self.rng))
-                for n in range(number, first - 1, -1)]
+        return _Rendered([n / rate for n in range(number, first - 1, -1)],
+                         lambda t: self.lab.tracking_frame(t, self.rng))
+
+
+class _Rendered(Sequence[Frame]):
+    """Frames (capture time, picture) whose pictures are drawn when first asked for."""
+
+    def __init__(self, times: list[float], render: Callable[[float], np.ndarray],
+                 drawn: dict[float, np.ndarray] | None = None) -> None:
+        self.times, self.render = times, render
+        self._drawn = {} if drawn is None else drawn
+
+    def __len__(self) -> int:
+        return len(self.times)
+
+    @overload
+    def __getitem__(self, index: int) -> Frame: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> Sequence[Frame]: ...
+
+    def __getitem__(self, index: int | slice) -> Frame | Sequence[Frame]:
+        if isinstance(index, slice):
+            return _Rendered(self.times[index], self.render, self._drawn)
+        t = self.times[index]
+        if t not in self._drawn:
+            self._drawn[t] = self.render(t)
+        return t, self._drawn[t]
 
 
 class SimCraneMarker:

@@ -17,7 +17,8 @@ sees the marker again.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
+from itertools import chain
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -29,7 +30,7 @@ from services.gantry.algorithms import make_predictor
 from services.gantry.crane_track import CraneTrack, MarkerTrack, Paired
 from services.gantry.crosscheck import CrossCheck
 from services.gantry.locate import locate
-from services.gantry.predict import Estimate, Predictor
+from services.gantry.predict import Aiming, Estimate, Predictor
 from services.gantry.safety import SetpointGuard, Workspace
 from services.gantry.settings import GantrySettings
 
@@ -111,6 +112,7 @@ class Controller:
         self.track = CraneTrack()
         self.marker_track = MarkerTrack()
         self._pending: list[Frame] = []  # pictures the crane's known positions do not cover yet
+        self._observed: dict[str, Any] = {}  # the newest picture observed since the step
         self._fed_s = -float("inf")  # the newest picture looked at
         self.paired = self.predictor.name not in PAPER_ALGORITHMS
         self.estimate: Estimate | None = None
@@ -145,9 +147,13 @@ class Controller:
         seen: dict[str, Any] = {}
         if self.paired:
             fresh = [] if frame is None else [frame, *older]
-            seen = self._measure_paired(now_s, fresh, crane_xy, self._aim(now_s, timing))
+            aim_s = self.aim_s(now_s, timing)
+            seen = self._measure_paired(now_s, fresh, crane_xy, aim_s) or self._observed
+            self._observed = {}
+            if self.estimate is not None and isinstance(self.predictor, Aiming):
+                self.estimate = self.predictor.aim(aim_s)  # for this step, new pictures or not
         elif frame is not None:
-            seen = self._measure([frame, *older], crane_xy, self._horizon(timing))
+            seen = self._measure(chain([frame], older), crane_xy, self._horizon(timing))
         if seen:
             failing = self.tracking_check.failing(seen["frame_s"])
             seen["disagreement"] = "" if failing is None else failing.text(seen["frame_s"])
@@ -180,7 +186,17 @@ class Controller:
         return (timing.report_age_s + timing.taken_in_s + self.settings.reaction_s
                 + 0.5 * period)
 
-    def _aim(self, now_s: float, timing: Timing | None) -> float:
+    def observe(self, now_s: float, frames: Sequence[Frame], crane_xy: np.ndarray,
+                fix: Fix | None, aim_s: float) -> None:
+        """Pictures as they come, between steps (the paired algorithms): located, fed to the
+        predictor aiming at ``aim_s``; the next ``step`` reports the newest."""
+        self._fix = fix if fix is not None and abs(now_s - fix.t_s) <= \
+            self.settings.mocap_max_age_s else None
+        seen = self._measure_paired(now_s, frames, np.asarray(crane_xy, dtype=float), aim_s)
+        if seen:
+            self._observed = seen
+
+    def aim_s(self, now_s: float, timing: Timing | None) -> float:
         """When the crane will be where this step's setpoint sends it: the wait until the
         controller takes it, the crane's reaction, and half a period (the setpoint stands for
         one); before the controller's cycle is known, as if a period away."""
@@ -227,10 +243,9 @@ class Controller:
             self.estimate = self.predictor.update(c.captured, c.xyz[:2], aim_s - c.captured,
                                                   noise[c.captured])
         self._fed_s = looked[-1].captured
-        if not used:
-            self.estimate = self.predictor.update(looked[-1].captured, None, None)
         newest = used[-1] if used else looked[-1]
-        self.estimate_s = newest.captured if self.estimate is not None else None
+        if used:  # a picture without the robot is no news: the estimate ages until stale
+            self.estimate_s = newest.captured if self.estimate is not None else None
         return {"frame_s": newest.captured, "frame_shape": newest.image.shape,
                 "detection": newest.found, "measured_xyz": newest.xyz,
                 "rejected_mm": newest.rejected}
@@ -251,7 +266,7 @@ class Controller:
             return marked, 0.0
         return self.track.at(t_s), self.settings.report_spread_s
 
-    def _measure(self, frames: Sequence[Frame], crane_xy: np.ndarray, horizon_s: float | None
+    def _measure(self, frames: Iterable[Frame], crane_xy: np.ndarray, horizon_s: float | None
                  ) -> dict[str, Any]:
         """The newest of ``frames`` that shows the robot where the motion capture sees it
         (within ``fix_check_mm``); of frames captured at the same time — a frame sent again,

@@ -100,6 +100,11 @@ class CycleSync:
             return None
         return phase + math.ceil((now_s - phase) / self.period_s + 1e-9) * self.period_s
 
+    @property
+    def next_tick_s(self) -> float | None:
+        """When the next tick is due (None before the first)."""
+        return self._next_tick_s
+
     def due(self, now_s: float) -> bool:
         """Whether to tick now; if so, the next tick is scheduled (never sooner than half a
         period, never later than one and a half)."""

@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 import threading
 from collections import deque
+from collections.abc import Sequence
 from typing import Protocol
 
 import numpy as np
@@ -27,7 +28,7 @@ class FrameSource(Protocol):
     def take(self) -> Frame | None:
         """The newest frame not taken yet, or None."""
 
-    def take_recent(self) -> list[Frame]:
+    def take_recent(self) -> Sequence[Frame]:
         """The frames not taken yet, newest first (a source may keep only the newest)."""
 
 

@@ -189,3 +189,12 @@ class FollowPredictor:
         horizon = min(0.0 if horizon_s is None else horizon_s, self.max_horizon_s)
         x = f.state
         return Estimate(x[0] + x[2], x[1], f.ahead(horizon))
+
+    def aim(self, aim_s: float) -> Estimate | None:
+        """The estimate for the crane to be where the robot will be at ``aim_s``, from the
+        positions so far (None before the first)."""
+        f = self._filter
+        if f is None or f.x is None:
+            return None
+        x = f.state
+        return Estimate(x[0] + x[2], x[1], f.ahead(min(aim_s - f.t_s, self.max_horizon_s)))

@@ -20,6 +20,8 @@ from common.heightmap import HeightMap
 from common.tracking_camera import TrackingCameraModel
 
 ROUNDS = 4
+SETTLED_MM = 0.05
+"""Rounds stop once the position moves less than this (on flat ground after the second)."""
 
 
 def locate(u: float, v: float, crane_xy_mm: np.ndarray, camera: TrackingCameraModel,
@@ -29,8 +31,12 @@ def locate(u: float, v: float, crane_xy_mm: np.ndarray, camera: TrackingCameraMo
     lens = camera.lens_xy(crane_xy_mm, frame)
     xy = lens
     for _ in range(ROUNDS):
-        ground = float(heights.height_at(xy[0], xy[1]))
+        ground = float(heights.height_at(float(xy[0]), float(xy[1])))
         z = camera.height_mm - (ground + marker_height_mm)
-        xy = lens + camera.ground_offset(u, v, z, frame)  # eq. 7–8
-    ground = float(heights.height_at(xy[0], xy[1]))
+        moved = lens + camera.ground_offset(u, v, z, frame)  # eq. 7–8
+        settled = abs(moved[0] - xy[0]) + abs(moved[1] - xy[1]) < SETTLED_MM
+        xy = moved
+        if settled:
+            break
+    ground = float(heights.height_at(float(xy[0]), float(xy[1])))
     return np.array([xy[0], xy[1], ground + marker_height_mm])

@@ -14,7 +14,7 @@ import logging
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -31,6 +31,7 @@ from services.gantry.safety import TargetCheck
 from services.gantry.settings import GantrySettings
 
 if TYPE_CHECKING:  # the frames' threads and JPEG decoding stay out of the core
+    from common.capture import Frame
     from services.gantry.frames import FrameSource
 
 log = logging.getLogger(__name__)
@@ -144,6 +145,8 @@ class GantryLoop:
         changes = self._observe(now_s)
         if self.reading is not None:
             self._track(now_s, mono, self.reading)
+            if self.controller.paired:
+                self._observe_frames(now_s, mono, self.reading)
         due = self.sync.due(mono)
         if not due and not replies and not changes:
             return None
@@ -264,7 +267,7 @@ class GantryLoop:
         if not self.reachable:
             log.info("crane controller reachable again")
             self.reachable = True
-        frames = self.frames.take_recent()
+        frames: Sequence[Frame] = [] if self.controller.paired else self.frames.take_recent()
         step = self.controller.step(now_s, frames[0] if frames else None,
                                     np.array([reading.x_mm, reading.y_mm]), self.fix(),
                                     self._timing(mono_s), older=frames[1:])
@@ -275,6 +278,17 @@ class GantryLoop:
             except CraneError as err:
                 self._error = self._unreachable(err)
         return step
+
+    def _observe_frames(self, now_s: float, mono_s: float, reading: CraneReading) -> None:
+        """The pictures that came since the last poll, into the controller as they come (its
+        step then only decides), aiming at the crane's position after the next tick."""
+        frames = self.frames.take_recent()
+        if not frames:
+            return
+        tick = max(self.sync.next_tick_s or mono_s, mono_s)
+        aim_s = self.controller.aim_s(now_s + (tick - mono_s), self._timing(tick))
+        self.controller.observe(now_s, frames, np.array([reading.x_mm, reading.y_mm]),
+                                self.fix(), aim_s)
 
     def _timing(self, mono_s: float) -> Timing | None:
         """The controller takes setpoints when it reports (one cycle); its report is

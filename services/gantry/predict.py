@@ -19,7 +19,7 @@ newest picture's offset added to the crane's latest report (eq. 8).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal, Protocol
+from typing import Literal, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -46,6 +46,14 @@ class Predictor(Protocol):
         """The estimate after a frame taken at ``t_s``; ``horizon_s``: how far ahead of it the
         crane will act on this setpoint, ``noise_mm`` how far the position may be off (only
         ``default`` uses them)."""
+
+
+@runtime_checkable
+class Aiming(Protocol):
+    """A predictor that can say at any moment where the crane should be for a later one (the
+    step asks it afresh each period, new pictures or not)."""
+
+    def aim(self, aim_s: float) -> Estimate | None: ...
 
 
 @dataclass
