@@ -97,10 +97,13 @@ def set_off(camera: Series, written_s: float, until_s: float, top_speed_mm_s: fl
     return SetOff(float(-intercept / slope), float(2 * slope ** 2))
 
 
-def report_age(reported: Series, camera: Series, *, max_s: float = 1.0,
-               step_s: float = 0.002) -> float:
+def report_timing(reported: Series, camera: Series, speed: float, *, max_s: float = 1.0,
+                  step_s: float = 0.002) -> tuple[float, float]:
     """The shift τ that best lays ``reported`` (position at publication) onto the camera's
-    position τ earlier; both in the same units, over the camera's time span."""
+    position τ earlier (both in the same units, over the camera's time span): the reports'
+    age; and how much it varies from report to report: what is left of the reports' offset
+    from the camera at τ (its standard deviation), over the ramp's ``speed`` (the camera's own
+    noise included, so a little more than the controller's)."""
     t = reported.t_s
     best, best_cost = 0.0, np.inf
     for tau in np.arange(0.0, max_s, step_s):
@@ -111,7 +114,7 @@ def report_age(reported: Series, camera: Series, *, max_s: float = 1.0,
         cost = float(np.var(offset))  # the camera's zero is arbitrary: only the spread counts
         if cost < best_cost:
             best, best_cost = float(tau), cost
-    return best
+    return best, float(np.sqrt(best_cost)) / speed if np.isfinite(best_cost) else 0.0
 
 
 def ramp_lag(camera: Series, ramp_s: tuple[float, float], start_mm: float, speed_mm_s: float,

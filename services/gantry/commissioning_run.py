@@ -24,7 +24,7 @@ from services.gantry.commission import (
     Figure,
     Series,
     ramp_lag,
-    report_age,
+    report_timing,
     sampling_period,
     set_off,
 )
@@ -247,6 +247,7 @@ class Measurements:
     reaction_s: Figure
     following_s: Figure
     report_age_s: Figure
+    report_spread_s: Figure
     top_speed_mm_s: Figure
     accel_mm_s2: Figure
 
@@ -270,18 +271,20 @@ class Measurements:
         ramp = (recorder.reported(0).t_s >= plan.ramp_s[0]) & (
             recorder.reported(0).t_s <= plan.ramp_s[1] + 1.0)
         reported = recorder.reported(0)
-        age = report_age(Series(reported.t_s[ramp], reported.values[ramp]), camera)
+        age, spread = report_timing(Series(reported.t_s[ramp], reported.values[ramp]), camera,
+                                    RAMP_MM_S)
         sampling = sampling_period(taken)
         trails = ramp_lag(camera, plan.ramp_s, plan.ramp_from_mm, RAMP_MM_S)
         follows = [] if trails is None else [trails - sampling.median / 2]
         return cls(sampling, Figure.of(dead), Figure.of(reaction), Figure.of(follows),
-                   Figure.of([age]), top_figure, accel)
+                   Figure.of([age]), Figure.of([spread]), top_figure, accel)
 
     def table(self) -> str:
         rows = [("sampling period", self.sampling_s, "s"), ("dead time", self.dead_s, "s"),
                 ("reaction (write → motion)", self.reaction_s, "s"),
                 ("following (taken → follows)", self.following_s, "s"),
                 ("report age", self.report_age_s, "s"),
+                ("report age's spread", self.report_spread_s, "s"),
                 ("top speed", self.top_speed_mm_s, "mm/s"),
                 ("acceleration", self.accel_mm_s2, "mm/s²")]
         return "\n".join(f"{name:<27} {f.median:10.3f} {unit:<6} spread {f.spread:.3f} "
@@ -292,6 +295,7 @@ class Measurements:
                 f"reaction_s = {max(self.following_s.median, 0.0):.3f}  # setpoint taken → "
                 "crane follows\n"
                 f"report_age_s = {self.report_age_s.median:.3f}\n"
+                f"report_spread_s = {self.report_spread_s.median:.3f}\n"
                 f"max_speed_mm_s = {self.top_speed_mm_s.median:.0f}\n"
                 f"max_accel_mm_s2 = {self.accel_mm_s2.median:.0f}\n"
                 f"# total reaction (write → motion) {self.reaction_s.median:.3f} s\n")
