@@ -5,12 +5,15 @@ non-finite or missing input, or an estimate older than ``stale_after_s``, → ho
 freezes at the last one sent (where the crane is already going, so it stops there without
 turning back; the crane's position if nothing was sent yet); otherwise the desired position
 is clamped to the workspace (with a margin) and the setpoint's own motion is limited in speed
-and acceleration, so a jump in the estimate never becomes a jump of the crane. The crane
+and acceleration, so a jump in the estimate never becomes a jump of the crane, and it closes
+in on the desired position no faster than it can stop there (no overshoot of a robot that
+stopped, whatever the lab's acceleration). The crane
 controller's watchdog (heartbeat) covers a dead or cut-off gantry service.
 """
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -67,11 +70,12 @@ class SetpointGuard:
     _step_velocity: np.ndarray = field(default_factory=lambda: np.zeros(2))
     _last_t: float | None = None
     _hold_at: np.ndarray | None = None
+    _last_target: np.ndarray | None = None
 
     def reset(self) -> None:
         """Forget every earlier setpoint: after the crane stopped on its own (watchdog, link
         loss) the next setpoint starts from where it stands, never from where it was going."""
-        self._last, self._last_t, self._hold_at = None, None, None
+        self._last, self._last_t, self._hold_at, self._last_target = None, None, None, None
         self._step_velocity = np.zeros(2)
 
     def decide(self, now_s: float, desired: np.ndarray | None, measured_s: float | None,
@@ -82,7 +86,7 @@ class SetpointGuard:
         if reason:
             if self._hold_at is None:  # freeze where the crane is already going: no reversal
                 self._hold_at = crane if self._last is None else self._last
-            self._last, self._last_t = self._hold_at, now_s
+            self._last, self._last_t, self._last_target = self._hold_at, now_s, None
             self._step_velocity = np.zeros(2)
             return Decision(self._hold_at.copy(), True, reason)
         self._hold_at = None
@@ -92,15 +96,33 @@ class SetpointGuard:
         dt = 0.25 if self._last_t is None else max(now_s - self._last_t, 1e-3)
         speed = self.max_speed_mm_s if max_speed_mm_s is None else min(max_speed_mm_s,
                                                                         self.max_speed_mm_s)
-        velocity = (target - last) / dt
-        velocity = _limit(velocity, speed)
+        velocity = _limit((target - last) / dt, speed)
         velocity = self._step_velocity + _limit(velocity - self._step_velocity,
                                                 self.max_accel_mm_s2 * dt)
-        velocity = _limit(velocity, speed)
+        velocity = self._braking(velocity, target, last, dt, speed)
         setpoint = self.workspace.clamp(last + velocity * dt)
         self._step_velocity = (setpoint - last) / dt
-        self._last, self._last_t = setpoint, now_s
+        self._last, self._last_t, self._last_target = setpoint, now_s, target
         return Decision(setpoint, False, "")
+
+    def _braking(self, velocity: np.ndarray, target: np.ndarray, last: np.ndarray, dt: float,
+                 speed: float) -> np.ndarray:
+        """``velocity`` capped so that the setpoint closes in on ``target`` no faster than it
+        can still stop there at the acceleration limit, step by step (a target that moves is
+        followed at its own velocity on top), and within the speed limit: a setpoint that
+        would have to brake harder than the crane can never sends it past a robot that
+        stopped."""
+        moving = np.zeros(2) if self._last_target is None else _limit(
+            (target - self._last_target) / dt, speed)
+        gap = target - last
+        distance = float(np.hypot(*gap))
+        a = self.max_accel_mm_s2
+        brake = min(math.sqrt(2 * a * distance + (a * dt / 2) ** 2) - a * dt / 2,
+                    distance / dt)  # and never past it within this step
+        closing = float(np.dot(velocity - moving, gap)) / distance if distance > 1e-9 else 0.0
+        if closing > brake:  # only the closing part is capped; sideways stays
+            velocity = velocity - (closing - brake) * gap / distance
+        return _limit(velocity, speed)
 
     def _why_hold(self, now_s: float, desired: np.ndarray | None,
                   measured_s: float | None) -> str:

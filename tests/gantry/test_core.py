@@ -178,6 +178,28 @@ def test_particle_filters_are_reproducible_from_their_seed() -> None:
         assert np.array_equal(np.array(runs[0]), np.array(runs[1])), algorithm
 
 
+@pytest.mark.parametrize("accel", [300.0, 550.0, 2080.0])
+def test_the_setpoint_stops_at_a_robot_that_stopped(accel: float) -> None:
+    """Towards a robot 1 m away that stands still, at the lab's speed and acceleration: the
+    setpoints close in no faster than they can still stop there, and never pass it (the
+    acceleration limit alone let them pass by 125 mm at 500 mm/s²); a robot on the move is
+    followed without lag."""
+    guard = SetpointGuard(WORKSPACE, 450.0, accel, 0.5)
+    robot = np.array([1000.0, 200.0])
+    setpoints = [guard.decide(k * 0.25, robot, k * 0.25, np.zeros(2)).setpoint
+                 for k in range(40)]
+    along = [float(np.dot(sp, robot) / np.hypot(*robot)) for sp in setpoints]
+    assert max(along) <= float(np.hypot(*robot)) + 1e-6
+    np.testing.assert_allclose(setpoints[-1], robot)
+    steps = np.diff([np.zeros(2), *setpoints], axis=0) / 0.25
+    assert max(np.hypot(*s) for s in steps) <= 450.0 + 1e-6
+    follower = SetpointGuard(WORKSPACE, 520.0, accel, 0.5)
+    walk = [np.array([-1000.0 + 290.0 * k * 0.25, 0.0]) for k in range(40)]
+    lag = [follower.decide(k * 0.25, w, k * 0.25, walk[0]).setpoint - w
+           for k, w in enumerate(walk)]
+    assert max(np.hypot(*d) for d in lag[20:]) < 1.0, "caught up within 5 s"
+
+
 def test_after_a_reset_the_guard_starts_from_the_crane_not_from_its_last_setpoint() -> None:
     guard = SetpointGuard(Workspace(), stale_after_s=0.6)
     crane = np.array([0.0, 0.0])
