@@ -1,4 +1,5 @@
-"""Gantry experiment speed: simulated seconds per wall-clock second (issue #7: at least 50×).
+"""Gantry experiment speed: simulated seconds per wall-clock second (at least 50×), and what
+one control step costs (at most 1 ms).
 
     .venv/bin/python -m benchmarks.experiment [--scenarios locomotive,walker] [--seeds 1,2,3]
 
@@ -6,7 +7,10 @@ Runs every algorithm on every scenario and seed, one after the other in this one
 first run included: the CLI's first run is a user's first run), on the crater the CLI uses
 (``run/sim/crater.npz``, made if missing). Real time is the reference: the ratio is the
 speed-up. Prints per algorithm the median and least speed-up and the wall time, and where the
-time goes in one walker run (render, detect, the rest), so that a slow-down shows its cause.
+time goes in one walker run (render, detect, the rest), so that a slow-down shows its cause;
+and the cost of ``default``'s control step and of each picture it takes in between (the
+pictures' drawing by the sim is inside the latter: the experiment draws them when the
+controller first looks).
 """
 
 from __future__ import annotations
@@ -48,8 +52,11 @@ def speed(scenarios: list[str], seeds: list[int], crater: Path) -> dict[str, dic
 
 
 def profile_walker(crater: Path) -> dict[str, float]:
-    """Wall time of one default walker run, split into rendering, detection and the rest."""
+    """Wall time of one default walker run, split into rendering, detection and the rest;
+    and what one control step (``Controller.step``, at 4 Hz) and one picture taken in
+    between (``Controller.observe``, at 25 Hz) cost: median, 99th percentile, largest (ms)."""
     spent = {"render": 0.0, "detect": 0.0}
+    calls: dict[str, list[float]] = {"step": [], "observe": []}
 
     def timed(what: str, fn: Callable[..., Any]) -> Callable[..., Any]:
         def wrapper(*args: Any, **kwargs: Any) -> Any:
@@ -57,21 +64,35 @@ def profile_walker(crater: Path) -> dict[str, float]:
             try:
                 return fn(*args, **kwargs)
             finally:
-                spent[what] += time.perf_counter() - t
+                if what in calls:
+                    calls[what].append(time.perf_counter() - t)
+                else:
+                    spent[what] += time.perf_counter() - t
         return wrapper
 
     render, detect = Lab.tracking_frame, control.detect
+    step, observe = control.Controller.step, control.Controller.observe
     Lab.tracking_frame = timed("render", render)  # type: ignore[method-assign]
     control.detect = timed("detect", detect)
+    control.Controller.step = timed("step", step)  # type: ignore[method-assign]
+    control.Controller.observe = timed("observe", observe)  # type: ignore[method-assign]
     settings = experiment.gantry_for(GantrySettings(), "default", seed=1,
                                      marker_height_mm=MARKER_HEIGHT_MM["walker"])
     try:
         r = experiment.run(experiment.make_lab("walker", 1, crater), settings)
     finally:
         Lab.tracking_frame, control.detect = render, detect  # type: ignore[method-assign]
-    return {"wall_s": round(r.wall_s, 3), "render_s": round(spent["render"], 3),
-            "detect_s": round(spent["detect"], 3),
-            "rest_s": round(r.wall_s - spent["render"] - spent["detect"], 3)}
+        control.Controller.step = step  # type: ignore[method-assign]
+        control.Controller.observe = observe  # type: ignore[method-assign]
+    out = {"wall_s": round(r.wall_s, 3), "render_s": round(spent["render"], 3),
+           "detect_s": round(spent["detect"], 3),
+           "rest_s": round(r.wall_s - spent["render"] - spent["detect"], 3)}
+    for what, times in calls.items():  # the pictures are drawn (lazily) inside observe
+        ms = np.array(times) * 1e3
+        out |= {f"{what}_ms_median": round(float(np.median(ms)), 3),
+                f"{what}_ms_p99": round(float(np.percentile(ms, 99)), 3),
+                f"{what}_ms_max": round(float(ms.max()), 3), f"{what}_calls": len(ms)}
+    return out
 
 
 def main() -> None:

@@ -132,7 +132,8 @@ class _Steady:
 
 def _settle(dt: float, omega: float, noise_mm: float, accels: np.ndarray, bursts: np.ndarray,
             o: FollowOptions, rounds: int = 400) -> _Steady:
-    """Each model's Riccati equation iterated to its steady state."""
+    """Each model's Riccati equation iterated to its steady state (until its gain stops
+    changing)."""
     models = len(accels)
     stay = o.stay ** (dt / 0.25)
     switch = np.full((models, models), (1 - stay) / max(models - 1, 1))
@@ -150,8 +151,12 @@ def _settle(dt: float, omega: float, noise_mm: float, accels: np.ndarray, bursts
             P = F[m] @ P @ F[m].T + Q
             ph = P @ h
             S[m] = float(h @ ph) + noise_mm ** 2
-            K[m] = ph / S[m]
-            P = P - np.outer(K[m], ph)
+            gain = ph / S[m]
+            settled = np.allclose(gain, K[m], rtol=1e-5, atol=1e-9)
+            K[m] = gain
+            P = P - np.outer(gain, ph)
+            if settled:
+                break
     return _Steady(switch, F, K, S)
 
 
