@@ -1,6 +1,6 @@
 """One controller, one result: the live gantry service (its own process, on real time, over
-Zenoh and Modbus/TCP) against the sim service gives the error the experiment gives on the
-same path, within 15 %."""
+Zenoh and Modbus/TCP, the crane's marker from the sim's QTM through the tracker) against the
+sim service gives the error the experiment gives on the same path, within 15 %."""
 
 from __future__ import annotations
 
@@ -33,15 +33,15 @@ connect = ["{router}"]
 crane_port = {(crane := free_port())}
 height_map = "{crater}"
 marker_height_mm = {MARKER_HEIGHT_MM["locomotive"]}
-crane_check_mm = 0.0  # no tracker here: nobody reports the crane's marker (the experiment's
-                      # own check sees the sim's, which agrees with the ideal frame)
+[tracker]
+qtm_port = {(qtm := free_port())}
 [sim]
 scenario = "locomotive"
 seed = 1
 loop = false
 crater_file = "{crater}"
 [sim.mocap]
-port = {free_port()}
+port = {qtm}
 [sim.crane]
 port = {crane}
 [sim.observation_camera]
@@ -78,17 +78,18 @@ def test_the_live_service_tracks_as_the_experiment_does(tmp_path: Path, router_e
     health: list[m.ServiceHealth] = []
     bus.subscribe(keys.HEALTH, health.append, service="gantry")
     gantry = stb_process("gantry", "--lab", str(lab))
-    sim = None
+    sim = tracker = None
     try:
         wait_for(lambda: health, timeout=30)  # started: it waits for the crane controller
         sim = stb_process("sim", "--lab", str(lab))
+        tracker = stb_process("tracker", "--lab", str(lab))  # the crane's marker, as in a lab
         wait_for(lambda: len(robots) > 0, timeout=20)
         start = robots[0].measured_s  # the sim's clock starts just before its first truth
         operator = Operator(make_bus())  # arms once the gantry sees the robot, as the
         wait_for(lambda: operator.send("arm").accepted, timeout=10, period=0.1)  # experiment
         wait_for(lambda: cranes and cranes[-1].measured_s - start > END_S, timeout=END_S + 30)
     finally:
-        for proc in (gantry, sim):
+        for proc in (gantry, tracker, sim):
             if proc is not None and proc.poll() is None:
                 proc.send_signal(signal.SIGINT)
                 proc.wait(10)
