@@ -70,20 +70,18 @@ def profile_walker(crater: Path) -> dict[str, float]:
                     spent[what] += time.perf_counter() - t
         return wrapper
 
-    render, detect = Lab.tracking_frame, control.detect
-    step, observe = control.Controller.step, control.Controller.observe
-    Lab.tracking_frame = timed("render", render)  # type: ignore[method-assign]
-    control.detect = timed("detect", detect)
-    control.Controller.step = timed("step", step)  # type: ignore[method-assign]
-    control.Controller.observe = timed("observe", observe)  # type: ignore[method-assign]
+    patched = [(Lab, "tracking_frame", "render"), (control, "detect", "detect"),
+               (control.Controller, "step", "step"), (control.Controller, "observe", "observe")]
+    originals = [getattr(owner, name) for owner, name, _ in patched]
+    for (owner, name, what), original in zip(patched, originals, strict=True):
+        setattr(owner, name, timed(what, original))
     settings = experiment.gantry_for(GantrySettings(), "default", seed=1,
                                      marker_height_mm=MARKER_HEIGHT_MM["walker"])
     try:
         r = experiment.run(experiment.make_lab("walker", 1, crater), settings)
     finally:
-        Lab.tracking_frame, control.detect = render, detect  # type: ignore[method-assign]
-        control.Controller.step = step  # type: ignore[method-assign]
-        control.Controller.observe = observe  # type: ignore[method-assign]
+        for (owner, name, _), original in zip(patched, originals, strict=True):
+            setattr(owner, name, original)
     out = {"wall_s": round(r.wall_s, 3), "render_s": round(spent["render"], 3),
            "detect_s": round(spent["detect"], 3),
            "rest_s": round(r.wall_s - spent["render"] - spent["detect"], 3)}

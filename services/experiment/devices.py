@@ -43,6 +43,9 @@ class ModelCrane(RegisterCrane):
         self.lab.crane.advance_to(self.clock())
         return input_registers(self.lab.crane, self.registers)
 
+    def _read_holding(self, start: int, count: int) -> list[int]:
+        return self._holding[start:start + count]
+
     def _write(self, address: int, values: list[int]) -> None:
         self._holding[address:address + len(values)] = values
         write_holding(self.lab.crane, self.clock(), range(address, address + len(values)),

@@ -11,6 +11,7 @@ is a ``CraneUnreachable`` (transport) or ``CraneRejected`` (a Modbus exception r
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import socket
 import struct
 import threading
@@ -85,10 +86,31 @@ class RegisterCrane:
         self._write(self.registers.heartbeat, [self._beat])
 
     def read(self) -> CraneReading:
-        return reading_from(self._read_input(), self.registers.input_start, self.registers,
-                            self.frame)
+        """The input registers, and the setpoint registers read back: whoever wrote them
+        last, the gantry or another Modbus client."""
+        reading = reading_from(self._read_input(), self.registers.input_start, self.registers,
+                               self.frame)
+        start, count = self._setpoint_span
+        block = self._read_holding(start, count)
+        written = self.frame.to_world([self.registers.read("setpoint_x", block, start),
+                                       self.registers.read("setpoint_y", block, start)])
+        return dataclasses.replace(reading, written_x_mm=float(written[0]),
+                                   written_y_mm=float(written[1]))
+
+    @property
+    def _setpoint_span(self) -> tuple[int, int]:
+        """The holding registers from the first setpoint register to the last: (start,
+        count)."""
+        m = self.registers
+        start = min(m.setpoint_x, m.setpoint_y)
+        end = max(m.setpoint_x + m.width("setpoint_x"), m.setpoint_y + m.width("setpoint_y"))
+        return start, end - start
 
     def _write(self, address: int, values: list[int]) -> None:
+        raise NotImplementedError
+
+    def _read_holding(self, start: int, count: int) -> list[int]:
+        """``count`` holding registers from ``start``."""
         raise NotImplementedError
 
     def _read_input(self) -> list[int]:
@@ -112,6 +134,12 @@ class ModbusCrane(RegisterCrane):
         start, count = self.registers.input_start, self.registers.input_count
         with self._lock:
             reply = self._call(lambda: self._client.read_input_registers(
+                start, count=count, device_id=self.registers.unit_id))
+        return reply.registers
+
+    def _read_holding(self, start: int, count: int) -> list[int]:
+        with self._lock:
+            reply = self._call(lambda: self._client.read_holding_registers(
                 start, count=count, device_id=self.registers.unit_id))
         return reply.registers
 

@@ -227,7 +227,8 @@ class GantryLoop:
             return ()
         stop = self.modes.observe(self.reading, now_s)
         if stop is None and self.armed:
-            foreign = self.targets.observe(self.reading)
+            foreign = (self.targets.observe_written(self.reading)
+                       or self.targets.observe(self.reading))
             stop = None if foreign is None else self.modes.halt(foreign, now_s)
         if stop is None and self.armed and (off := self.crane_check.failing(now_s)):
             stop = self.modes.halt(off.text(now_s), now_s)

@@ -32,6 +32,8 @@ class CraneReading:
     target_x_mm: float
     target_y_mm: float
     setpoints_taken: int = 0  # the controller's count of setpoints it took (wraps at 65536)
+    written_x_mm: float | None = None  # the setpoint registers as read back (None: not read)
+    written_y_mm: float | None = None
 
     @property
     def enabled(self) -> bool:

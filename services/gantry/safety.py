@@ -149,15 +149,19 @@ class TargetCheck:
     like the gantry's own. Each time the controller reports a setpoint taken
     (``setpoints_taken`` changes), its target must be one of the setpoints the gantry wrote
     lately; ``persist`` targets in a row that are none of them → the reason to stop. A
-    controller without those registers (constant values) is never judged. The gantry's
-    setpoints stay inside its workspace, which lies inside the crane's: a clamped target is
-    not one of them either."""
+    controller without those registers (constant values) is never judged. The gantry's setpoints stay inside its
+    workspace, which lies inside the crane's: a clamped target is not one of them either. And
+    at every poll the setpoint registers as read back must hold one of the gantry's
+    setpoints: another client's write shows there at once, whether or not the controller
+    takes it (``persist`` polls in a row): ``default`` writes just before the controller
+    takes a setpoint, so a foreign client's write is taken seldom, but it is read back."""
 
     def __init__(self, tolerance_mm: float, persist: int = 2, remember: int = 8) -> None:
         self.tolerance_mm, self.persist = tolerance_mm, persist
         self._written: deque[tuple[float, float]] = deque(maxlen=remember)
         self._taken: int | None = None
         self._misses = 0
+        self._foreign_polls = 0
 
     def wrote(self, x_mm: float, y_mm: float) -> None:
         self._written.append((x_mm, y_mm))
@@ -165,7 +169,26 @@ class TargetCheck:
     def forget(self) -> None:
         """Before the crane is enabled: what was written before is no reference."""
         self._written.clear()
-        self._taken, self._misses = None, 0
+        self._taken, self._misses, self._foreign_polls = None, 0, 0
+
+    def observe_written(self, reading: CraneReading) -> str | None:
+        """The setpoint registers read back: none of the gantry's setpoints for ``persist``
+        polls in a row → the reason to stop."""
+        x, y = reading.written_x_mm, reading.written_y_mm
+        if self.tolerance_mm <= 0 or x is None or y is None or not self._written:
+            return None
+        if self._ours(x, y):
+            self._foreign_polls = 0
+            return None
+        self._foreign_polls += 1
+        if self._foreign_polls < self.persist:
+            return None
+        return (f"the crane's setpoint registers hold ({x:.0f}, {y:.0f}) mm, none of the "
+                f"gantry's setpoints, {self._foreign_polls} polls in a row: another Modbus "
+                "client writes setpoints")
+
+    def _ours(self, x: float, y: float) -> bool:
+        return any(np.hypot(x - wx, y - wy) <= self.tolerance_mm for wx, wy in self._written)
 
     def observe(self, reading: CraneReading) -> str | None:
         taken, self._taken = self._taken, reading.setpoints_taken
@@ -173,7 +196,7 @@ class TargetCheck:
                 or not self._written:
             return None
         x, y = reading.target_x_mm, reading.target_y_mm
-        if any(np.hypot(x - wx, y - wy) <= self.tolerance_mm for wx, wy in self._written):
+        if self._ours(x, y):
             self._misses = 0
             return None
         self._misses += 1

@@ -267,6 +267,18 @@ def test_the_target_check_stops_on_targets_the_gantry_never_wrote() -> None:
     assert TargetCheck(tolerance_mm=0.0).observe(_reading(1, (0.0, 0.0))) is None
 
 
+def test_the_setpoint_registers_read_back_show_a_foreign_write_at_once() -> None:
+    check = TargetCheck(tolerance_mm=5.0)
+    reading = lambda xy: CraneReading(0, 0, 0, 0, 0, 0, 0, 0, 0, *xy)  # noqa: E731
+    assert check.observe_written(reading((110.0, 200.0))) is None, "nothing written yet"
+    check.wrote(110.0, 200.0)
+    assert check.observe_written(reading((111.0, 201.0))) is None, "ours, to the register unit"
+    assert check.observe_written(reading((-2500.0, 2500.0))) is None, "one poll: not yet"
+    why = check.observe_written(reading((-2500.0, 2500.0)))
+    assert why is not None and "setpoint registers" in why and "another Modbus client" in why
+    assert check.observe_written(CraneReading(0, 0, 0, 0, 0, 0, 0, 0)) is None, "not read"
+
+
 def test_the_default_needs_no_library_to_load_at_its_first_update() -> None:
     """An import at the first update, while the crane is armed, holds the GIL (filterpy and
     scipy took 0.8 s: the heartbeat starved and the crane's watchdog tripped): the default's
