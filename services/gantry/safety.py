@@ -149,8 +149,9 @@ class TargetCheck:
     like the gantry's own. Each time the controller reports a setpoint taken
     (``setpoints_taken`` changes), its target must be one of the setpoints the gantry wrote
     lately; ``persist`` targets in a row that are none of them → the reason to stop. A
-    controller without those registers (constant values) is never judged. The gantry's setpoints stay inside its
-    workspace, which lies inside the crane's: a clamped target is not one of them either. And
+    controller without those registers (constant values) is never judged. The gantry's
+    setpoints stay inside its workspace, which lies inside the crane's: a clamped target is
+    not one of them either. And
     at every poll the setpoint registers as read back must hold one of the gantry's
     setpoints: another client's write shows there at once, whether or not the controller
     takes it (``persist`` polls in a row): ``default`` writes just before the controller
