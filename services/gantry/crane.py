@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import logging
 import socket
 import struct
 import threading
@@ -26,6 +27,7 @@ from common.crane_frame import CRANE_COUNTS_IN_THE_WORLD, CraneFrame
 from common.crane_registers import DEFAULT_MAP, RegisterMap
 from services.gantry.reading import CraneReading, CraneRejected, CraneUnreachable
 
+log = logging.getLogger(__name__)
 
 def reading_from(block: list[int], start: int, registers: RegisterMap = DEFAULT_MAP,
                  frame: CraneFrame = CRANE_COUNTS_IN_THE_WORLD) -> CraneReading:
@@ -65,6 +67,7 @@ class RegisterCrane:
                  frame: CraneFrame = CRANE_COUNTS_IN_THE_WORLD) -> None:
         self.registers, self.frame = registers, frame
         self._beat = 0
+        self.reads_back = True  # the setpoint registers, at each read
 
     def enable(self) -> None:
         """Enable only: a latched fault stays latched (``reset_faults`` is the operator's)."""
@@ -90,21 +93,20 @@ class RegisterCrane:
         last, the gantry or another Modbus client."""
         reading = reading_from(self._read_input(), self.registers.input_start, self.registers,
                                self.frame)
-        start, count = self._setpoint_span
-        block = self._read_holding(start, count)
-        written = self.frame.to_world([self.registers.read("setpoint_x", block, start),
-                                       self.registers.read("setpoint_y", block, start)])
+        if not self.reads_back:
+            return reading
+        try:
+            x, y = (self.registers.read(name, self._read_holding(
+                getattr(self.registers, name), self.registers.width(name)),
+                getattr(self.registers, name)) for name in ("setpoint_x", "setpoint_y"))
+        except CraneRejected as err:  # a controller that does not let its setpoints be read
+            log.warning("the setpoint registers cannot be read back (%s): the gantry judges "
+                        "only the targets the controller takes", err)
+            self.reads_back = False
+            return reading
+        written = self.frame.to_world([x, y])
         return dataclasses.replace(reading, written_x_mm=float(written[0]),
                                    written_y_mm=float(written[1]))
-
-    @property
-    def _setpoint_span(self) -> tuple[int, int]:
-        """The holding registers from the first setpoint register to the last: (start,
-        count)."""
-        m = self.registers
-        start = min(m.setpoint_x, m.setpoint_y)
-        end = max(m.setpoint_x + m.width("setpoint_x"), m.setpoint_y + m.width("setpoint_y"))
-        return start, end - start
 
     def _write(self, address: int, values: list[int]) -> None:
         raise NotImplementedError

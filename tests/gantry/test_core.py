@@ -12,15 +12,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from common.crane_frame import CraneFrame
-from common.crane_registers import FAULT_CLAMPED
+from common.crane_registers import FAULT_CLAMPED, RegisterMap
 from common.heightmap import HeightMap
 from common.names import ALGORITHMS
 from common.tracking_camera import TrackingCameraModel
 from services.gantry.algorithms import make_predictor
+from services.gantry.crane import RegisterCrane
 from services.gantry.frames import FrameInbox
 from services.gantry.locate import locate
 from services.gantry.predict import ParticleOptions
-from services.gantry.reading import CraneReading
+from services.gantry.reading import CraneReading, CraneRejected
 from services.gantry.safety import SetpointGuard, TargetCheck, Workspace
 from tests.gantry.camera import pixel_of
 
@@ -277,6 +278,23 @@ def test_the_setpoint_registers_read_back_show_a_foreign_write_at_once() -> None
     why = check.observe_written(reading((-2500.0, 2500.0)))
     assert why is not None and "setpoint registers" in why and "another Modbus client" in why
     assert check.observe_written(CraneReading(0, 0, 0, 0, 0, 0, 0, 0)) is None, "not read"
+
+
+class _NoReadBack(RegisterCrane):
+    """A controller whose setpoint registers cannot be read (it refuses function code 3)."""
+
+    def _read_input(self) -> list[int]:
+        return [0] * self.registers.input_count
+
+    def _read_holding(self, start: int, count: int) -> list[int]:
+        raise CraneRejected("exception 2: illegal data address")
+
+
+def test_a_controller_that_hides_its_setpoints_is_judged_by_its_targets_only() -> None:
+    crane = _NoReadBack(RegisterMap())
+    first = crane.read()
+    assert first.written_x_mm is None and not crane.reads_back
+    assert crane.read().written_x_mm is None, "asked once only"
 
 
 def test_the_default_needs_no_library_to_load_at_its_first_update() -> None:
