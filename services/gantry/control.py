@@ -113,7 +113,7 @@ class Controller:
         self.marker_track = MarkerTrack()
         self._pending: list[Frame] = []  # pictures the crane's known positions do not cover yet
         self._observed: dict[str, Any] = {}  # the newest picture observed since the step
-        self._fed_s = -float("inf")  # the newest picture looked at
+        self._fed_s = -float("inf")  # the newest picture fed to the predictor
         self.paired = self.predictor.name not in PAPER_ALGORITHMS
         self.estimate: Estimate | None = None
         self.estimate_s: float | None = None
@@ -242,7 +242,8 @@ class Controller:
             assert c.xyz is not None
             self.estimate = self.predictor.update(c.captured, c.xyz[:2], aim_s - c.captured,
                                                   noise[c.captured])
-        self._fed_s = looked[-1].captured
+        if used:  # a picture without the robot sets no order (a spoofed one is stamped "now")
+            self._fed_s = used[-1].captured
         newest = used[-1] if used else looked[-1]
         if used:  # a picture without the robot is no news: the estimate ages until stale
             self.estimate_s = newest.captured if self.estimate is not None else None
