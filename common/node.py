@@ -171,11 +171,18 @@ def run_every(period_s: float, stop: threading.Event, action: Callable[[], None]
               what: str = "periodic task") -> None:
     """Call ``action`` every ``period_s`` (no drift) until ``stop``; an exception is logged
     and the next tick comes anyway — one bad tick must not end a stream or a control loop."""
-    next_at = time.monotonic()
+    run_scheduled(lambda at: at + period_s, stop, action, what)
+
+
+def run_scheduled(next_at: Callable[[float], float], stop: threading.Event,
+                  action: Callable[[], None], what: str = "periodic task") -> None:
+    """Call ``action``, then again at ``next_at(when it was due)`` (monotonic seconds), until
+    ``stop``; an exception is logged and the next call comes anyway."""
+    due = time.monotonic()
     while not stop.is_set():
         try:
             action()
         except Exception:  # noqa: BLE001
             log.exception("%s failed", what)
-        next_at += period_s
-        stop.wait(max(0.0, next_at - time.monotonic()))
+        due = next_at(due)
+        stop.wait(max(0.0, due - time.monotonic()))

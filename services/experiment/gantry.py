@@ -23,6 +23,7 @@ from common.markers import warm_up
 from common.names import AlgorithmName
 from services.experiment.devices import ModelCrane, SimClock, SimCraneMarker, SimFrames
 from services.gantry.control import Controller
+from services.gantry.cycle import dithered_period_s
 from services.gantry.loop import GantryLoop, Request
 from services.gantry.predict import Estimate
 from services.gantry.settings import GantrySettings
@@ -125,27 +126,29 @@ def run(lab: Lab, settings: GantrySettings, *, end_s: float | None = None,
     samples_t: list[float] = []
     errors: list[np.ndarray] = []
     poll_s = 1 / settings.poll_hz
-    polls = int((end - START_S) / poll_s) + 1
-    every = max(1, polls // 50)
-    for poll in range(polls):
-        if progress is not None and poll % every == 0:
-            progress(poll / polls)
-        t = START_S + poll * poll_s
+    dither = np.random.default_rng((settings.seed, 4))  # as the service polls
+    every_s, told = (end - START_S) / 50, -1
+    t = START_S
+    while t <= end:
+        if progress is not None and (share := int((t - START_S) / every_s)) > told:
+            progress(share / 50)
+            told = share
         while len(samples_t) * ERROR_SAMPLE_S < t:  # error samples between polls
             at = len(samples_t) * ERROR_SAMPLE_S
             samples_t.append(at)
             errors.append(lab.crane_state(at)[0] - lab.robot(at)[:2])
-        clock.now_s = t
+        clock.now_s = polled = t
         tick = loop.poll(t)
+        t = loop.next_poll_s(t, dithered_period_s(poll_s, float(dither.random())))
         if tick is None or tick.step is None:
             continue
         step = tick.step
         if not arm_asked and step.estimate is not None:  # as an operator would, once in view
             loop.request(Request("arm", "experiment", "the robot is in view"))
             arm_asked = True
-        result.report_age_s.append(t - lab.crane.reported_s)
+        result.report_age_s.append(polled - lab.crane.reported_s)
         if step.estimate is not None and step.frame_s is not None:
-            result.velocity_t_s.append(t)
+            result.velocity_t_s.append(polled)
             result.velocity_mm_s.append(step.estimate.velocity)
         result.held += step.hold
         result.ticks += 1

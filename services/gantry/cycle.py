@@ -16,6 +16,13 @@ paired with the crane's position:
 
 While the crane stands still the report does not change: the ticks keep the phase learnt
 last, or run free at the period until one is learnt.
+
+Each change lies between the poll that saw it and the one before: a bracket. Polls at a fixed
+phase to the cycle (40 Hz against 4 Hz is exactly ten a cycle) would give the same bracket every
+cycle and leave the phase a poll period uncertain, a bias fixed per run of up to half a poll
+(12.5 ms: the live crane once followed 12 mm rms where the experiment, its polls on the
+cycle, followed 10). So the polls are dithered (``dithered_period_s``) and the phase is the
+middle of where the last few brackets overlap: within a few milliseconds after a second.
 """
 
 from __future__ import annotations
@@ -39,6 +46,16 @@ def tick_offset_s(after_report_s: float | None, period_s: float, paired: bool) -
     return period_s - WRITE_MARGIN_S if paired else AFTER_REPORT_S
 
 
+POLL_DITHER = 0.5
+"""Polls come a random 50–150 % of the poll period apart (the mean rate kept), so that
+their brackets around a report's change differ from cycle to cycle."""
+
+
+def dithered_period_s(period_s: float, u: float) -> float:
+    """The wait until the next poll for ``u`` drawn uniformly from [0, 1)."""
+    return period_s * (1 + POLL_DITHER * (2 * u - 1))
+
+
 @dataclass
 class CycleSync:
     """Learns the phase of the controller's reports from the times they changed and says when
@@ -46,8 +63,8 @@ class CycleSync:
 
     period_s: float
     offset_s: float = AFTER_REPORT_S
-    remembered: int = 8  # report times averaged (a circular mean over the period)
-    _report_phases: deque[float] = field(init=False)
+    remembered: int = 8  # brackets intersected (the newest that overlap)
+    _brackets: deque[tuple[float, float]] = field(init=False)
     _last_poll: tuple[float, tuple[float, float]] | None = None
     _next_tick_s: float | None = None
     last_report_s: float | None = None
@@ -56,7 +73,7 @@ class CycleSync:
     def __post_init__(self) -> None:
         if not 0 <= self.offset_s < self.period_s:
             raise ValueError(f"offset_s {self.offset_s} must lie in [0, {self.period_s})")
-        self._report_phases = deque(maxlen=self.remembered)
+        self._brackets = deque(maxlen=self.remembered)
 
     def observe(self, now_s: float, reported_xy: tuple[float, float]) -> bool:
         """One poll of the controller's reported position, read at ``now_s``; whether it
@@ -64,9 +81,11 @@ class CycleSync:
         changed = self._last_poll is not None and reported_xy != self._last_poll[1]
         if changed:
             assert self._last_poll is not None
-            changed_s = 0.5 * (self._last_poll[0] + now_s)  # between the two polls
-            self._report_phases.append(changed_s % self.period_s)
-            self.last_report_s = changed_s
+            if now_s - self._last_poll[0] < self.period_s:  # a longer gap says nothing
+                self._brackets.append((self._last_poll[0], now_s))
+            phase = self.report_phase_s
+            self.last_report_s = 0.5 * (self._last_poll[0] + now_s) if phase is None else \
+                self._in_cycle_of(phase, 0.5 * (self._last_poll[0] + now_s))
         self._last_poll = (now_s, reported_xy)
         return changed
 
@@ -80,17 +99,28 @@ class CycleSync:
             return self.last_report_s if changed else now_s - self.period_s
         if changed:
             assert self.last_report_s is not None
-            return phase + round((self.last_report_s - phase) / self.period_s) * self.period_s
+            return self._in_cycle_of(phase, self.last_report_s)
         return phase + math.floor((now_s - margin_s - phase) / self.period_s) * self.period_s
 
     @property
     def report_phase_s(self) -> float | None:
-        """When in the period the controller reports (None until the crane has moved)."""
-        if not self._report_phases:
+        """When in the period the controller reports (None until the crane has moved): the
+        middle of the overlap of the newest brackets, newest first, as far back as they
+        overlap (an older one that does not — a late read, the two clocks' drift — ends it)."""
+        if not self._brackets:
             return None
-        angles = [2 * math.pi * p / self.period_s for p in self._report_phases]
-        mean = math.atan2(sum(map(math.sin, angles)), sum(map(math.cos, angles)))
-        return (mean / (2 * math.pi) * self.period_s) % self.period_s
+        low, high = self._brackets[-1]
+        for start, end in reversed(list(self._brackets)[:-1]):
+            shift = round((low + high - start - end) / (2 * self.period_s)) * self.period_s
+            new_low, new_high = max(low, start + shift), min(high, end + shift)
+            if new_low > new_high:
+                break
+            low, high = new_low, new_high
+        return (0.5 * (low + high)) % self.period_s
+
+    def _in_cycle_of(self, phase: float, t_s: float) -> float:
+        """The report time nearest ``t_s``."""
+        return phase + round((t_s - phase) / self.period_s) * self.period_s
 
     def next_report_s(self, now_s: float) -> float | None:
         """When the controller reports (and takes setpoints) next after ``now_s``, or None

@@ -130,21 +130,34 @@ class GantryLoop:
                         "the rest of this flood is answered \"too many\" without more log",
                         request.rate_key[:128], self.rate.per_s, self.rate.burst)
 
+    def next_poll_s(self, due_s: float, wait_s: float) -> float:
+        """When to poll next after the poll due at ``due_s`` (scheduling clock): ``wait_s``
+        later (a dithered poll period, ``cycle.dithered_period_s``), or at the next tick if
+        that comes sooner — a tick does not wait for a poll, so its setpoint reaches the
+        controller ``WRITE_MARGIN_S`` before it takes one, as planned."""
+        tick = self.sync.next_tick_s
+        return min(due_s + wait_s, tick) if tick is not None and tick > due_s else \
+            due_s + wait_s
+
     def poll(self, now_s: float, monotonic_s: float | None = None) -> Tick | None:
         """Read the controller's report, carry out commands and stops, tick when due.
         ``now_s`` is the frames' clock (their capture times), ``monotonic_s`` the scheduling
         clock (default: ``now_s``). Returns None when there is nothing to report."""
         mono = now_s if monotonic_s is None else monotonic_s
         error: CraneError | None = None
+        before = self.clock()
         try:
             self.reading = self.crane.read()
         except CraneError as err:
             self.reading, error = None, err
+        # when the controller answered, about: under load a read takes milliseconds, and a
+        # report's change seen by it is dated by it (``CycleSync``), the ticks' phase with it
+        read_s = mono + 0.5 * (self.clock() - before)
         self._compare_crane(now_s)
         replies = self._carry_out_requests(now_s)
         changes = self._observe(now_s)
         if self.reading is not None:
-            self._track(now_s, mono, self.reading)
+            self._track(now_s, mono, read_s, self.reading)
             if self.controller.paired:
                 self._observe_frames(now_s, mono, self.reading)
         due = self.sync.due(mono)
@@ -300,12 +313,14 @@ class GantryLoop:
         return Timing(next_report - mono_s,
                       self.settings.report_age_s + (mono_s - last_report))
 
-    def _track(self, now_s: float, mono_s: float, reading: CraneReading) -> None:
-        """Learn the controller's cycle from its report; keep the report with the time it was
-        measured (its cycle less ``report_age_s``) for the frames' pairing."""
+    def _track(self, now_s: float, mono_s: float, read_s: float, reading: CraneReading
+               ) -> None:
+        """Learn the controller's cycle from its report, read at ``read_s``; keep the report
+        with the time it was measured (its cycle less ``report_age_s``) for the frames'
+        pairing."""
         xy = (reading.x_mm, reading.y_mm)
-        changed = self.sync.observe(mono_s, xy)
-        published = self.sync.published_s(mono_s, changed, 1 / self.settings.poll_hz)
+        changed = self.sync.observe(read_s, xy)
+        published = self.sync.published_s(read_s, changed, 1 / self.settings.poll_hz)
         if published is not None:
             measured = now_s - (mono_s - published) - self.settings.report_age_s
             self.controller.track.add(measured, np.array(xy),

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import random
 import threading
 import time
 from typing import TypedDict
@@ -33,9 +34,10 @@ from common import messages as m
 from common.errors import StartupError
 from common.heightmap import HeightMap
 from common.markers import kernel_origin, to_message, warm_up
-from common.node import Node, run_every
+from common.node import Node, run_every, run_scheduled
 from services.gantry.control import Controller, Fix, Step
 from services.gantry.crane import ModbusCrane
+from services.gantry.cycle import dithered_period_s
 from services.gantry.frames import FrameInbox, FrameSource, OpenCvFrames
 from services.gantry.loop import GantryLoop, Reply, Request
 from services.gantry.modes import crane_status, health, heartbeat_due
@@ -71,7 +73,10 @@ def run(node: Node[GantrySettings]) -> None:
                                              "heartbeat"), name="heartbeat", daemon=True).start()
     log.info("disarmed: the crane moves once an operator arms the gantry (stb gantry arm)")
     try:
-        run_every(1 / s.poll_hz, node.stop, control.poll, "crane poll")
+        rng = random.Random()
+        run_scheduled(lambda due: control.loop.next_poll_s(
+            due, dithered_period_s(1 / s.poll_hz, rng.random())), node.stop, control.poll,
+            "crane poll")
     finally:
         crane.close()
 

@@ -145,9 +145,15 @@ class CraneModel:
 
     def position_at(self, t: float) -> np.ndarray:
         """Where the crane was at ``t`` (at most ``HISTORY_S`` ago; clamped to that)."""
+        return self.state_at(t)[0]
+
+    def state_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(position, velocity) at ``t`` (at most ``HISTORY_S`` ago; clamped to that): the
+        crane may have been advanced past ``t`` by another thread (a Modbus request)."""
         step = min(max(int(round(t / STEP_S)), self._step - len(self._history) + 1, 0),
                    self._step)
-        return np.array(self._history[step % len(self._history)][:2])
+        x, y, vx, vy = self._history[step % len(self._history)]
+        return np.array([x, y]), np.array([vx, vy])
 
     # --- register writes -----------------------------------------------------------------
 

@@ -312,10 +312,12 @@ class Lab:
 
     def crane_state(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(position, velocity) of the crane's reference point at ``t`` in the world (mm,
-        mm/s)."""
+        mm/s): from its history where another thread has advanced it past ``t`` already (a
+        thread that read the clock, then waited for the lock, would take a later state for
+        ``t``)."""
         with self.crane_lock:
             self.crane.advance_to(t)
-            position, velocity = self.crane.position.copy(), self.crane.velocity.copy()
+            position, velocity = self.crane.state_at(t)
         return self.crane_frame.to_world(position), self.crane_frame.vector_to_world(velocity)
 
     def crane_world_at(self, t: float) -> np.ndarray:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from common.settings import ConfigError, load_settings
-from services.gantry.cycle import CycleSync
+from services.gantry.cycle import CycleSync, dithered_period_s
 from services.gantry.settings import GantrySettings
 
 PERIOD, POLL = 0.25, 0.025
@@ -50,6 +50,23 @@ def test_runs_free_at_the_period_until_the_crane_moves_and_keeps_the_phase_after
     after = _ticks(sync, 0.2, start=8.0, seconds=3.0, moves=moves)
     assert sync.report_phase_s == learnt
     assert all(abs((t - 0.2) % PERIOD - 0.1) <= POLL + 1e-9 for t in after[1:])
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_dithered_polls_find_the_phase_within_milliseconds(seed: int) -> None:
+    """Polls a random 50-150 % of a period apart: the brackets around each change differ,
+    and where they overlap pins the report's phase to a few milliseconds, where polls at a
+    fixed phase to the cycle leave it half a poll off."""
+    rng = np.random.default_rng(seed)
+    report_phase = float(rng.uniform(0, PERIOD))
+    sync, t = CycleSync(PERIOD), float(rng.uniform(0, 1))
+    while t < 3.0:
+        sync.observe(t, (float(np.floor((t - report_phase) / PERIOD)), 0.0))
+        t += dithered_period_s(POLL, float(rng.random()))
+    learnt = sync.report_phase_s
+    assert learnt is not None
+    off = (learnt - report_phase + PERIOD / 2) % PERIOD - PERIOD / 2
+    assert abs(off) <= 0.004, off
 
 
 def test_follows_a_controller_whose_cycle_moves() -> None:

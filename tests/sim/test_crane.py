@@ -252,3 +252,19 @@ def test_the_sim_stopping_with_a_gantry_connected_logs_no_error(
     with caplog.at_level("ERROR"):
         asyncio.run(main())
     assert [r.getMessage() for r in caplog.records if r.levelname == "ERROR"] == []
+
+
+def test_the_state_at_a_time_the_crane_has_moved_past_is_its_history() -> None:
+    """A thread that read the clock, then waited while another advanced the crane (a Modbus
+    request), gets the state at its time, not the later one (the live truth once did)."""
+    crane = _enabled()
+    for t in (0.01, 0.3, 0.6):  # within the watchdog's 0.5 s
+        crane.write_setpoint(t, 800.0, -300.0)
+    crane.advance_to(0.7)
+    then = (crane.position.copy(), crane.velocity.copy())
+    assert np.hypot(*then[1]) > 50, "moving"
+    crane.write_setpoint(1.0, 800.0, -300.0)
+    crane.advance_to(1.1)
+    position, velocity = crane.state_at(0.7)
+    assert position == pytest.approx(then[0]) and velocity == pytest.approx(then[1])
+    assert not np.allclose(crane.position, then[0])
