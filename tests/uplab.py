@@ -53,7 +53,8 @@ def write_up_lab(folder: Path, services: list[str], pose_version: int = 0,
     with open(lab, "a") as f:
         f.write(f'\n[router]\nlisten = ["{endpoint}"]\n[up]\nlog_dir = "{folder / "logs"}"\n'
                 f'services = [{listed}]\n[web]\nport = {web_port}\n'
-                f'height_map = "{folder / "crater.npz"}"\n')
+                f'height_map = "{folder / "crater.npz"}"\n'
+                f'recordings_dir = "{folder / "recordings"}"\n')
         if users:
             f.write(f'users_file = "{write_users(folder / "users.json")}"\n')
     store_poses(folder / "calib", pose_version)

@@ -17,6 +17,8 @@ crane and both cameras follow the robot. Then, one after the other:
 * SIGKILL of each service (the router last);
 * SIGSTOP of the gantry for 0.3, 1 and 3 s and of the tracker for 2 s;
 * a foreign Modbus client writing setpoints beside the gantry's.
+* the page: 200 live views at once; 200 wrong sign-ins while an operator presses Stop; a
+  link in a report folder to a file outside it.
 
 Measured from outside, as a lab would: liveliness tokens and health messages on the bus, the
 sim's true crane and robot (``stb/sim/truth/**``), the setpoints and estimates the gantry

@@ -1,5 +1,5 @@
 """Faults that come to the operator's page: many live views at once; a flood of wrong
-sign-ins while an operator presses Stop."""
+sign-ins while an operator presses Stop; a report folder's link to a file outside."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import http.client
 import json
 import threading
 import time
+from pathlib import Path
 
 from benchmarks.faults.lab import wait_until
 from benchmarks.faults.rows import Row
@@ -109,3 +110,26 @@ class WebFaults:
             f"{state_s:.2f} s ({state_status})", not misses,
             {"stop_s": stop_s, "state_s": state_s, "answers": counts}, misses))
         self.log(f"wrong sign-ins: {self.rows[-1].measured}")
+
+    def report_link(self) -> None:
+        """A link in a recording's report folder to a file outside it (a symlink once served
+        /etc/shadow to any signed-in user): refused, while the report's own file is served."""
+        report = Path(self.folder) / "recordings" / "20261204-000000.report"
+        report.mkdir(parents=True, exist_ok=True)
+        (report / "index.html").write_text("<html>the report</html>")
+        secret = Path(self.folder) / "secret.txt"
+        secret.write_text("root:$6$not-for-the-page")
+        link = report / "leak.txt"
+        link.unlink(missing_ok=True)
+        link.symlink_to(secret)
+        page = PageClient(self.web_url)
+        viewer, _, _ = page.sign_in(VIEWER)
+        own = page.request("GET", "/recordings/20261204-000000/index.html", cookie=viewer)
+        leak = page.request("GET", "/recordings/20261204-000000/leak.txt", cookie=viewer)
+        held = own[0] == 200 and leak[0] == 404 and b"root:" not in leak[2]
+        self.rows.append(Row(
+            "report folder's link out", "a link out of a report's folder is not served (404); "
+            "the report's own files are", f"the report's index.html: {own[0]}; its link to a "
+            f"file outside: {leak[0]}", held, {"own": own[0], "link": leak[0]},
+            [] if held else ["served"]))
+        self.log(f"report folder's link out: {self.rows[-1].measured}")

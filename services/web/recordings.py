@@ -111,10 +111,15 @@ class RecordingDesk:
         return {"current": current, "past": past}
 
     def report_file(self, name: str, file: str) -> Path | None:
-        """A file of a recording's report, or None (no such recording or file)."""
+        """A file of a recording's report, or None (no such recording or file, or a link
+        that leads out of the report's folder: a symlink once served /etc/shadow)."""
         if not NAME.match(name) or not REPORT_FILE.match(file) or file.startswith("."):
             return None
-        path = self.folder / f"{name}.report" / file
+        report = (self.folder / f"{name}.report").resolve()
+        path = (report / file).resolve()
+        if not path.is_relative_to(report) or not report.is_relative_to(self.folder.resolve()):
+            log.warning("refused %s/%s: a link out of the recordings folder", name, file)
+            return None
         return path if path.is_file() else None
 
     def _report_when_done(self, run: _Run) -> None:

@@ -28,7 +28,7 @@ def console_lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
     services = ["router", "sim", "tracker", "calib", "ptz:ptz1", "ptz:ptz2", "web"]
     lab, endpoint, port = write_up_lab(tmp, services, users=True)
     with open(lab, "a") as f:  # the wand all along; a short collection from the page
-        f.write(f'recordings_dir = "{tmp / "recordings"}"\ncalibration_count = 30\n')
+        f.write("calibration_count = 30\n")
     text = lab.read_text().replace("[sim]\n", '[sim]\nscenario = "calibration"\n', 1)
     lab.write_text(text)
     up = stb_process("up", "--lab", str(lab), "--no-view")
