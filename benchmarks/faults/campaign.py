@@ -171,8 +171,8 @@ class Campaign(BusFaults, ProcessFaults, WebFaults, TrustFaults):
 
 
 STEPS = ["quiet", "fuzz", "churn", "bombs", "frames", "pose", "drift", "calibration-flood",
-         "command-flood", "origin", "crater-file", "streams", "sign-ins", "report-link",
-         "stalls", "tracker", "modbus", "kill"]
+         "command-flood", "origin", "crater-file", "streams", "sign-ins", "viewer-sign-ins",
+         "report-link", "stalls", "tracker", "modbus", "kill"]
 
 
 def run(short: bool, per_key: int, churn: int, folder: Path,
@@ -210,6 +210,7 @@ def run(short: bool, per_key: int, churn: int, folder: Path,
                 "crater-file": campaign.crater_rewrite,
                 "streams": campaign.event_streams,
                 "sign-ins": campaign.sign_in_flood,
+                "viewer-sign-ins": campaign.viewer_sign_ins,
                 "report-link": campaign.report_link,
                 "stalls": lambda: [campaign.stall("gantry", seconds) for seconds in
                                    ((0.3, 1.0) if short else (0.3, 1.0, 3.0))],

@@ -1,5 +1,6 @@
 """Faults that come to the operator's page: many live views at once; a flood of wrong
-sign-ins while an operator presses Stop; a report folder's link to a file outside."""
+sign-ins while an operator presses Stop; a viewer's sign-ins by the thousand; a report
+folder's link to a file outside."""
 
 from __future__ import annotations
 
@@ -19,6 +20,9 @@ SIGN_IN_ADDRESSES, SIGN_IN_TRIES = 40, 5
 """200 wrong sign-ins: 40 client addresses (127.0.0.2…) × 5, each within the brake's free
 tries, so that every one of them costs a password check."""
 GOAL_STOP_S = 0.5
+VIEWER_SIGN_INS = 2000
+"""A viewer's sign-ins (``--short``: 40, twice a user's share of sessions) while an
+operator stays signed in."""
 
 
 class WebFaults:
@@ -133,3 +137,24 @@ class WebFaults:
             f"file outside: {leak[0]}", held, {"own": own[0], "link": leak[0]},
             [] if held else ["served"]))
         self.log(f"report folder's link out: {self.rows[-1].measured}")
+
+    def viewer_sign_ins(self) -> None:
+        """A viewer signs in again and again (a script gone wrong, or on purpose): the
+        operator's session, opened before, still answers (1,001 once ended it)."""
+        page = PageClient(self.web_url)
+        cookie, _, _ = page.sign_in(OPERATOR)
+        count = 40 if self.short else VIEWER_SIGN_INS
+        start, refused = time.monotonic(), 0
+        for _ in range(count):
+            status = page.request("POST", "/signin", body={"user": VIEWER[0],
+                                                           "password": VIEWER[1]})[0]
+            refused += status != 200
+        status, _, body = page.request("GET", "/session.json", cookie=cookie)
+        kept = status == 200 and json.loads(body).get("user") == OPERATOR[0]
+        self.rows.append(Row(
+            "viewer sign-ins", f"an operator's session survives a viewer's {count} sign-ins",
+            f"{count} sign-ins by a viewer in {time.monotonic() - start:.1f} s ({refused} "
+            f"refused); the operator's session afterwards: "
+            f"{'kept' if kept else f'gone ({status})'}", kept and refused == 0,
+            {"sign_ins": count, "kept": kept}, [] if kept else ["ended"]))
+        self.log(f"viewer sign-ins: {self.rows[-1].measured}")

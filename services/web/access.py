@@ -15,10 +15,10 @@ from __future__ import annotations
 import base64
 import binascii
 import secrets
-from collections import OrderedDict
+from collections import Counter, OrderedDict
 from dataclasses import dataclass
 
-from services.web.users import User
+from services.web.users import Role, User
 
 
 @dataclass(frozen=True)
@@ -28,19 +28,35 @@ class Session:
     expires_s: float
 
 
-class Sessions:
-    """Signed-in sessions by token, at most ``limit`` (the oldest go first)."""
+PER_USER = 20
+"""Sessions one user may hold at once (browsers, tabs, scripts); a further sign-in ends that
+user's oldest — never another user's (1,001 sign-ins by a viewer once ended the operator's)."""
 
-    def __init__(self, lifetime_s: float, limit: int = 1000) -> None:
-        self.lifetime_s, self.limit = lifetime_s, limit
+
+class Sessions:
+    """Signed-in sessions by token: at most ``per_user`` of one user (their oldest go first)
+    and ``limit`` in all (then the expired go, and the oldest of whoever holds the most, a
+    viewer's before an operator's: an operator must be able to press Stop)."""
+
+    def __init__(self, lifetime_s: float, limit: int = 1000, per_user: int = PER_USER) -> None:
+        self.lifetime_s, self.limit, self.per_user = lifetime_s, limit, per_user
         self._by_token: OrderedDict[str, Session] = OrderedDict()
 
     def open(self, user: User, now_s: float) -> tuple[str, Session]:
         token = secrets.token_urlsafe(32)
         session = Session(user, secrets.token_urlsafe(24), now_s + self.lifetime_s)
+        own = [t for t, s in self._by_token.items() if s.user.name == user.name]
+        for old in own[:max(0, len(own) - self.per_user + 1)]:
+            del self._by_token[old]
+        if len(self._by_token) >= self.limit:
+            for old in [t for t, s in self._by_token.items() if now_s >= s.expires_s]:
+                del self._by_token[old]
+        while len(self._by_token) >= self.limit:  # who gives way: the most sessions, a
+            counts = Counter(s.user.name for s in self._by_token.values())  # viewer first
+            victim = min(self._by_token.items(), key=lambda item: (
+                -counts[item[1].user.name], item[1].user.role == Role.OPERATOR))[0]
+            del self._by_token[victim]
         self._by_token[token] = session
-        while len(self._by_token) > self.limit:
-            self._by_token.popitem(last=False)
         return token, session
 
     def get(self, token: str | None, now_s: float) -> Session | None:

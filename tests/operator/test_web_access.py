@@ -121,6 +121,21 @@ def test_sessions_expire_and_are_bounded() -> None:
     assert sessions.get("", 1.0) is None and sessions.get(None, 1.0) is None
 
 
+def test_a_viewers_sign_ins_never_end_an_operators_session() -> None:
+    """2,000 sign-ins by a viewer end only the viewer's own oldest sessions (1,001 once
+    ended the operator's); with the table full of many users', the one holding the most
+    gives way, not the operator with one."""
+    sessions = Sessions(lifetime_s=3600.0, limit=100, per_user=20)
+    operator, viewer = User("olga", Role.OPERATOR), User("victor", Role.VIEWER)
+    kept, _ = sessions.open(operator, 0.0)
+    viewer_tokens = [sessions.open(viewer, float(i))[0] for i in range(2000)]
+    assert sessions.get(kept, 2000.0) is not None
+    assert [t for t in viewer_tokens if sessions.get(t, 2000.0)] == viewer_tokens[-20:]
+    for n in range(200):  # many users, each within their share: the table fills
+        sessions.open(User(f"user{n}", Role.VIEWER), 2000.0)
+    assert sessions.get(kept, 2001.0) is not None and len(sessions._by_token) == 100
+
+
 @pytest.mark.parametrize(("header", "expected"), [
     ("Basic " + base64.b64encode(b"alice:pa:ss").decode(), ("alice", "pa:ss")),
     ("basic " + base64.b64encode(b"a:").decode(), ("a", "")),
