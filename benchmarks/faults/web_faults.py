@@ -1,6 +1,7 @@
 """Faults that come to the operator's page: many live views at once; a flood of wrong
-sign-ins while an operator presses Stop; a viewer's sign-ins by the thousand; a report
-folder's link to a file outside."""
+sign-ins while an operator presses Stop; a viewer's sign-ins by the thousand; wrong sign-ins
+that name another client in X-Forwarded-For; a foreign name in Host; a report folder's link
+to a file outside."""
 
 from __future__ import annotations
 
@@ -158,3 +159,41 @@ class WebFaults:
             f"{'kept' if kept else f'gone ({status})'}", kept and refused == 0,
             {"sign_ins": count, "kept": kept}, [] if kept else ["ended"]))
         self.log(f"viewer sign-ins: {self.rows[-1].measured}")
+
+    def forwarded_for(self) -> None:
+        """A local process (the page's own machine) tries passwords, each try naming another
+        client in X-Forwarded-For: without ``[web] trusted_proxies`` the header is ignored,
+        so the tries count for one address and the brake stops them (uvicorn's default once
+        trusted it from loopback: any address passed the brake and went into the audit)."""
+        page = PageClient(self.web_url)
+        answers = [page.request("POST", "/signin", body={"user": OPERATOR[0],
+                                                         "password": f"guess-xff-{i}"},
+                                headers={"X-Forwarded-For": f"203.0.113.{i + 1}"})[0]
+                   for i in range(8)]
+        braked = 429 in answers
+        wait_until(lambda: page.request("POST", "/signin", body={  # the brake waited out,
+            "user": VIEWER[0], "password": VIEWER[1]})[0] == 200, 60, 0.5)  # for what follows
+        self.rows.append(Row(
+            "X-Forwarded-For from loopback", "ignored without a configured proxy: the "
+            "brake stops the tries", f"8 wrong sign-ins from loopback, each naming another "
+            f"client: answers {answers}", braked, {"answers": answers},
+            [] if braked else ["trusted"]))
+        self.log(f"X-Forwarded-For: {self.rows[-1].measured}")
+
+    def foreign_host(self) -> None:
+        """A DNS-rebinding page: the signed-in operator's browser sends another site's name
+        in ``Host`` (its cookie is not sent to that name, so: without one, and with Basic as
+        a script would): refused before anything is read, the page's own name answered."""
+        page = PageClient(self.web_url)
+        answers = {}
+        for path, method in (("/session.json", "GET"), ("/state.json", "GET"),
+                             ("/gantry/stop", "POST")):
+            answers[path] = page.request(method, path, auth=OPERATOR, headers={
+                "Host": "evil.example", "Origin": "http://evil.example"})[0]
+        own = page.request("GET", "/state.json", auth=VIEWER)[0]
+        held = all(code in (401, 403, 421) for code in answers.values()) and own == 200
+        self.rows.append(Row(
+            "foreign Host", "401/403/421 for another site's name in Host; the page's own "
+            "answered", f"Host evil.example: {answers}; the page's own address: {own}", held,
+            {"answers": answers, "own": own}, [] if held else ["answered"]))
+        self.log(f"foreign Host: {self.rows[-1].measured}")

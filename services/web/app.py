@@ -27,6 +27,7 @@ from typing import Any
 
 import anyio
 from starlette.applications import Starlette
+from starlette.middleware import Middleware
 from starlette.requests import Request
 from starlette.responses import JSONResponse, Response, StreamingResponse
 from starlette.routing import Route
@@ -35,6 +36,7 @@ from common.names import GANTRY_COMMANDS
 from services.web.console import Console, console_routes
 from services.web.crater_image import CraterImage
 from services.web.gate import COOKIE, Caller, Gate, command_refusal
+from services.web.hosts import HostCheck, HostGate
 from services.web.lanes import Busy, command_lane, password_lane
 
 log = logging.getLogger(__name__)
@@ -87,9 +89,10 @@ def build_app(gate: Gate, view: Callable[[], dict[str, Any]],
               video: Callable[[str], bytes | None], crater: CraterImage, *,
               push_period_s: float, max_streams: int,
               command: Callable[[str, str], dict] | None = None,
-              console: Console | None = None) -> Starlette:
+              console: Console | None = None, hosts: HostCheck | None = None) -> Starlette:
     """The page's application; ``command(name, caller_label)`` sends a gantry command;
-    ``console``: the calibration, camera and recording controls (``console.py``)."""
+    ``console``: the calibration, camera and recording controls (``console.py``);
+    ``hosts``: the names it answers to (``hosts.py``; None: any)."""
     live = LiveView(view, push_period_s, max_streams)
     passwords, commands = password_lane(), command_lane()
 
@@ -225,4 +228,5 @@ def build_app(gate: Gate, view: Callable[[], dict[str, Any]],
     ]
     if console is not None:
         routes += console_routes(console, authorize, signed_in)
-    return Starlette(routes=routes, exception_handlers={Busy: busy})
+    middleware = [] if hosts is None else [Middleware(HostGate, check=hosts)]
+    return Starlette(routes=routes, exception_handlers={Busy: busy}, middleware=middleware)

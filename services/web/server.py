@@ -6,6 +6,7 @@ from __future__ import annotations
 import logging
 import socket
 import threading
+from collections.abc import Sequence
 from pathlib import Path
 
 import uvicorn
@@ -19,7 +20,7 @@ class WebServer:
     file is bad), serves from ``start``."""
 
     def __init__(self, app: Starlette, host: str, port: int,
-                 tls: tuple[Path, Path] | None = None) -> None:
+                 tls: tuple[Path, Path] | None = None, proxies: Sequence[str] = ()) -> None:
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self._socket = socket.socket(family, socket.SOCK_STREAM)
         self._socket.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -32,7 +33,11 @@ class WebServer:
         certificate, key = tls if tls else (None, None)
         config = uvicorn.Config(app, log_level="warning", access_log=False, lifespan="off",
                                 ssl_certfile=certificate, ssl_keyfile=key,
-                                timeout_graceful_shutdown=1, ws="none")
+                                timeout_graceful_shutdown=1, ws="none",
+                                # X-Forwarded-For only from the lab's proxies (uvicorn's
+                                # default trusts it from loopback: any local process)
+                                proxy_headers=bool(proxies),
+                                forwarded_allow_ips=list(proxies) or [])
         try:
             config.load()  # a bad certificate or key: an error now, not on the thread
         except OSError:

@@ -20,6 +20,7 @@ from services.web.commands import GantryCommander
 from services.web.console import Console
 from services.web.crater_image import CraterImage
 from services.web.gate import Gate
+from services.web.hosts import HostCheck, own_names
 from services.web.recordings import RecordingDesk
 from services.web.server import WebServer
 from services.web.settings import WebSettings
@@ -105,9 +106,11 @@ def run(node: Node[WebSettings]) -> None:
     app = build_app(gate, view, preview, video, crater,
                     push_period_s=1 / settings.push_hz, max_streams=settings.max_streams,
                     command=GantryCommander(node.bus, settings.bus.zenoh.identity("web")).send,
-                    console=Console(node.bus, desk, settings.calibration_count))
+                    console=Console(node.bus, desk, settings.calibration_count),
+                    hosts=HostCheck([*settings.server_names, *own_names()]))
     try:
-        server = WebServer(app, settings.host, settings.port, settings.tls)
+        server = WebServer(app, settings.host, settings.port, settings.tls,
+                           settings.trusted_proxies)
     except OSError as err:
         tokens.undeclare()
         raise StartupError(f"cannot serve on {settings.host}:{settings.port}: {err}") from err

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import ipaddress
 from pathlib import Path
+from typing import Annotated
 
 from pydantic import Field, model_validator
 
@@ -25,6 +26,14 @@ class WebSettings(ServiceSettings):
     tls_key: Path | None = Field(None, description="PEM private key of tls_certificate")
     session_h: float = Field(12.0, gt=0, le=24 * 30, description="a sign-in lasts this long, "
                              "hours")
+    server_names: list[Annotated[str, Field(max_length=253)]] = Field(
+        default_factory=list, max_length=64, description="host names the lab's browsers "
+        "reach the page by, beside IP addresses, localhost and this machine's own names; a "
+        "request for any other name (Host) is refused 421 (DNS rebinding)")
+    trusted_proxies: list[Annotated[str, Field(max_length=64)]] = Field(
+        default_factory=list, max_length=32, description="addresses of reverse proxies whose "
+        "X-Forwarded-For names the client (for the sign-in brake and the audit); from any "
+        "other sender, loopback included, the header is ignored")
     max_streams: int = Field(50, ge=1, le=10_000, description="open live views (event "
                              "streams) at once; more are refused until one closes")
     recordings_dir: Path = Field(Path("run/recordings"), description="where the page's "

@@ -188,7 +188,8 @@ class Page(PageClient):
 
 
 def _serve(users: Users | None, tmp: Path, tls: tuple[Path, Path] | None = None,
-           max_streams: int = 10) -> Iterator[tuple[Page, WebServer]]:
+           max_streams: int = 10, proxies: tuple[str, ...] = ()
+           ) -> Iterator[tuple[Page, WebServer]]:
     commands: list[tuple[str, str]] = []
 
     def command(name: str, who: str) -> dict:
@@ -199,7 +200,7 @@ def _serve(users: Users | None, tmp: Path, tls: tuple[Path, Path] | None = None,
     app = build_app(gate, lambda: {"robot": {"x_mm": 1.0}}, lambda c: b"\xff\xd8jpeg",
                     lambda c: b"\xff\xd8video", CraterImage(tmp / "none.npz"), push_period_s=0.05,
                     max_streams=max_streams, command=command)
-    web = WebServer(app, "127.0.0.1", 0, tls).start()
+    web = WebServer(app, "127.0.0.1", 0, tls, proxies).start()
     page = Page(f"{web.scheme}://127.0.0.1:{web.port}", tls[0] if tls else None, commands)
     try:
         yield page, web
@@ -284,6 +285,24 @@ def test_twenty_wrong_passwords_end_refused_outright(page: Page) -> None:
                         )[0] == 429, "the right password waits too"
     assert page.request("POST", "/signin", body="x", headers={"Content-Type": "text/plain"}
                         )[0] == 415, "another site's form cannot post a sign-in"
+
+
+def _wrong_tries_each_forwarded_for_another(page: Page) -> list[int]:
+    return [page.request("POST", "/signin", body={"user": "alice", "password": f"guess{i}"},
+                         headers={"X-Forwarded-For": f"203.0.113.{i + 1}"})[0]
+            for i in range(7)]
+
+
+def test_x_forwarded_for_is_ignored_unless_from_a_configured_proxy(users_file: Path,
+                                                                   tmp_path: Path) -> None:
+    """A local process writing any address into X-Forwarded-For passed the sign-in brake
+    (uvicorn trusts the header from loopback by default); now it is one address, braked,
+    unless ``[web] trusted_proxies`` names the sender."""
+    for page, _ in _serve(Users.load(users_file), tmp_path):
+        assert _wrong_tries_each_forwarded_for_another(page)[5:] == [429, 429]
+    for page, _ in _serve(Users.load(users_file), tmp_path, proxies=("127.0.0.1",)):
+        assert _wrong_tries_each_forwarded_for_another(page) == [401] * 7, \
+            "behind a configured proxy each client is braked on its own"
 
 
 class HeldUsers(Users):
