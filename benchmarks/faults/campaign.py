@@ -172,7 +172,7 @@ class Campaign(BusFaults, ProcessFaults, WebFaults, TrustFaults):
 
 STEPS = ["quiet", "fuzz", "churn", "bombs", "frames", "pose", "drift", "calibration-flood",
          "command-flood", "origin", "crater-file", "streams", "sign-ins", "viewer-sign-ins",
-         "forwarded-for", "host", "report-link", "stalls", "tracker", "modbus", "kill"]
+         "forwarded-for", "host", "bodies", "report-link", "stalls", "tracker", "modbus", "kill"]
 
 
 def run(short: bool, per_key: int, churn: int, folder: Path,
@@ -213,6 +213,7 @@ def run(short: bool, per_key: int, churn: int, folder: Path,
                 "viewer-sign-ins": campaign.viewer_sign_ins,
                 "forwarded-for": campaign.forwarded_for,
                 "host": campaign.foreign_host,
+                "bodies": campaign.huge_bodies,
                 "report-link": campaign.report_link,
                 "stalls": lambda: [campaign.stall("gantry", seconds) for seconds in
                                    ((0.3, 1.0) if short else (0.3, 1.0, 3.0))],

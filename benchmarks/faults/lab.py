@@ -77,6 +77,11 @@ def _status(pid: int, field: str) -> float:
     return float("nan")
 
 
+def resident_mb(pid: int) -> float:
+    """A process's resident memory (VmRSS), shared memory included."""
+    return _status(pid, "VmRSS") / 1024
+
+
 def private_mb(pid: int) -> float:
     """A process's own resident memory (RssAnon): what it allocated. Not the shared memory it
     maps: Zenoh hands messages over 3 kB between processes on one host through each sender's

@@ -1,17 +1,18 @@
 """Faults that come to the operator's page: many live views at once; a flood of wrong
 sign-ins while an operator presses Stop; a viewer's sign-ins by the thousand; wrong sign-ins
-that name another client in X-Forwarded-For; a foreign name in Host; a report folder's link
-to a file outside."""
+that name another client in X-Forwarded-For; a foreign name in Host; huge bodies before
+sign-in; a report folder's link to a file outside."""
 
 from __future__ import annotations
 
 import http.client
 import json
+import socket
 import threading
 import time
 from pathlib import Path
 
-from benchmarks.faults.lab import wait_until
+from benchmarks.faults.lab import resident_mb, wait_until
 from benchmarks.faults.rows import Row
 from tests.uplab import OPERATOR, VIEWER
 from tests.webpage import PageClient, basic
@@ -21,6 +22,7 @@ SIGN_IN_ADDRESSES, SIGN_IN_TRIES = 40, 5
 """200 wrong sign-ins: 40 client addresses (127.0.0.2…) × 5, each within the brake's free
 tries, so that every one of them costs a password check."""
 GOAL_STOP_S = 0.5
+BODY_MB, BODIES, GOAL_WEB_MB = 500, 3, 300
 VIEWER_SIGN_INS = 2000
 """A viewer's sign-ins (``--short``: 40, twice a user's share of sessions) while an
 operator stays signed in."""
@@ -197,3 +199,46 @@ class WebFaults:
             "answered", f"Host evil.example: {answers}; the page's own address: {own}", held,
             {"answers": answers, "own": own}, [] if held else ["answered"]))
         self.log(f"foreign Host: {self.rows[-1].measured}")
+
+    def huge_bodies(self) -> None:
+        """Three anonymous 500 MB bodies to ``/signin`` at once, each sent as fast as the
+        page takes it: refused (413) on the declared length, the web process's own memory
+        sampled meanwhile (2.14 GB once)."""
+        page = PageClient(self.web_url)
+        pid = self.meters.pid("web") or -1
+        before, peak, answers = resident_mb(pid), 0.0, []
+        sent_mb: list[float] = []
+
+        def send() -> None:
+            chunk, sent = b"{" + b" " * (1024 * 1024 - 1), 0
+            try:
+                with socket.create_connection((page.host, page.port), timeout=10) as conn:
+                    conn.sendall(b"POST /signin HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+                                 b"Content-Type: application/json\r\n"
+                                 b"Content-Length: %d\r\n\r\n" % (BODY_MB * 1024 * 1024))
+                    for _ in range(BODY_MB):
+                        conn.sendall(chunk)
+                        sent += 1
+                    answers.append(int(conn.recv(64).split()[1]))
+            except (OSError, IndexError, ValueError):
+                answers.append(0)  # closed on us while we were still sending: refused
+            sent_mb.append(sent)
+
+        senders = [threading.Thread(target=send) for _ in range(BODIES)]
+        for thread in senders:
+            thread.start()
+        while any(t.is_alive() for t in senders):
+            peak = max(peak, resident_mb(pid))
+            time.sleep(0.05)  # sampling the memory while the bodies come
+        after = resident_mb(pid)
+        answered = page.request("GET", "/state.json", auth=VIEWER)[0]
+        held = peak <= GOAL_WEB_MB and answered == 200 and self.meters.pid("web") == pid
+        self.rows.append(Row(
+            "huge bodies", f"the web process's resident memory ≤ {GOAL_WEB_MB} MB under "
+            f"{BODIES} × {BODY_MB} MB bodies to /signin", f"{BODIES} bodies of {BODY_MB} MB "
+            f"declared: {max(sent_mb, default=0):.0f} MB at most sent before the page closed "
+            f"(answers {answers}); web {before:.0f} → peak {peak:.0f} → {after:.0f} MB; "
+            f"state.json after: {answered}", held,
+            {"peak_mb": peak, "before_mb": before, "after_mb": after},
+            [] if held else ["memory"]))
+        self.log(f"huge bodies: {self.rows[-1].measured}")

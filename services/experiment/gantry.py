@@ -118,7 +118,8 @@ def run(lab: Lab, settings: GantrySettings, *, end_s: float | None = None,
                       SimFrames(lab, clock, np.random.default_rng((settings.seed, 2))),
                       controller, START_S,
                       crane_marker=SimCraneMarker(lab, clock,
-                                                  np.random.default_rng((settings.seed, 3))))
+                                                  np.random.default_rng((settings.seed, 3))),
+                      clock=clock)  # the simulated time, reads included: reproducible
     arm_asked = False
     end = lab.trajectory.duration_s if end_s is None else end_s
     name = settings.algorithm if oracle_ahead_s is None else f"oracle {oracle_ahead_s:.2f} s"

@@ -38,6 +38,7 @@ from services.web.crater_image import CraterImage
 from services.web.gate import COOKIE, Caller, Gate, command_refusal
 from services.web.hosts import HostCheck, HostGate
 from services.web.lanes import Busy, command_lane, password_lane
+from services.web.limits import BodyLimit
 
 log = logging.getLogger(__name__)
 CAMERA = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
@@ -228,5 +229,6 @@ def build_app(gate: Gate, view: Callable[[], dict[str, Any]],
     ]
     if console is not None:
         routes += console_routes(console, authorize, signed_in)
-    middleware = [] if hosts is None else [Middleware(HostGate, check=hosts)]
+    middleware = ([] if hosts is None else [Middleware(HostGate, check=hosts)]) + \
+        [Middleware(BodyLimit)]
     return Starlette(routes=routes, exception_handlers={Busy: busy}, middleware=middleware)

@@ -66,3 +66,32 @@ def test_a_rebinding_page_gets_neither_the_token_nor_the_stop(open_page: int) ->
     status, body = _ask(open_page, "GET", "/session.json", f"127.0.0.1:{open_page}")
     assert status == 200 and b"csrf" in body
     assert _ask(open_page, "GET", "/session.json", "lab-pc")[0] == 200
+
+
+def test_bodies_are_bounded_before_anything_reads_them(open_page: int) -> None:
+    """A body declared larger than the page's requests ever are is refused at once (413,
+    not read); a chunked one is cut off once past the bound; a small one is served."""
+    conn = http.client.HTTPConnection("127.0.0.1", open_page, timeout=10)
+    try:
+        conn.putrequest("POST", "/signin")
+        conn.putheader("Content-Type", "application/json")
+        conn.putheader("Content-Length", str(500 * 1024 * 1024))
+        conn.endheaders()  # nothing of the 500 MB sent: answered without waiting for it
+        assert conn.getresponse().status == 413
+    finally:
+        conn.close()
+
+    def chunks() -> Iterator[bytes]:
+        for _ in range(64):
+            yield b"x" * 16384  # 1 MiB in all
+
+    conn = http.client.HTTPConnection("127.0.0.1", open_page, timeout=10)
+    try:
+        conn.request("POST", "/signin", body=chunks(), encode_chunked=True,
+                     headers={"Content-Type": "application/json"})
+        assert conn.getresponse().status == 413
+    except (BrokenPipeError, ConnectionResetError):
+        pass  # refused and closed while the rest was still being sent
+    finally:
+        conn.close()
+    assert _ask(open_page, "GET", "/session.json", f"127.0.0.1:{open_page}")[0] == 200
