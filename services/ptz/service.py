@@ -169,6 +169,11 @@ class _Loop:
                         now - msg.measured_s)
             return
         with self.lock:
+            if msg.action in ("move", "nudge", "preset") and self.calibration.active(now):
+                log.warning("%s from %s refused: %s is in calibration mode (a move would spoil "
+                            "its passpoints); again once the calibration has ended",
+                            msg.action, msg.operator, msg.camera)
+                return
             try:
                 if msg.action == "follow":
                     self.control.release()

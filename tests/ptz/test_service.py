@@ -212,6 +212,19 @@ def test_calibration_mode_holds_still_detects_and_ends_with_its_lease(service: d
 
     wait_for(renew, timeout=10, period=0.3)
     assert server.camera.head.ir_cut_filter == "off"
+    for action, values in (("move", {"pan_deg": 60.0, "tilt_deg": -20.0}),
+                           ("nudge", {"pan_deg": 5.0}), ("preset", {"preset": "Home"})):
+        world.publish(keys.PTZ_HAND, m.PtzHand(measured_s=time.time(), camera="ptz1",
+                                               action=action, operator="olga (web h)",
+                                               **values), camera="ptz1")
+    seen = len(states)
+    deadline = time.monotonic() + 1.5
+    while time.monotonic() < deadline:  # a window: the page's moves must not happen
+        renew()
+        time.sleep(0.3)  # pacing the lease's renewals within the window
+    during = states[seen:]
+    assert during and all(abs(s.pan_deg - held[0]) < 0.1 and abs(s.tilt_deg - held[1]) < 0.1
+                          for s in during), [(s.pan_deg, s.tilt_deg) for s in during]
     assert any(s.status == "calibrating" for s in states)
     expected = project(TARGET[None, :], head_pose(MOUNT, *held), Intrinsics(3.8))[0]
     for d in detections:  # none from before the camera stood where it was held
