@@ -62,7 +62,10 @@ def _import(args: argparse.Namespace) -> int:
         units = "m" if span < METRES_BELOW else "mm"
     if units == "m":
         points *= 1000.0
-    gridded = grid_points(points, args.cell_mm)
+    try:
+        gridded = grid_points(points, args.cell_mm)
+    except ValueError as err:
+        raise ValueError(f"{args.scan}: {err}") from err
     gridded.heights.save(args.out, filled=gridded.filled)
     print(f"{args.scan}: read in {units}; {gridded.report()}")
     if args.plot:

@@ -21,6 +21,11 @@ from common.heightmap import HeightMap
 
 MIN_POINTS = 3
 PLANE_VARIANCE = 3.0
+LINE_SPREAD = 0.1
+"""A cell's points spread less than this share of the cell across their main direction lie on
+a line (a plane through them is not defined)."""
+MAX_COORDINATE_MM = 1e8  # 100 km: farther is no crater's point
+MAX_CELLS = 50_000_000  # 200 MB of float32: a 100 × 100 m hall at 15 mm is 44 M
 
 
 @dataclass(frozen=True)
@@ -57,10 +62,20 @@ def grid_points(points: np.ndarray, cell_mm: float) -> Gridded:
     """The height map of ``points`` (N, 3, mm) at ``cell_mm``; holes filled and counted."""
     if cell_mm <= 0:
         raise ValueError("the cell size must be positive")
+    far = float(np.abs(points).max())
+    if far > MAX_COORDINATE_MM:
+        raise ValueError(f"a point lies {far:.3g} mm from the scan's origin (more than "
+                         f"{MAX_COORDINATE_MM / 1e6:g} km): a broken point, or the wrong "
+                         "units (--units)?")
     x0 = np.floor(points[:, 0].min() / cell_mm) * cell_mm
     y0 = np.floor(points[:, 1].min() / cell_mm) * cell_mm
-    cols = int(np.rint((points[:, 0].max() - x0) / cell_mm)) + 1
-    rows = int(np.rint((points[:, 1].max() - y0) / cell_mm)) + 1
+    span_cols = float(np.rint((points[:, 0].max() - x0) / cell_mm)) + 1
+    span_rows = float(np.rint((points[:, 1].max() - y0) / cell_mm)) + 1
+    if span_cols * span_rows > MAX_CELLS:
+        raise ValueError(f"the points span {span_cols * cell_mm / 1000:.0f} × "
+                         f"{span_rows * cell_mm / 1000:.0f} m: {span_cols * span_rows:.3g} cells "
+                         f"of {cell_mm:g} mm, more than {MAX_CELLS:,}: a larger cell?")
+    cols, rows = int(span_cols), int(span_rows)
     if rows < 2 or cols < 2:
         raise ValueError(f"the points cover less than 2 × 2 cells of {cell_mm:g} mm")
     heights, counts = _fit_planes(points, x0, y0, cell_mm, rows, cols)
@@ -109,12 +124,50 @@ def _fit_planes(points: np.ndarray, x0: float, y0: float, cell: float, rows: int
     # (noise² / n). Else (few points, all on one side, as at a hole's edge) the cell is a
     # hole: neither a swinging plane nor a mean that leans with the slope.
     candidates = np.flatnonzero(n >= MIN_POINTS)
-    inverse = np.linalg.pinv(matrix[candidates])
-    steady = inverse[:, 0, 0] * n[candidates] <= PLANE_VARIANCE
-    pick = candidates[steady]
+    line = _along_a_line(n, sx, sy, sxx, sxy, syy, sz, sxz, syz, candidates, cell)
+    planar = candidates[~line.on_line]
+    inverse = np.linalg.pinv(matrix[planar])
+    steady = inverse[:, 0, 0] * n[planar] <= PLANE_VARIANCE
+    pick = planar[steady]
     heights[pick] = (inverse[steady] @ rhs[pick][..., None])[:, 0, 0]
+    on_line = candidates[line.on_line]
+    heights[on_line[line.steady]] = line.heights[line.steady]
     n = np.where(np.isfinite(heights), n, 0)
     return heights.reshape(rows, cols), n.reshape(rows, cols)
+
+
+@dataclass(frozen=True)
+class _Line:
+    on_line: np.ndarray  # per candidate: its points lie on a line (a plane is not defined)
+    heights: np.ndarray  # per cell on a line: z along the line, at the centre's foot
+    steady: np.ndarray  # per cell on a line: that value is not a long extrapolation
+
+
+def _along_a_line(n: np.ndarray, sx: np.ndarray, sy: np.ndarray, sxx: np.ndarray,
+                  sxy: np.ndarray, syy: np.ndarray, sz: np.ndarray, sxz: np.ndarray,
+                  syz: np.ndarray, candidates: np.ndarray, cell: float) -> _Line:
+    """Cells whose points lie on a line — one scan line through a sparse scan, its
+    coordinates quantised to 1 mm — have no plane: its least squares are singular, and the
+    smallest-norm answer pulled the height toward 0 (301 mm off once). There the height is
+    the line's own fit, z = a + b·t along it, at the foot of the cell's centre; the slope
+    across the line is taken as none."""
+    k = candidates
+    count = n[k]
+    mx, my, mz = sx[k] / count, sy[k] / count, sz[k] / count
+    cxx, cyy, cxy = sxx[k] / count - mx * mx, syy[k] / count - my * my, sxy[k] / count - mx * my
+    half_sum, half_diff = (cxx + cyy) / 2, np.hypot((cxx - cyy) / 2, cxy)
+    minor, major = half_sum - half_diff, half_sum + half_diff
+    on_line = minor < (LINE_SPREAD * cell) ** 2
+    angle = 0.5 * np.arctan2(2 * cxy, cxx - cyy)  # the major axis
+    ux, uy = np.cos(angle), np.sin(angle)
+    czx, czy = sxz[k] / count - mx * mz, syz[k] / count - my * mz
+    spread = np.maximum(major, 1e-12)
+    slope = np.where(major > 1e-6, (czx * ux + czy * uy) / spread, 0.0)
+    mean_t = mx * ux + my * uy  # the points' middle along the line; the centre's foot is 0
+    heights = mz - slope * mean_t
+    steady = np.where(major > 1e-6, 1 + mean_t ** 2 / spread <= PLANE_VARIANCE,
+                      np.hypot(mx, my) <= cell / 2)
+    return _Line(on_line, heights[on_line], steady[on_line])
 
 
 def _fill(heights: np.ndarray, hole: np.ndarray) -> np.ndarray:
