@@ -12,6 +12,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import websockets
@@ -209,14 +210,22 @@ class TrustFaults:
                        0.3)
             statuses = {origin: _handshake(port, origin) for origin in
                         ("https://evil.example", "http://localhost:3000", None)}
+            inner = {p: _handshake(p, "https://evil.example")
+                     for p in _listening_ports(proc.pid) if p != port}
         finally:
             interrupt(proc, 10)
-        ok = statuses == {"https://evil.example": 403, "http://localhost:3000": 101, None: 101}
+        ok = statuses == {"https://evil.example": 403, "http://localhost:3000": 101,
+                          None: 101} and bool(inner) and 101 not in inner.values()
         self.rows.append(Row(
             "foreign Origin at stb foxglove", "a foreign page refused (403); this machine's "
-            "page and a client without Origin served",
-            "; ".join(f"{o or 'no Origin'}: {s}" for o, s in statuses.items()), ok,
-            {"statuses": {str(o): s for o, s in statuses.items()}}))
+            "page and a client without Origin served; the inner server behind the gate "
+            "refuses a page that finds its port",
+            "; ".join(f"{o or 'no Origin'}: {s}" for o, s in statuses.items()) +
+            "; the inner port(s) to evil.example: " + (", ".join(
+                f"{p}: {'opened' if s == 101 else 'refused'}" for p, s in inner.items())
+                or "none found"), ok,
+            {"statuses": {str(o): s for o, s in statuses.items()},
+             "inner": {str(p): s for p, s in inner.items()}}))
 
     def crater_rewrite(self) -> None:
         """The crater file written again and again (as the sim does at start) while the
@@ -252,6 +261,18 @@ class TrustFaults:
             {"statuses": statuses, "gantry_back_s": back}))
 
 
+def _listening_ports(pid: int) -> list[int]:
+    """The TCP ports a process listens on (its sockets' inodes in /proc/net/tcp)."""
+    try:
+        inodes = {os.readlink(f"/proc/{pid}/fd/{fd}")[8:-1] for fd in os.listdir(
+            f"/proc/{pid}/fd") if os.readlink(f"/proc/{pid}/fd/{fd}").startswith("socket:")}
+        lines = Path(f"/proc/{pid}/net/tcp").read_text().splitlines()[1:]
+    except OSError:
+        return []
+    return [int(f[1].split(":")[1], 16) for f in (line.split() for line in lines)
+            if f[3] == "0A" and f[9] in inodes]
+
+
 def _handshake(port: int, origin: str | None) -> int:
     async def go() -> int:
         try:
@@ -260,6 +281,6 @@ def _handshake(port: int, origin: str | None) -> int:
                 return 101
         except websockets.InvalidStatus as err:
             return err.response.status_code
-        except (OSError, TimeoutError):
-            return 0
+        except (OSError, TimeoutError, websockets.InvalidHandshake):
+            return 0  # no WebSocket there (the inner server speaks TLS)
     return asyncio.run(go())

@@ -24,6 +24,7 @@ from common.node import stop_on_signals
 from common.settings import LogLevel, ServiceSettings
 from services.entry import ToolError, checked_key_exprs, tool_session, tool_settings
 from services.recording.foxglove import json_copy
+from services.recording.inner_tls import make_certificate
 from services.recording.origin_gate import OriginGate
 from services.recording.record import crater, decode, latest_samples
 from services.recording.typed import CRATER, LabScene, Typed
@@ -149,10 +150,13 @@ def serve(args: argparse.Namespace) -> int:
     try:
         try:  # foxglove-sdk's server on a loopback port of its own, behind the Origin gate
             listener = cast("ServerListener", _Listener(scene))  # duck-typed: see _Listener
+            inner = make_certificate()  # the inner link: only the gate can open it
             server = foxglove.start_server(name="stb-supervisor", host="127.0.0.1", port=0,
-                                          context=context, server_listener=listener)
+                                          context=context, server_listener=listener,
+                                          tls_cert=inner.certificate_pem,
+                                          tls_key=inner.key_pem)
             gate = OriginGate(settings.host, settings.port, server.port,
-                              settings.allowed_origins).start()
+                              settings.allowed_origins, inner.client_context()).start()
         except (RuntimeError, OSError) as err:
             raise ToolError(f"cannot serve on {settings.host}:{settings.port}: {err}") from err
         subscribers = [session.declare_subscriber(e, bridge.on_sample) for e in exprs]

@@ -13,6 +13,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import re
+import ssl
 import threading
 from collections.abc import Sequence
 
@@ -31,11 +32,16 @@ def accepted_origins(configured: Sequence[str]) -> list[Origin | re.Pattern[str]
 
 
 class OriginGate:
-    """Serves ``host:port`` in a thread of its own; relays to ``ws://127.0.0.1:upstream``."""
+    """Serves ``host:port`` in a thread of its own; relays to ``ws://127.0.0.1:upstream``
+    (``wss://`` with ``upstream_tls``: ``inner_tls.py``)."""
 
     def __init__(self, host: str, port: int, upstream_port: int,
-                 allowed_origins: Sequence[str] = ()) -> None:
-        self.host, self.port, self.upstream = host, port, f"ws://127.0.0.1:{upstream_port}"
+                 allowed_origins: Sequence[str] = (),
+                 upstream_tls: ssl.SSLContext | None = None) -> None:
+        scheme = "ws" if upstream_tls is None else "wss"
+        self.host, self.port = host, port
+        self.upstream = f"{scheme}://127.0.0.1:{upstream_port}"
+        self.upstream_tls = upstream_tls
         self.origins = accepted_origins(allowed_origins)
         self._loop = asyncio.new_event_loop()
         self._server: Server | None = None
@@ -73,7 +79,7 @@ class OriginGate:
         protocols = [client.subprotocol] if client.subprotocol else SUBPROTOCOLS
         try:
             async with connect(self.upstream, subprotocols=protocols, compression=None,
-                               max_size=None, open_timeout=5) as server:
+                               max_size=None, open_timeout=5, ssl=self.upstream_tls) as server:
                 pumps = [asyncio.create_task(_pump(client, server)),
                          asyncio.create_task(_pump(server, client))]
                 _, pending = await asyncio.wait(pumps, return_when=asyncio.FIRST_COMPLETED)
