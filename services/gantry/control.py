@@ -230,16 +230,15 @@ class Controller:
             xyz, rejected, pixel = self._locate(found, crane, captured)
             looked.append(_Looked(captured, image, found, xyz, rejected, pixel,
                                   self._mocap_off(xyz, captured)))
-            if xyz is not None:
-                self._seen = [*self._seen[-1:], (captured, xyz[:2])]
-                self.last_pixel = pixel
         if not looked:  # every picture newer than the crane's reports
             return {}
         chosen = [_agreeing(group, self.tracking_check.tolerance_mm) for group in
                   _by_capture(looked)]
         used = [c for c in chosen if c is not None]
-        for c in used:
-            assert c.xyz is not None
+        for c in used:  # only these move the expectation the next spot is gated by: a
+            assert c.xyz is not None  # copy that loses to its original must not drag it
+            self._seen = [*self._seen[-1:], (c.captured, c.xyz[:2])]
+            self.last_pixel = c.pixel
             self.estimate = self.predictor.update(c.captured, c.xyz[:2], aim_s - c.captured,
                                                   noise[c.captured])
         if used:  # a picture without the robot sets no order (a spoofed one is stamped "now")
