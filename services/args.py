@@ -16,6 +16,8 @@ from common.errors import ConfigError
 from common.setting_text import setting_value
 
 EXIT_CONFIG = 2
+EXIT_DISK = 5
+"""The disk is (nearly) full: what was being written stopped, its file readable."""
 NUMBERS = re.compile(r"^-\.?\d[\d.,eE+-]*$")
 """A value that starts with a minus: -5, -.5, -1e3, -100,200,3000 (a vector)."""
 

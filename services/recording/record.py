@@ -6,7 +6,6 @@ from __future__ import annotations
 import argparse
 import logging
 import queue
-import shutil
 import sys
 import threading
 import time
@@ -31,18 +30,19 @@ from common.mcap_file import RecordWriter
 from common.mjpeg import CameraVideo
 from common.node import stop_on_signals
 from common.settings import LogLevel, ServiceSettings, load_settings
+from services.args import EXIT_DISK
 from services.entry import (
     ToolError,
     checked_key_exprs,
     tool_session,
     tool_settings,
 )
+from services.recording.disk import DiskReserve, DiskWatch
 from services.recording.foxglove import json_copy
 from services.recording.split import SplitRule, part_path
 from services.recording.typed import VIDEO_TOPICS, LabScene
 
 log = logging.getLogger(__name__)
-EXIT_DISK = 5  # the disk is (nearly) full: the recording stopped, its file finished
 DISK_CHECK_S = 0.5  # free space looked at this often
 NO_SPLIT = SplitRule()
 
@@ -65,6 +65,9 @@ class RecordSettings(ServiceSettings):
     min_free_mb: float = Field(64.0, ge=0, description="the recording stops (exit 5) when the "
                                "disk has less free than this, while the file can still be "
                                "finished with its summary")
+    reserve_mb: float = Field(8.0, ge=0, description="room held on the disk (a hidden file "
+                              "beside the recording) from the start and given back to finish "
+                              "the file, should another process fill the disk; 0: none")
     split_mb: float | None = Field(None, gt=0, description="start a new file (each a complete "
                                    "MCAP: run-001.mcap, run-002.mcap, …) at this size")
     split_s: float | None = Field(None, gt=0, description="start a new file after this many "
@@ -242,7 +245,11 @@ class Recorder:
         self._queue.put(None)
         self._thread.join()
         if self.write_error is None:
-            self._writer.finish()
+            try:
+                self._writer.finish()
+            except OSError as err:  # the disk filled up (from outside) while it finished
+                self.write_error = err
+                log.error("cannot finish the recording: %s", err)
 
 
 def video_cameras(names: list[str], args: argparse.Namespace
@@ -302,15 +309,18 @@ def record(args: argparse.Namespace) -> int:
     def next_part() -> IO[bytes]:
         paths.append(part_path(args.out, len(paths) + 1))
         log.info("recording: part %d, %s", len(paths), paths[-1])
-        return open(paths[-1], "wb")
+        return reserve.open(paths[-1])
 
+    reserve = DiskReserve(paths[0].parent)
     try:
-        out = open(paths[0], "wb")  # noqa: SIM115 - closed below, after the writer finished
+        out = reserve.open(paths[0])
     except OSError as err:
         raise ToolError(f"cannot write {paths[0]}: {err}") from err
+    reserve.hold(settings.reserve_mb)
     try:
         session = tool_session(settings)
     except ToolError:
+        reserve.release()
         out.close()
         paths[0].unlink(missing_ok=True)
         raise
@@ -328,12 +338,13 @@ def record(args: argparse.Namespace) -> int:
     recorder.ask_latest()
     videos = [CameraVideo(name, connection, settings.video_fps, settings.video_resolution,
                           recorder.add_video).start() for name, connection in cameras]
-    disk = DiskWatch(paths, settings.min_free_mb, recorder)
+    disk = DiskWatch(paths, settings.min_free_mb, lambda: recorder.write_error, reserve)
     try:
         _wait(recorder, stop, args.duration, settings.progress_s, disk)
     finally:
         for video in videos:
             video.stop()
+        reserve.release()  # the room to finish the file, however full the disk is now
         recorder.close()
         try:
             recorder.out.close()
@@ -348,39 +359,6 @@ def record(args: argparse.Namespace) -> int:
                         f"{' (the parts before it are complete)' if len(paths) > 1 else ''}"
                         " — free space, or record to another disk", EXIT_DISK)
     return 0
-
-
-@dataclass
-class DiskWatch:
-    """Whether the recording must stop for its disk: less free than ``min_free_mb`` (while the
-    file can still be finished), or a write failed (the disk filled up faster)."""
-
-    paths: list[Path]  # the recording's files so far (one, or its parts)
-    min_free_mb: float
-    recorder: Recorder
-    why: str = ""
-
-    @property
-    def folder(self) -> Path:
-        return self.paths[0].parent
-
-    def size_mb(self) -> float:
-        """The recording's size so far, all its parts."""
-        return sum(p.stat().st_size for p in self.paths if p.exists()) / 1e6
-
-    def free_mb(self) -> float:
-        try:
-            return shutil.disk_usage(self.folder).free / 1e6
-        except OSError:
-            return float("inf")
-
-    def full(self) -> bool:
-        if self.recorder.write_error is not None:
-            self.why = f"cannot write: {self.recorder.write_error}"
-        elif (free := self.free_mb()) < self.min_free_mb:
-            self.why = (f"{free:.0f} MB free on {self.folder}, less than [record] "
-                        f"min_free_mb = {self.min_free_mb:g}")
-        return bool(self.why)
 
 
 def _wait(recorder: Recorder, stop: threading.Event, duration: float | None,

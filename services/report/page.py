@@ -4,6 +4,7 @@ command and its documentation): the figures, summary.json and index.html."""
 from __future__ import annotations
 
 import argparse
+import errno
 import html
 import json
 import sys
@@ -18,7 +19,7 @@ from common.heightmap import HeightMap
 from common.lab_views import GantryHeightMap
 from common.mcap_file import RecordingError
 from common.settings import load_settings
-from services.entry import EXIT_CONFIG
+from services.args import EXIT_CONFIG, EXIT_DISK
 from services.report import birdseye, plots
 from services.report.data import Recording, crane_error, moments, read_recording, summary
 from services.report.stills import Moment, write_stills
@@ -116,11 +117,19 @@ def report(args: argparse.Namespace) -> int:
     except (ConfigError, RecordingError, OSError, ValueError) as err:
         print(f"stb report: {err}", file=sys.stderr)
         return EXIT_CONFIG
-    written = write_report(rec, args.out, height_map, args.calib_marker, args.recording)
-    for name, path in written.items():
-        print(f"  {path}" if path else f"  {name}: no data in this recording", file=sys.stderr)
-    if args.video:
-        _video(args, rec)
+    try:
+        written = write_report(rec, args.out, height_map, args.calib_marker, args.recording)
+        for name, path in written.items():
+            print(f"  {path}" if path else f"  {name}: no data in this recording",
+                  file=sys.stderr)
+        if args.video:
+            _video(args, rec)
+    except OSError as err:  # the output's disk full, or a folder it may not write to
+        full = err.errno == errno.ENOSPC
+        print(f"stb report: cannot write the report to {args.out}: {err}"
+              f"{' — free space, or give --out on another disk' if full else ''}",
+              file=sys.stderr)
+        return EXIT_DISK if full else EXIT_CONFIG
     print(f"stb report: {args.out / 'index.html'}", file=sys.stderr)
     return 0
 

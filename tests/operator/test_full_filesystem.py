@@ -21,7 +21,7 @@ from mcap.stream_reader import StreamReader
 from common import keys
 from common import messages as m
 from common.bus import Bus
-from services.recording.record import EXIT_DISK
+from services.args import EXIT_DISK
 from tests.conftest import ROOT, client_settings, open_when_up, wait_for
 from tests.operator.conftest import LiveLab
 
@@ -30,17 +30,25 @@ pytestmark = [pytest.mark.system,
 SIZE_MB = 20
 
 
-def _record_on_small_disk(live_lab: LiveLab, folder: Path, *settings: str
-                          ) -> tuple[int, str, Path]:
-    """``stb record`` into a fresh 20 MB tmpfs; (exit code, stderr, the file copied out)."""
+def _record_on_small_disk(live_lab: LiveLab, folder: Path, *settings: str,
+                          fill_at_bytes: int | None = None) -> tuple[int, str, Path]:
+    """``stb record`` into a fresh 20 MB tmpfs; (exit code, stderr, the file copied out).
+    ``fill_at_bytes``: when the recording is this large, another process fills the disk."""
     disk, kept = folder / "disk", folder / "kept"
     disk.mkdir()
     kept.mkdir()
     record = [sys.executable, "-m", "services.cli", "record", str(disk / "run.mcap"), "--lab",
               str(live_lab.lab), "--duration", "120", "--set", "progress_s=1",
               "--set", f"height_map={live_lab.crater_file}", "--raw-frames", *settings]
-    script = (f"mount -t tmpfs -o size={SIZE_MB}m tmpfs {shlex.quote(str(disk))} || exit 99; "
-              f"{shlex.join(record)}; code=$?; df -m {shlex.quote(str(disk))} >&2; "
+    where, run = shlex.quote(str(disk)), shlex.quote(str(disk / "run.mcap"))
+    recording = shlex.join(record) if fill_at_bytes is None else (
+        # the filler waits (a deadline of 60 s) for the recording to reach its size
+        f"{shlex.join(record)} & pid=$!; t=0; while [ $(stat -c %s {run} 2>/dev/null || echo 0)"
+        f" -lt {fill_at_bytes} ] && kill -0 $pid && [ $t -lt 1200 ]; do sleep 0.05; t=$((t+1));"
+        f" done; dd if=/dev/zero of={shlex.quote(str(disk / 'filler'))} bs=64k 2>/dev/null;"
+        f" echo filled at $(stat -c %s {run}) bytes >&2; wait $pid")
+    script = (f"mount -t tmpfs -o size={SIZE_MB}m tmpfs {where} || exit 99; "
+              f"{recording}; code=$?; df -m {where} >&2; ls -a {where} >&2; "
               f"cp {shlex.quote(str(disk / 'run.mcap'))} {shlex.quote(str(kept))}/; exit $code")
     done = subprocess.run(["unshare", "-m", "sh", "-c", script], cwd=ROOT, capture_output=True,
                           text=True, timeout=180)
@@ -75,9 +83,18 @@ def _lab_goes_on(live_lab: LiveLab) -> None:
         session.close()
 
 
-def test_a_disk_that_fills_up_ends_the_recording_readable_and_the_lab_goes_on(
+def _finished_with(path: Path) -> int:
+    """The messages in the file's summary (the mcap library reads it)."""
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics is not None, "finished: with a summary"
+    return summary.statistics.message_count
+
+
+def test_a_disk_that_fills_up_with_no_room_kept_ends_the_recording_readable_and_the_lab_goes_on(
         live_lab: LiveLab, tmp_path: Path) -> None:
-    code, err, kept = _record_on_small_disk(live_lab, tmp_path, "--set", "min_free_mb=0")
+    code, err, kept = _record_on_small_disk(live_lab, tmp_path, "--set", "min_free_mb=0",
+                                            "--set", "reserve_mb=0")
     assert code == EXIT_DISK, err
     assert "Traceback" not in err
     assert "stopped: cannot write" in err and "No space left on device" in err, err
@@ -92,7 +109,18 @@ def test_the_free_space_floor_stops_it_first_with_the_file_finished(
     code, err, kept = _record_on_small_disk(live_lab, tmp_path, "--set", "min_free_mb=8")
     assert code == EXIT_DISK and "Traceback" not in err, err
     assert "less than [record] min_free_mb = 8" in err and "readable and finished" in err, err
-    with open(kept, "rb") as f:
-        summary = make_reader(f).get_summary()
-    assert summary is not None and summary.statistics.message_count > 100
+    assert _finished_with(kept) > 100
     _lab_goes_on(live_lab)
+
+
+def test_a_disk_another_process_fills_ends_the_recording_finished(
+        live_lab: LiveLab, tmp_path: Path) -> None:
+    """The disk filled from outside faster than the free-space floor is looked at: the room
+    kept beside the recording finishes the file (it ended in a traceback, the file rejected
+    by the mcap reader); exit 5 like a recording that fills the disk itself."""
+    code, err, kept = _record_on_small_disk(live_lab, tmp_path, "--set", "min_free_mb=2",
+                                            fill_at_bytes=1_000_000)
+    assert code == EXIT_DISK and "Traceback" not in err, err
+    assert "filled at" in err and "readable and finished" in err, err
+    assert _finished_with(kept) > 100
+    assert ".stb-record-" not in err, "the room kept is given back"

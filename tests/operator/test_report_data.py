@@ -2,16 +2,23 @@
 
 from __future__ import annotations
 
+import shlex
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from common import codec, keys
 from common import messages as m
 from common.camera import Pose
+from common.mcap_file import RecordWriter
+from services.args import EXIT_DISK
 from services.calib.synthetic import PAPER_POSE, moving_marker
 from services.report.data import Recording, calibration_residuals, crane_error, summary
-from tests.conftest import stb_process
+from tests.conftest import ROOT, stb_process
 
 
 def _pose_msg(pose: Pose, camera: str = "ptz1") -> m.CameraPose:
@@ -101,3 +108,44 @@ def test_the_tracks_are_shown_zoomed_to_where_the_run_went(tmp_path: Path) -> No
     rec.poses["ptz1"] = _pose_msg(PAPER_POSE)
     written = track_plot(rec, None, tmp_path / "tracks.png")
     assert written is not None and written.stat().st_size > 10_000
+
+
+def _small_recording(path: Path) -> None:
+    with open(path, "wb") as f:
+        writer = RecordWriter(f)
+        for i in range(50):
+            t = 1.7e9 + i * 0.1
+            robot = m.RobotPosition(measured_s=t, label="robot", x_mm=float(i), y_mm=0.0,
+                                    z_mm=0.0, vx_mm_s=0.0, vy_mm_s=0.0, vz_mm_s=0.0)
+            writer.write(keys.TRACKER_ROBOT.key(keys.DEFAULT_PREFIX),
+                         codec.encode(robot, sent_s=t), encoding=codec.CONTENT_TYPE,
+                         model="RobotPosition", received_s=t, measured_s=t)
+        writer.finish()
+
+
+def test_a_report_that_cannot_be_written_is_a_clear_error(tmp_path: Path) -> None:
+    """``--out`` a file, not a folder: exit 2 naming it (it ended in a traceback)."""
+    _small_recording(recording := tmp_path / "run.mcap")
+    proc = stb_process("report", str(recording), "--out", str(recording))
+    assert proc.wait(timeout=120) == 2
+    error = proc.stderr.read()
+    assert f"cannot write the report to {recording}" in error and "Traceback" not in error
+
+
+@pytest.mark.skipif(shutil.which("unshare") is None, reason="needs unshare(1)")
+def test_a_report_onto_a_full_disk_exits_5_without_a_traceback(tmp_path: Path) -> None:
+    """``--out`` on a real filesystem (a 1 MB tmpfs of its own) that is full."""
+    _small_recording(recording := tmp_path / "run.mcap")
+    (disk := tmp_path / "disk").mkdir()
+    report = [sys.executable, "-m", "services.cli", "report", str(recording), "--out",
+              str(disk / "report")]
+    script = (f"mount -t tmpfs -o size=1m tmpfs {shlex.quote(str(disk))} || exit 99; "
+              f"dd if=/dev/zero of={shlex.quote(str(disk / 'filler'))} bs=64k 2>/dev/null; "
+              f"{shlex.join(report)}")
+    done = subprocess.run(["unshare", "-m", "sh", "-c", script], cwd=ROOT, capture_output=True,
+                          text=True, timeout=120)
+    if done.returncode == 99:
+        pytest.skip(f"cannot mount a tmpfs here: {done.stderr.strip()}")
+    assert done.returncode == EXIT_DISK, done.stderr
+    assert "No space left on device" in done.stderr and "free space" in done.stderr
+    assert "Traceback" not in done.stderr

@@ -17,7 +17,9 @@ from mcap.reader import make_reader
 from common import keys
 from common import messages as m
 from common.bus import Bus
-from services.recording.record import EXIT_DISK, Recorder
+from services.args import EXIT_DISK
+from services.recording.disk import DiskReserve, DiskWatch
+from services.recording.record import Recorder
 from tests.conftest import stb_process, wait_for
 
 
@@ -78,3 +80,31 @@ def test_a_disk_that_fills_up_stops_the_writing_with_one_error(
     errors = [r for r in caplog.records if r.levelno >= logging.ERROR]
     assert len(errors) == 1 and "cannot write the recording" in errors[0].getMessage()
     assert len(out.getvalue()) <= 300_000
+
+
+def test_a_disk_full_while_the_file_is_finished_ends_without_an_exception(
+        make_bus: Callable[..., Bus]) -> None:
+    """Another process filled the disk after the last sample: the summary cannot be written;
+    close() says so in ``write_error`` (it once ended ``stb record`` in a traceback)."""
+    out = FillingFile(room=10**9)
+    recorder = Recorder(make_bus().session, "stb", ["stb/**"], out)  # type: ignore[arg-type]
+    out.room = out.tell()  # full from here on
+    recorder.close()
+    assert recorder.write_error is not None and recorder.write_error.errno == errno.ENOSPC
+
+
+def test_a_write_that_finds_the_disk_full_spends_the_reserve(tmp_path: Path) -> None:
+    """The room held beside the recording is given back at the first ENOSPC and the write is
+    made again (``/dev/full`` stays full, so that one fails too) and ``spent`` tells why."""
+    reserve = DiskReserve(tmp_path)
+    reserve.hold(1.0)
+    held = list(tmp_path.glob(".stb-record-*.reserve"))
+    assert len(held) == 1 and held[0].stat().st_blocks * 512 >= 1e6, "its blocks allocated"
+    watch = DiskWatch([tmp_path / "run.mcap"], 0.0, lambda: None, reserve)
+    assert not watch.full()
+    with reserve.open(Path("/dev/full")) as full, pytest.raises(OSError) as raised:
+        full.write(b"x" * 10_000)
+        full.flush()
+    assert raised.value.errno == errno.ENOSPC
+    assert reserve.spent is not None and not list(tmp_path.glob(".stb-record-*.reserve"))
+    assert watch.full() and "the disk ran full under it" in watch.why
