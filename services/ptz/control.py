@@ -102,9 +102,12 @@ class PtzControl:
 
     def failed(self, now: float) -> None:
         """The camera failed: wait, twice as long each time in a row; ask its limits again
-        (it may have been replaced or reconfigured)."""
+        (it may have been replaced or reconfigured). Where it comes back is no one's hand
+        (a reboot sends it home): judged from there on, and sent a fresh command."""
         self.retry_at, self.retry_s = now + self.retry_s, doubled(self.retry_s, RETRY_MAX_S)
         self.limits = None
+        self.override.lost_sight()
+        self.follower.forget()
 
     def answered(self) -> None:
         self.retry_s = RETRY_FIRST_S

@@ -11,7 +11,8 @@ Every move the service sends is ours, not only following's: a calibration-mode h
 command too (``own_move``), kept for ``own_move_s`` — long enough for the slowest turn —
 so that a camera still on its way to a hold, or carrying out a hold queued behind its
 latency, is on our path after calibration mode ends; a move to the camera's home (where,
-we do not know) is not judged for ``own_move_s``.
+we do not know) is not judged for ``own_move_s``. A camera that stopped answering is judged
+afresh when it answers again: a reboot sends it home, which is no one's hand.
 """
 
 from __future__ import annotations
@@ -60,6 +61,12 @@ class ManualOverride:
         """The camera was moved by an operator's hand: no pause, no reference."""
         self._commands.clear()
         self._last_seen, self.paused_until, self._blind_until = None, 0.0, 0.0
+
+    def lost_sight(self) -> None:
+        """The camera did not answer (a reboot, a cable): where it is next is no one's hand —
+        no reference until we command it again; a pause under way goes on."""
+        self._commands.clear()
+        self._last_seen, self._blind_until = None, 0.0
 
     def watch_only(self, pan_deg: float, tilt_deg: float) -> None:
         """Where the camera is while not following (calibration mode holds it): seen, not

@@ -180,6 +180,8 @@ class CameraServer:
         self.camera = camera
         self._secret = secrets.token_bytes(16)
         self._closing = threading.Event()
+        self._open: set[socket.socket] = set()  # the clients' connections, cut at close
+        self._open_lock = threading.Lock()
         self._httpd = ThreadingHTTPServer((host, port), self._handler_class())
         self._httpd.daemon_threads = True
         self.port = self._httpd.server_address[1]
@@ -193,9 +195,15 @@ class CameraServer:
         return self
 
     def close(self) -> None:
+        """The camera gone (switched off, rebooting): no new connections, and the open ones
+        (a client's keep-alive) cut."""
         self._closing.set()
         self._httpd.shutdown()
         self._httpd.server_close()
+        with self._open_lock:
+            for connection in self._open:
+                with contextlib.suppress(OSError):  # closed by its client meanwhile
+                    connection.shutdown(socket.SHUT_RDWR)
 
     def _handler_class(self) -> type[StampedHandler]:
         server = self
@@ -212,6 +220,13 @@ class CameraServer:
                 self.rfile.close()  # the plain reader: its reference would keep the socket open
                 self._stamps = StampedReader(self.connection)
                 self.rfile = io.BufferedReader(self._stamps)
+                with server._open_lock:
+                    server._open.add(self.connection)
+
+            def finish(self) -> None:
+                with server._open_lock:
+                    server._open.discard(self.connection)
+                super().finish()
 
             def parse_request(self) -> bool:
                 # The request line has just been read: the command reached the camera when

@@ -89,3 +89,18 @@ def test_a_move_home_is_not_judged_while_it_may_last() -> None:
     assert not override.observe(5.3, 170.0, -45.0), "no command since: nothing to judge by"
     override.commanded(5.4, 160.0, -40.0)
     assert override.observe(5.6, 0.0, 0.0), "judged again after the home move's time"
+
+
+def test_a_camera_back_from_a_reboot_is_judged_afresh_and_a_pause_goes_on() -> None:
+    """It stopped answering and came back home (pan 0, tilt 0), 80° off our path: no one's
+    hand; the next command starts the path from there. A pause under way is kept."""
+    override = ManualOverride(pause_s=30.0)
+    t = _following(override)
+    override.lost_sight()
+    assert not override.observe(t + 5.0, 0.0, 0.0), "home after a reboot"
+    assert not override.paused(t + 5.0)
+    override.commanded(t + 5.1, 80.0, 1.0)
+    assert not override.observe(t + 5.3, 20.0, 0.5), "on its way back to the robot"
+    assert override.observe(t + 6.0, -60.0, 40.0), "judged again once commanded"
+    override.lost_sight()
+    assert not override.observe(t + 7.0, 0.0, 0.0) and override.paused(t + 35.0)

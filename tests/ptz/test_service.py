@@ -29,9 +29,10 @@ MOUNT = Pose(3550, 1090, 2190, 180, 30, 165)
 TARGET = np.array([-300.0, 200.0, 100.0])
 
 
-def _camera_server(port: int, latency_s: float = 0.05) -> CameraServer:
+def _camera_server(port: int, latency_s: float = 0.05, target: np.ndarray = TARGET
+                   ) -> CameraServer:
     t0 = time.monotonic()
-    sim = SimCamera("ptz1", PtzHead(MOUNT, latency_s=latency_s), lambda: TARGET[None, :], [],
+    sim = SimCamera("ptz1", PtzHead(MOUNT, latency_s=latency_s), lambda: target[None, :], [],
                     lambda: time.monotonic() - t0, np.random.default_rng(0))
     return CameraServer(sim, "127.0.0.1", port).start()
 
@@ -85,11 +86,11 @@ def _publish_robot(world: Bus, xyz: np.ndarray) -> None:
         measured_s=time.time(), label="robot", x_mm=xyz[0], y_mm=xyz[1], z_mm=xyz[2],
         vx_mm_s=0.0, vy_mm_s=0.0, vz_mm_s=0.0))
 
-def _following(service: dict, latency_s: float = 0.05, within_deg: float = 0.5
-               ) -> tuple[CameraServer, Callable[[], bool]]:
+def _following(service: dict, latency_s: float = 0.05, within_deg: float = 0.5,
+               target: np.ndarray = TARGET) -> tuple[CameraServer, Callable[[], bool]]:
     """Start the service with a sim camera and the true pose; and the check that it follows
-    the robot at ``TARGET`` (a robot sample sent with each look)."""
-    server = _camera_server(service["port"], latency_s)
+    the robot at ``target`` (a robot sample sent with each look)."""
+    server = _camera_server(service["port"], latency_s, target)
     service["servers"].append(server)
     service["thread"].start()
     world, states = service["world"], service["states"]
@@ -97,7 +98,7 @@ def _following(service: dict, latency_s: float = 0.05, within_deg: float = 0.5
     _publish_pose(service)
 
     def following() -> bool:
-        _publish_robot(world, TARGET)
+        _publish_robot(world, target)
         return bool(states) and states[-1].status == "tracking" and \
             states[-1].aim_error_deg < within_deg
 
@@ -384,6 +385,35 @@ def test_a_move_by_someone_else_pauses_following_then_it_follows_again(service: 
     assert all(s.aim_error_deg > 10 for s in during[-10:]), "left where it was put"
     wait_for(following, timeout=5, period=0.05)
     assert time.monotonic() - moved_at >= 2.0, "the pause lasted"
+
+
+def test_a_camera_that_reboots_is_not_taken_for_a_hand(service: dict) -> None:
+    """The camera goes away and comes back at its home position (a reboot; the sim's
+    restart), 26° off where it looked: not "manual" (it once paused following for 30 s,
+    11–15° off), it follows again at once."""
+    far_side = np.array([0.0, -2500.0, 0.0])
+    assert aim_error_deg(far_side, MOUNT, 0.0, 0.0) > 20.0
+    server, following_first = _following(service, target=far_side)
+    world, states = service["world"], service["states"]
+    wait_for(following_first, timeout=5, period=0.05)
+    since = states[-1].measured_s  # the first move (from home) counts as ours for 1 s more
+    wait_for(lambda: following_first() and states[-1].measured_s > since + 1.2, timeout=5,
+             period=0.05)
+    there = far_side + [300.0, 0.0, 0.0]  # a step on: our path spans no more of home
+
+    def following() -> bool:
+        _publish_robot(world, there)
+        return states[-1].status == "tracking" and states[-1].aim_error_deg < 0.5
+
+    wait_for(following, timeout=5, period=0.05)
+    server.close()
+    wait_for(lambda: states[-1].status == "camera_unreachable", timeout=5,
+             why=lambda: str([s.status for s in states[-5:]]))
+    rebooted = len(states)
+    service["servers"].append(_camera_server(service["port"], target=there))  # at home
+    wait_for(following, timeout=10, period=0.05,
+             why=lambda: str(sorted({s.status for s in states[rebooted:]})))
+    assert "manual" not in {s.status for s in states[rebooted:]}
 
 
 def test_an_operators_hand_holds_moves_and_releases_the_camera(service: dict) -> None:
