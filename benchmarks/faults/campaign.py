@@ -12,6 +12,7 @@ import numpy as np
 import zenoh
 
 from benchmarks.faults.bus_faults import BusFaults
+from benchmarks.faults.file_faults import FileFaults
 from benchmarks.faults.lab import (
     ALIVE,
     open_when_up,
@@ -34,15 +35,15 @@ from common.settings import BusSettings, ZenohSettings
 from services.gantry.settings import GantrySettings
 
 
-class Campaign(BusFaults, ProcessFaults, WebFaults, TrustFaults):
+class Campaign(BusFaults, ProcessFaults, WebFaults, TrustFaults, FileFaults):
     """The operator's side and the bookkeeping; the faults are in the bases."""
 
     def __init__(self, up: subprocess.Popen, meters: Meters, bus: Bus, session: zenoh.Session,
                  short: bool, crane_port: int, web_url: str = "", endpoint: str = "",
-                 folder: Path = Path()) -> None:
+                 folder: Path = Path(), lab: Path = Path()) -> None:
         self.up, self.meters, self.bus, self.session = up, meters, bus, session
         self.short, self.crane_port, self.web_url = short, crane_port, web_url
-        self.endpoint, self.folder = endpoint, folder  # the lab's router; its files
+        self.endpoint, self.folder, self.lab = endpoint, folder, lab  # router; files; lab file
         self.gantry = GantrySettings()
         self.max_age_s = BusSettings().max_age_s
         self.rows: list[Row] = []
@@ -172,7 +173,8 @@ class Campaign(BusFaults, ProcessFaults, WebFaults, TrustFaults):
 
 STEPS = ["quiet", "fuzz", "churn", "bombs", "frames", "pose", "drift", "calibration-flood",
          "command-flood", "origin", "crater-file", "streams", "sign-ins", "viewer-sign-ins",
-         "forwarded-for", "host", "bodies", "report-link", "stalls", "tracker", "modbus", "kill"]
+         "forwarded-for", "host", "bodies", "report-link", "calibration-move", "disk-fill",
+         "crater-import", "stalls", "tracker", "modbus", "camera-reboot", "kill"]
 
 
 def run(short: bool, per_key: int, churn: int, folder: Path,
@@ -185,7 +187,7 @@ def run(short: bool, per_key: int, churn: int, folder: Path,
         meters = Meters(session, bus, ports["crane"])
         try:
             campaign = Campaign(up, meters, bus, session, short, ports["crane"],
-                                f"http://127.0.0.1:{ports['web']}", endpoint, folder)
+                                f"http://127.0.0.1:{ports['web']}", endpoint, folder, lab)
             campaign.log("lab starting; waiting until every service is alive")
             if not wait_until(lambda: all(campaign.meters.pid(s) for s in ALIVE), 90, 0.5):
                 raise SystemExit(f"the lab did not come up: see {folder / 'logs'}")
@@ -215,10 +217,14 @@ def run(short: bool, per_key: int, churn: int, folder: Path,
                 "host": campaign.foreign_host,
                 "bodies": campaign.huge_bodies,
                 "report-link": campaign.report_link,
+                "calibration-move": campaign.calibration_move,
+                "disk-fill": campaign.disk_filled,
+                "crater-import": campaign.crater_imports,
                 "stalls": lambda: [campaign.stall("gantry", seconds) for seconds in
                                    ((0.3, 1.0) if short else (0.3, 1.0, 3.0))],
                 "tracker": lambda: campaign.stall("tracker", 2.0),
                 "modbus": lambda: campaign.foreign_modbus(baseline),
+                "camera-reboot": campaign.camera_reboot,
                 "kill": campaign.kill_each}
             for name in only or list(steps):
                 campaign.follow()  # each fault starts from a crane that follows the robot

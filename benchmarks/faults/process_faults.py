@@ -1,5 +1,5 @@
 """Faults of processes and devices: SIGKILL, SIGSTOP, a router restart, a foreign Modbus
-writer."""
+writer, the cameras rebooting."""
 
 from __future__ import annotations
 
@@ -11,6 +11,8 @@ from pymodbus.client import ModbusTcpClient
 
 from benchmarks.faults.lab import ALIVE, SERVICES, children, cmdline, wait_until
 from benchmarks.faults.rows import (
+    GOAL_AIM_BACK_S,
+    GOAL_AIM_DEG,
     GOAL_ALIVE_S,
     GOAL_FOREIGN_STOP_S,
     GOAL_WATCHDOG_S,
@@ -20,6 +22,7 @@ from benchmarks.faults.rows import (
     quick_restart,
 )
 from common.crane_registers import DEFAULT_MAP, ENABLED, FAULTED
+from tests.calib.test_demo_calibration import MOUNTS
 
 
 class ProcessFaults:
@@ -166,3 +169,45 @@ class ProcessFaults:
             f"the crane after {duration_text(stopped)}; crane x {crane[:, 1].min():.0f}…"
             f"{crane[:, 1].max():.0f} mm, max gap to the robot {worst:.0f} mm (baseline "
             f"{baseline['max_mm']:.0f})", held, {"stopped_s": stopped, "max_gap_mm": worst}))
+
+    def camera_reboot(self) -> None:
+        """The sim killed and started again by ``stb up``: its cameras go away and come back
+        at home, as after a reboot. No camera may be taken for someone else's hand (it sat
+        ``manual`` for 30 s at 11–15° true error), each aims at the robot again (true aim
+        ≤ 1°) within 10 s of answering."""
+        pid, at, at_wall = self.meters.pid("sim"), time.monotonic(), time.time()
+        if pid is None:
+            self.rows.append(Row("camera reboot", "≤ 1° within 10 s", "no sim pid", False))
+            return
+        os.kill(pid, signal.SIGKILL)
+        wait_until(lambda: self.meters.pid("sim") not in (None, pid), 30)
+        started = time.monotonic()  # the new sim's process is up: what comes now is its own
+        cameras = sorted(MOUNTS)
+
+        def back_at(camera: str) -> float | None:
+            """When the camera answered again (its first truth from the new sim)."""
+            return next((t for t, _ in self._aim(camera, started)), None)
+
+        wait_until(lambda: all(back_at(c) is not None for c in cameras), 30)
+        backs = {c: back_at(c) for c in cameras}
+
+        def aimed() -> dict[str, float | None]:
+            return {c: None if (b := backs[c]) is None else self._settled(
+                b, self._aim(c, b), GOAL_AIM_DEG, GOAL_AIM_BACK_S) for c in cameras}
+
+        last = max((b for b in backs.values() if b is not None), default=at)
+        wait_until(lambda: None not in aimed().values(),
+                   max(0.0, last + GOAL_AIM_BACK_S + 1.5 - time.monotonic()), 0.5)
+        aim = aimed()
+        manual = sorted({s.camera for s in self.meters.ptz_states
+                         if s.measured_s >= at_wall and s.status == "manual"})
+        misses = (["manual: " + ", ".join(manual)] if manual else []) + \
+            [f"{c} not back" for c, a in aim.items() if a is None]
+        self.rows.append(Row(
+            "camera reboot", "not taken for a hand (manual); true aim ≤ 1° within 10 s of the "
+            "camera answering", f"the sim killed, both cameras back at home: declared manual: "
+            f"{', '.join(manual) or 'none'}; aim ≤ 1° after " + ", ".join(
+                f"{c} {duration_text(a)}" for c, a in aim.items()), not misses,
+            {"aim_back_s": aim, "manual": manual}, misses))
+        self.log(f"camera reboot: {self.rows[-1].measured}")
+        self.follow(since_s=time.time())  # the crane came back disarmed with the sim

@@ -12,6 +12,7 @@ GOAL_FLAT_MB = 5.0  # the same fault twice more: no service grows by more in bot
 GOAL_POSE_REPORTED_S = 5.0
 GOAL_FOREIGN_STOP_S = 1.0
 POLL_S = 0.01
+GOAL_AIM_DEG, GOAL_AIM_BACK_S = 1.0, 10.0  # every camera back on the robot after a fault
 
 
 @dataclass

@@ -18,7 +18,7 @@ import numpy as np
 import websockets
 
 from benchmarks.faults.lab import ALIVE, ROOT, interrupt, wait_until
-from benchmarks.faults.rows import Row, duration_text
+from benchmarks.faults.rows import GOAL_AIM_BACK_S, GOAL_AIM_DEG, Row, duration_text
 from common import keys
 from common import messages as m
 from common.heightmap import HeightMap
@@ -29,7 +29,6 @@ from tests.conftest import free_port
 from tests.uplab import VIEWER
 from tests.webpage import PageClient
 
-GOAL_AIM_DEG, GOAL_AIM_BACK_S = 1.0, 10.0
 GOAL_CRANE_BACK_S = 5.0
 SETTLED_S = 1.0  # "back" once every sample of this long is within the goal
 DRIFT_PX_S = 15.0  # the spoofed spot's drift: slow enough to pass a gate frame by frame

@@ -1,7 +1,8 @@
 """Faults that come to the operator's page: many live views at once; a flood of wrong
 sign-ins while an operator presses Stop; a viewer's sign-ins by the thousand; wrong sign-ins
 that name another client in X-Forwarded-For; a foreign name in Host; huge bodies before
-sign-in; a report folder's link to a file outside."""
+sign-in; a report folder's link to a file outside; the page's move of a camera in calibration
+mode."""
 
 from __future__ import annotations
 
@@ -14,6 +15,8 @@ from pathlib import Path
 
 from benchmarks.faults.lab import resident_mb, wait_until
 from benchmarks.faults.rows import Row
+from common import keys
+from common import messages as m
 from tests.uplab import OPERATOR, VIEWER
 from tests.webpage import PageClient, basic
 
@@ -242,3 +245,45 @@ class WebFaults:
             {"peak_mb": peak, "before_mb": before, "after_mb": after},
             [] if held else ["memory"]))
         self.log(f"huge bodies: {self.rows[-1].measured}")
+
+    def calibration_move(self) -> None:
+        """ptz1 in calibration mode (a collector's requests, held where it looks): the
+        signed-in operator's page moves it 40° away: refused by the PTZ service, the camera
+        stays at its hold (sim truth) — it once went, and spoiled the passpoints."""
+        page, camera = PageClient(self.web_url), "ptz1"
+        cookie, csrf, _ = page.sign_in(OPERATOR)
+        states = self.meters.ptz_states
+        start_wall, hold = time.time(), next(
+            (s for s in reversed(states) if s.camera == camera), None)
+        pan, tilt = (hold.pan_deg, hold.tilt_deg) if hold else (0.0, -30.0)
+
+        def ask(active: bool) -> None:
+            self.bus.publish(keys.PTZ_CALIBRATION, m.CalibrationMode(
+                measured_s=time.time(), camera=camera, active=active, pan_deg=pan,
+                tilt_deg=tilt, zoom=None, lease_s=2.0), camera=camera)
+
+        def calibrating() -> bool:
+            ask(True)  # the collector's lease, renewed as it would be
+            return any(s.camera == camera and s.status == "calibrating"
+                       and s.measured_s > start_wall for s in states[-20:])
+
+        entered = wait_until(calibrating, 10, 0.3)
+        moved_at = time.monotonic()
+        status = page.request("POST", f"/ptz/{camera}/move", cookie=cookie,
+                              headers={"X-CSRF-Token": csrf},
+                              body={"pan_deg": (pan + 40.0 + 180.0) % 360.0 - 180.0,
+                                    "tilt_deg": tilt})[0]
+        wait_until(lambda: calibrating() and time.monotonic() > moved_at + 2.0, 5, 0.3)
+        heads = [head for head, _ in self.meters.ptz_window(camera, moved_at)]
+        away = max((abs((h.pan_deg - pan + 180.0) % 360.0 - 180.0) for h in heads),
+                   default=float("nan"))
+        ask(False)
+        held = entered and status == 200 and away <= 1.0
+        self.rows.append(Row(
+            "page move in calibration mode", "the camera stays at its hold (≤ 1°)",
+            f"ptz1 held at pan {pan:.1f}° for calibration "
+            f"({'calibrating' if entered else 'NOT calibrating'}); the page's move 40° away "
+            f"answered {status}; the camera's true pan at most {away:.2f}° from the hold over "
+            f"the next 2 s", held, {"entered": entered, "away_deg": away, "status": status},
+            [] if held else ["moved"]))
+        self.log(f"calibration move: {self.rows[-1].measured}")

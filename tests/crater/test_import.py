@@ -7,7 +7,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import laspy
 import numpy as np
 import pytest
 
@@ -17,6 +16,7 @@ from services.crater.grid import grid_points
 from services.sim.scan import ScanOptions, scan
 from services.sim.world import CraterMap
 from tests.conftest import stb_process
+from tests.crater.scans import BROKEN_XYZ, sparse_quantised_scan, sparse_terrain, write_las
 
 TOLERANCE_MM = 5.0
 
@@ -26,15 +26,6 @@ def _cloud(rng: np.random.Generator, n: int = 20_000) -> np.ndarray:
     return np.column_stack([xy, 100.0 + 0.5 * xy[:, 0] - 0.2 * xy[:, 1]])
 
 
-def _las(path: Path, points: np.ndarray, scale: float = 0.001) -> None:
-    header = laspy.LasHeader(point_format=3, version="1.2")
-    header.scales = np.array([scale] * 3)
-    header.offsets = np.floor(points.min(axis=0))
-    las = laspy.LasData(header)
-    las.x, las.y, las.z = points[:, 0], points[:, 1], points[:, 2]
-    las.write(str(path))
-
-
 @pytest.mark.parametrize("name", ["scan.ply", "ascii.ply", "scan.xyz", "scan.csv", "scan.las",
                                   "scan.laz"])
 def test_every_format_reads_back_the_points_it_was_written_with(
@@ -42,7 +33,7 @@ def test_every_format_reads_back_the_points_it_was_written_with(
     points = np.round(_cloud(rng, 500), 2)
     path = tmp_path / name
     if path.suffix in (".las", ".laz"):
-        _las(path, points, scale=0.01)
+        write_las(path, points, scale=0.01)
     else:
         write_points(path, points, ascii_ply=name.startswith("ascii"))
     np.testing.assert_allclose(read_points(path), points, atol=0.006)
@@ -123,7 +114,7 @@ def test_a_bad_file_is_a_clear_error_naming_it(tmp_path: Path, name: str, conten
 
 def test_a_scan_in_metres_is_read_as_metres(tmp_path: Path, rng: np.random.Generator) -> None:
     points = _cloud(rng, 30_000) / 1000.0
-    _las(tmp_path / "scan.las", points)
+    write_las(tmp_path / "scan.las", points)
     out = tmp_path / "out.npz"
     done = subprocess.run([sys.executable, "-m", "services.cli", "crater", "import",
                            str(tmp_path / "scan.las"), "--out", str(out)], capture_output=True,
@@ -135,7 +126,7 @@ def test_a_scan_in_metres_is_read_as_metres(tmp_path: Path, rng: np.random.Gener
 
 def test_a_point_a_world_away_is_a_clear_error_naming_the_file(tmp_path: Path) -> None:
     path = tmp_path / "broken.xyz"
-    path.write_text("0 0 0\n1000 0 0\n0 1000 0\n1000 1000 5\nnan 5 5\n1e300 0 0\n")
+    path.write_text(BROKEN_XYZ)
     done = stb_process("crater", "import", str(path), "--out", str(tmp_path / "out.npz"))
     _, err = done.communicate(timeout=60)
     assert done.returncode == 2 and str(path) in err and "from the scan's origin" in err, err
@@ -147,21 +138,12 @@ def test_a_sparse_scan_quantised_to_a_millimetre_imports_where_it_was(tmp_path: 
     15 mm cells hold the points of one line only, on a line — no plane through them. The
     singular fit once put 70 cells of such a scan 20-301 mm off; now each is the line's own
     fit, within a few millimetres of the truth."""
-    rng = np.random.default_rng(7)
-
-    def terrain(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        return 300 + 0.25 * x - 0.1 * y + 40 * np.sin(x / 400)
-
-    lines = []
-    for y in np.arange(-1000.0, 1000.0, 37.0):
-        x = np.arange(-1000.0, 1000.0, 4.0) + rng.uniform(-1, 1)
-        lines.append(np.column_stack([x, y + 0.002 * x, terrain(x, y + 0.002 * x)]))
-    _las(tmp_path / "sparse.las", np.vstack(lines), scale=1.0)  # in mm, 1 mm steps
+    sparse_quantised_scan(tmp_path / "sparse.las")
     gridded = grid_points(read_points(tmp_path / "sparse.las"), 15.0)
     heights = gridded.heights
     rows, cols = np.indices(heights.heights_mm.shape)
     x = heights.origin_x_mm + cols * heights.resolution_mm
     y = heights.origin_y_mm + rows * heights.resolution_mm
     inside = (np.abs(x) < 950) & (np.abs(y) < 950)
-    off = np.abs(heights.heights_mm - terrain(x, y))[inside & ~gridded.filled]
+    off = np.abs(heights.heights_mm - sparse_terrain(x, y))[inside & ~gridded.filled]
     assert off.size > 5000 and off.max() < 5.0, (off.size, off.max())

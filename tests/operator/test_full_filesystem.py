@@ -5,16 +5,12 @@ when the free-space floor stopped it first); the lab goes on as before."""
 
 from __future__ import annotations
 
-import shlex
 import shutil
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 from mcap.exceptions import McapError
-from mcap.reader import make_reader
 from mcap.records import Message
 from mcap.stream_reader import StreamReader
 
@@ -22,8 +18,9 @@ from common import keys
 from common import messages as m
 from common.bus import Bus
 from services.args import EXIT_DISK
-from tests.conftest import ROOT, client_settings, open_when_up, wait_for
+from tests.conftest import client_settings, open_when_up, wait_for
 from tests.operator.conftest import LiveLab
+from tests.smalldisk import NO_TMPFS, record_on_small_disk, summary_messages
 
 pytestmark = [pytest.mark.system,
               pytest.mark.skipif(shutil.which("unshare") is None, reason="needs unshare(1)")]
@@ -32,29 +29,12 @@ SIZE_MB = 20
 
 def _record_on_small_disk(live_lab: LiveLab, folder: Path, *settings: str,
                           fill_at_bytes: int | None = None) -> tuple[int, str, Path]:
-    """``stb record`` into a fresh 20 MB tmpfs; (exit code, stderr, the file copied out).
-    ``fill_at_bytes``: when the recording is this large, another process fills the disk."""
-    disk, kept = folder / "disk", folder / "kept"
-    disk.mkdir()
-    kept.mkdir()
-    record = [sys.executable, "-m", "services.cli", "record", str(disk / "run.mcap"), "--lab",
-              str(live_lab.lab), "--duration", "120", "--set", "progress_s=1",
-              "--set", f"height_map={live_lab.crater_file}", "--raw-frames", *settings]
-    where, run = shlex.quote(str(disk)), shlex.quote(str(disk / "run.mcap"))
-    recording = shlex.join(record) if fill_at_bytes is None else (
-        # the filler waits (a deadline of 60 s) for the recording to reach its size
-        f"{shlex.join(record)} & pid=$!; t=0; while [ $(stat -c %s {run} 2>/dev/null || echo 0)"
-        f" -lt {fill_at_bytes} ] && kill -0 $pid && [ $t -lt 1200 ]; do sleep 0.05; t=$((t+1));"
-        f" done; dd if=/dev/zero of={shlex.quote(str(disk / 'filler'))} bs=64k 2>/dev/null;"
-        f" echo filled at $(stat -c %s {run}) bytes >&2; wait $pid")
-    script = (f"mount -t tmpfs -o size={SIZE_MB}m tmpfs {where} || exit 99; "
-              f"{recording}; code=$?; df -m {where} >&2; ls -a {where} >&2; "
-              f"cp {shlex.quote(str(disk / 'run.mcap'))} {shlex.quote(str(kept))}/; exit $code")
-    done = subprocess.run(["unshare", "-m", "sh", "-c", script], cwd=ROOT, capture_output=True,
-                          text=True, timeout=180)
-    if done.returncode == 99:
-        pytest.skip(f"cannot mount a tmpfs here: {done.stderr.strip()}")
-    return done.returncode, done.stderr, kept / "run.mcap"
+    code, err, kept = record_on_small_disk(
+        live_lab.lab, folder, "--set", f"height_map={live_lab.crater_file}", *settings,
+        size_mb=SIZE_MB, fill_at_bytes=fill_at_bytes)
+    if code == NO_TMPFS:
+        pytest.skip(f"cannot mount a tmpfs here: {err.strip()}")
+    return code, err, kept
 
 
 def _messages_until_the_end(path: Path) -> int:
@@ -85,10 +65,9 @@ def _lab_goes_on(live_lab: LiveLab) -> None:
 
 def _finished_with(path: Path) -> int:
     """The messages in the file's summary (the mcap library reads it)."""
-    with open(path, "rb") as f:
-        summary = make_reader(f).get_summary()
-    assert summary is not None and summary.statistics is not None, "finished: with a summary"
-    return summary.statistics.message_count
+    count = summary_messages(path)
+    assert count is not None, "finished: with a summary"
+    return count
 
 
 def test_a_disk_that_fills_up_with_no_room_kept_ends_the_recording_readable_and_the_lab_goes_on(
