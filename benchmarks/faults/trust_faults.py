@@ -181,19 +181,28 @@ class TrustFaults:
         obeyed = [r for r in answers if "too many" not in r.detail]
         bound = self.gantry.command_burst + self.gantry.command_per_s * (seconds + 1.0)
         aim, back = self.recovery(armed_at or time.monotonic(), baseline["max_mm"])
+        crane = self.meters.crane_window(start)  # from the flood until the crane is back
+        worst = float(crane[:, 3].max()) if len(crane) else float("nan")
+        refused = [r for r in self.meters.replies
+                   if r.id.startswith("campaign-") and "too many" in r.detail]
         after, misses = self._back_text(aim, back)
         misses = ([] if len(obeyed) <= bound else ["obeyed"]) + \
-            ([] if armed_at is not None else ["operator refused"]) + misses
+            ([] if armed_at is not None and not refused else ["operator refused"]) + misses
+        # the crane's largest gap is a figure, not a goal: the burst's disarms are carried
+        # out (anyone allowed to command may disarm), the crane disabled until the operator
+        # arms again (docs/reliability.md)
         self.rows.append(Row(
             "command flood", f"≤ {self.gantry.command_burst} + {self.gantry.command_per_s:g}/s "
-            "carried out, the rest \"too many\"; the operator's arm taken; crane back ≤ 5 s",
+            "carried out, the rest \"too many\"; the operator never refused; crane back ≤ 5 s",
             f"{FLOOD} disarms under 1000 names from one identity in {seconds:.1f} s: "
             f"{len(answers)} answered, "
             f"{len(obeyed)} carried out (bound {bound:.0f}); the operator's arm taken "
-            f"{duration_text(None if armed_at is None else armed_at - end)} after the flood"
-            f"{after}", not misses,
+            f"{duration_text(None if armed_at is None else armed_at - end)} after the flood, "
+            f"its commands refused as too many: {len(refused)}; crane–robot max {worst:.0f} mm "
+            f"(baseline max {baseline['max_mm']:.0f} mm){after}", not misses,
             {"answered": len(answers), "obeyed": len(obeyed), "aim_back_s": aim,
-             "crane_back_s": back}, misses))
+             "crane_back_s": back, "worst_mm": worst, "operator_refused": len(refused)},
+            misses))
 
     def foreign_origin(self) -> None:
         """``stb foxglove`` against the lab, and a web page from elsewhere that opens a
