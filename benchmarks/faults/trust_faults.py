@@ -218,8 +218,10 @@ class TrustFaults:
                        0.3)
             statuses = {origin: _handshake(port, origin) for origin in
                         ("https://evil.example", "http://localhost:3000", None)}
-            inner = {p: _handshake(p, "https://evil.example")
-                     for p in _listening_ports(proc.pid) if p != port}
+            ports: list[int] = []  # the inner server listens soon after the gate
+            wait_until(lambda: ports.extend(p for p in _listening_ports(proc.pid)
+                                            if p != port and p not in ports) or ports, 10, 0.2)
+            inner = {p: _handshake(p, "https://evil.example") for p in ports}
         finally:
             interrupt(proc, 10)
         ok = statuses == {"https://evil.example": 403, "http://localhost:3000": 101,
@@ -270,15 +272,28 @@ class TrustFaults:
 
 
 def _listening_ports(pid: int) -> list[int]:
-    """The TCP ports a process listens on (its sockets' inodes in /proc/net/tcp)."""
+    """The TCP ports a process listens on (its sockets' inodes in /proc/net/tcp and tcp6); a
+    descriptor closed while they are read is passed over (it once made the list empty)."""
+    inodes = set()
     try:
-        inodes = {os.readlink(f"/proc/{pid}/fd/{fd}")[8:-1] for fd in os.listdir(
-            f"/proc/{pid}/fd") if os.readlink(f"/proc/{pid}/fd/{fd}").startswith("socket:")}
-        lines = Path(f"/proc/{pid}/net/tcp").read_text().splitlines()[1:]
+        fds = os.listdir(f"/proc/{pid}/fd")
     except OSError:
         return []
-    return [int(f[1].split(":")[1], 16) for f in (line.split() for line in lines)
-            if f[3] == "0A" and f[9] in inodes]
+    for fd in fds:
+        try:
+            link = os.readlink(f"/proc/{pid}/fd/{fd}")
+        except OSError:
+            continue  # closed meanwhile
+        if link.startswith("socket:"):
+            inodes.add(link[8:-1])
+    lines = []
+    for table in ("tcp", "tcp6"):
+        try:
+            lines += Path(f"/proc/{pid}/net/{table}").read_text().splitlines()[1:]
+        except OSError:
+            continue
+    return sorted({int(f[1].rsplit(":", 1)[1], 16) for f in (line.split() for line in lines)
+                   if len(f) > 9 and f[3] == "0A" and f[9] in inodes})
 
 
 def _handshake(port: int, origin: str | None) -> int:
