@@ -11,7 +11,8 @@ from pathlib import Path
 
 from mcap.reader import make_reader
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.conftest import ROOT
+
 NO_TMPFS = 99
 """The exit code when the tmpfs could not be mounted (no privileges)."""
 

@@ -15,7 +15,7 @@ from benchmarks.faults.lab import ROOT
 from benchmarks.faults.rows import Row
 from common.heightmap import HeightMap
 from services.args import EXIT_CONFIG, EXIT_DISK
-from tests.crater.scans import BROKEN_XYZ, sparse_quantised_scan, sparse_terrain
+from tests.crater.scans import BROKEN_XYZ, sparse_cells_off, sparse_quantised_scan
 from tests.smalldisk import NO_TMPFS, record_on_small_disk, summary_messages
 
 GOAL_CELL_MM = 20.0  # a cell of an imported scan this far off its ground counts as wrong
@@ -86,9 +86,5 @@ def _crater_import(scan: Path, out: Path) -> subprocess.CompletedProcess:
 
 def _cells_off(path: Path) -> np.ndarray:
     """How far each cell of the imported map inside the scanned square is off its ground."""
-    heights = HeightMap.load(path)
-    rows, cols = np.indices(heights.heights_mm.shape)
-    x = heights.origin_x_mm + cols * heights.resolution_mm
-    y = heights.origin_y_mm + rows * heights.resolution_mm
-    inside = (np.abs(x) < 950) & (np.abs(y) < 950)
-    return np.abs(heights.heights_mm - sparse_terrain(x, y))[inside]
+    off, inside = sparse_cells_off(HeightMap.load(path))
+    return off[inside]

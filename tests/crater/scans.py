@@ -8,6 +8,8 @@ from pathlib import Path
 import laspy
 import numpy as np
 
+from common.heightmap import HeightMap
+
 
 def write_las(path: Path, points: np.ndarray, scale: float = 0.001) -> None:
     """``points`` (N × 3) as a LAS 1.2 file quantised to ``scale``."""
@@ -34,6 +36,15 @@ def sparse_quantised_scan(path: Path, seed: int = 7) -> None:
         x = np.arange(-1000.0, 1000.0, 4.0) + rng.uniform(-1, 1)
         lines.append(np.column_stack([x, y + 0.002 * x, sparse_terrain(x, y + 0.002 * x)]))
     write_las(path, np.vstack(lines), scale=1.0)  # in mm, 1 mm steps
+
+
+def sparse_cells_off(heights: HeightMap) -> tuple[np.ndarray, np.ndarray]:
+    """How far each cell of a map of ``sparse_quantised_scan`` is off its ground, and which
+    cells lie inside the scanned square (a margin from its edge)."""
+    rows, cols = np.indices(heights.heights_mm.shape)
+    x = heights.origin_x_mm + cols * heights.resolution_mm
+    y = heights.origin_y_mm + rows * heights.resolution_mm
+    return np.abs(heights.heights_mm - sparse_terrain(x, y)), (np.abs(x) < 950) & (np.abs(y) < 950)
 
 
 BROKEN_XYZ = "0 0 0\n1000 0 0\n0 1000 0\n1000 1000 5\nnan 5 5\n1e300 0 0\n"
