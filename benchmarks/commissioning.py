@@ -61,7 +61,7 @@ def one(seed: int, folder: Path) -> dict:
             "origin_mm": float(np.hypot(*np.subtract(found["frame"]["origin_mm"],
                                                      crane["origin_mm"]))),
             "yaw_deg": abs(found["frame"]["yaw_deg"] - crane["yaw_deg"]),
-            "focal_pct": abs(fitted.focal_mm / 8.0 - 1) * 100,
+            "focal_pct": abs(fitted.focal_mm / camera["focal_mm"] - 1) * 100,
             "camera_yaw_deg": abs(fitted.yaw_deg - camera["yaw_deg"]),
             "offset_mm": float(np.hypot(*np.subtract(fitted.offset_mm, camera["offset_mm"]))),
             "distortion_px": distortion_difference_px(fitted, TrackingCameraModel(**camera))}

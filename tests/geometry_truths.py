@@ -7,8 +7,11 @@ crater's rim); gantry axes are aligned to a room by eye and tape to a degree or 
 a camera mounted by hand sits 2–4° askew and a few centimetres off the carriage's reference
 (30–60 mm); the lens bends as the 640 × 480 camera of OpenCV's calibration tutorial does (its
 sample chessboard images give k1 −0.29, k2 0.11, p1 0.001, p2 −0.0002, k3 0.04), scaled by
-0.7–1.1 (its corners move 20–35 px); a principal point within 10 px of the image's centre;
-the lens 3.38–3.48 m up."""
+0.7–1.1 (its corners move 20–35 px behind an 8 mm lens, 5–10 px behind 11 mm); a principal
+point within 10 px of the image's centre; the lens 3.38–3.48 m up; its focal length 6–12 mm
+(the code's default is 8 mm; C-mount lenses for a 1/3-inch chip are sold from 2.8 to 50 mm,
+and 6–12 mm see 2.7–1.4 m of ground across the 4.8 mm chip from 3.4 m: the robot and the
+targets stay in view)."""
 
 from __future__ import annotations
 
@@ -38,6 +41,7 @@ def draw_truths(seed: int) -> tuple[dict, dict]:
               "yaw_deg": float(rng.choice([-1.0, 1.0]) * rng.uniform(2.0, 4.0)),
               "offset_mm": (float(reach * np.cos(angle)), float(reach * np.sin(angle))),
               "height_mm": float(rng.uniform(3380.0, 3480.0))}
+    camera["focal_mm"] = float(rng.uniform(6.0, 12.0))
     return crane, camera
 
 

@@ -34,6 +34,7 @@ GATE_PX = 70.0  # a spot this far from where a target should appear is not it
 GRID = (5, 4)  # camera stops per target across the image (columns, rows)
 SPAN = 0.45  # of the image's width and height, each way from its middle
 CENTRAL = 0.6  # the first camera fit takes targets within this share of the image's middle
+REPLAN = 0.05  # a first fit's focal length this far off the lab file's: the stops planned again
 
 
 @dataclass
@@ -172,26 +173,54 @@ def sightings_at(stand_xy: np.ndarray, spots: list[list[Spot]], targets: dict[st
     return out
 
 
-def camera_from_stands(stands: list[tuple[np.ndarray, list[list[Spot]]]],
-                       targets: dict[str, np.ndarray], nominal: TrackingCameraModel,
-                       frame: CraneFrame, height_mm: float, *, max_residual_px: float = 1.0
-                       ) -> CameraFit:
-    """The camera from what each stop saw (where the crane stood in the world, the frames'
-    spots): first without distortion from the targets near the image's middle, where the
-    nominal camera finds them, then everything from every stop, found through that first fit."""
-    def sightings(camera: TrackingCameraModel, central: bool) -> list[Sighting]:
-        out = [s for stand, spots in stands
-               for s in sightings_at(stand, spots, targets, camera, frame)]
-        if not central:
-            return out
-        middle = np.array(camera.principal)
-        size = np.array([camera.width_px, camera.height_px])
-        return [s for s in out if np.all(np.abs(s.pixel - middle) <= CENTRAL * size / 2)]
+Stands = list[tuple[np.ndarray, list[list[Spot]]]]
+"""What each camera stop saw: where the crane stood (world x, y) and the frames' spots."""
 
-    first = fit_camera(sightings(nominal, True), nominal, frame, height_mm, distortion=False,
-                       max_residual_px=10.0)
-    return fit_camera(sightings(first.camera, False), nominal, frame, height_mm,
-                      max_residual_px=max_residual_px)
+
+def survey_camera(visit: Callable[[list[np.ndarray]], Stands], targets: dict[str, np.ndarray],
+                  nominal: TrackingCameraModel, frame: CraneFrame, height_mm: float, *,
+                  max_residual_px: float = 1.0, notes: list[str] | None = None) -> CameraFit:
+    """The camera's lens and mount from the stops ``visit`` takes the crane to (it returns
+    what each saw). The stops are planned with ``nominal``'s focal length so that each target
+    crosses the image's corners; when the first fit's focal length is more than ``REPLAN`` off
+    it (a 12 mm lens where the lab file says 8 sees two thirds of the ground the stops were
+    planned for, and no corner), the stops are planned again with the focal length measured
+    and taken once more, and the camera is fitted from those (a note says so)."""
+    stands = visit(camera_pattern(np.array(list(targets.values())), nominal))
+    first = _first_fit(stands, targets, nominal, frame, height_mm)
+    ratio = first.camera.focal_mm / nominal.focal_mm
+    if abs(ratio - 1.0) > REPLAN:
+        if notes is not None:
+            notes.append(f"camera: the lens measured {first.camera.focal_mm:.2f} mm where the "
+                         f"lab file says {nominal.focal_mm:g} mm; the stops planned again")
+        nominal = nominal.model_copy(update={"focal_mm": first.camera.focal_mm})
+        stands = visit(camera_pattern(np.array(list(targets.values())), nominal))
+    return camera_from_stands(stands, targets, nominal, frame, height_mm,
+                              max_residual_px=max_residual_px)
+
+
+def _first_fit(stands: Stands, targets: dict[str, np.ndarray], nominal: TrackingCameraModel,
+               frame: CraneFrame, height_mm: float) -> CameraFit:
+    """Without distortion, from the targets near the image's middle, where the nominal
+    camera finds them."""
+    middle = np.array(nominal.principal)
+    size = np.array([nominal.width_px, nominal.height_px])
+    central = [s for stand, spots in stands
+               for s in sightings_at(stand, spots, targets, nominal, frame)
+               if np.all(np.abs(s.pixel - middle) <= CENTRAL * size / 2)]
+    return fit_camera(central, nominal, frame, height_mm, distortion=False,
+                      max_residual_px=10.0)
+
+
+def camera_from_stands(stands: Stands, targets: dict[str, np.ndarray],
+                       nominal: TrackingCameraModel, frame: CraneFrame, height_mm: float, *,
+                       max_residual_px: float = 1.0) -> CameraFit:
+    """The camera from what each stop saw: first without distortion (``_first_fit``), then
+    from everything every stop saw, found through that first fit."""
+    first = _first_fit(stands, targets, nominal, frame, height_mm)
+    found = [s for stand, spots in stands
+             for s in sightings_at(stand, spots, targets, first.camera, frame)]
+    return fit_camera(found, nominal, frame, height_mm, max_residual_px=max_residual_px)
 
 
 def confirm(yes: bool, question: str, ask: Callable[[str], str] = input) -> None:

@@ -26,12 +26,12 @@ from services.gantry.commissioning_run import (
 )
 from services.gantry.crane import ModbusCrane
 from services.gantry.first_day import (
+    Stands,
     Watch,
-    camera_from_stands,
-    camera_pattern,
     confirm,
     frame_pattern,
     heartbeat,
+    survey_camera,
 )
 from services.gantry.geometry_fit import CameraFit, FitRefused, FrameFit, fit_frame
 from services.gantry.reading import CraneError
@@ -156,23 +156,26 @@ def _camera(watch: Watch, settings: GantrySettings, frame: CraneFrame, height: f
         "height_mm": height, "principal_px": None, "distortion": (0.0,) * 5, "yaw_deg": 0.0,
         "offset_mm": (0.0, 0.0)})
     targets = watch.mocap(args.targets, seconds=1.0)
-    stops = camera_pattern(np.array(list(targets.values())), nominal)
-    inside = [s for s in stops if np.all(np.abs(frame.to_crane(s) - start) <= args.box / 2)]
-    if len(inside) < len(stops):
-        outcome.notes.append(f"camera: {len(stops) - len(inside)} of {len(stops)} stops lay "
-                             f"outside the ±{args.box / 2:.0f} mm box and were left out")
-    confirm(args.yes, f"camera: move the crane through {len(inside)} stops above the targets "
-                      f"{', '.join(targets)}?")
-    stands: list[tuple[np.ndarray, list]] = []
-    began = time.monotonic()
-    for i, world_xy in enumerate(inside):
-        reading = watch.move(frame.to_crane(world_xy))
-        stand = frame.to_world([reading.x_mm, reading.y_mm])
-        stands.append((stand, watch.spots()))
-        _progress(f"camera stop {i + 1}/{len(inside)}: {sum(map(len, stands[-1][1]))} spots")
-    outcome.motion_s += time.monotonic() - began
-    return camera_from_stands(stands, targets, nominal, frame, height,
-                              max_residual_px=args.max_camera_px)
+
+    def visit(stops: list[np.ndarray]) -> Stands:
+        inside = [s for s in stops if np.all(np.abs(frame.to_crane(s) - start) <= args.box / 2)]
+        if len(inside) < len(stops):
+            outcome.notes.append(f"camera: {len(stops) - len(inside)} of {len(stops)} stops "
+                                 f"lay outside the ±{args.box / 2:.0f} mm box and were left out")
+        confirm(args.yes, f"camera: move the crane through {len(inside)} stops above the "
+                          f"targets {', '.join(targets)}?")
+        stands: Stands = []
+        began = time.monotonic()
+        for i, world_xy in enumerate(inside):
+            reading = watch.move(frame.to_crane(world_xy))
+            stand = frame.to_world([reading.x_mm, reading.y_mm])
+            stands.append((stand, watch.spots()))
+            _progress(f"camera stop {i + 1}/{len(inside)}: {sum(map(len, stands[-1][1]))} spots")
+        outcome.motion_s += time.monotonic() - began
+        return stands
+
+    return survey_camera(visit, targets, nominal, frame, height,
+                         max_residual_px=args.max_camera_px, notes=outcome.notes)
 
 
 def _dynamics(settings: GantrySettings, heights: HeightMap, frame: CraneFrame,
