@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 import services.gantry.control as control
+from common.lab_paths import SIM_CRATER_FILE
 from common.names import ALGORITHMS
 from services.args import Parser
 from services.experiment import gantry as experiment
@@ -98,7 +99,7 @@ def main() -> None:
                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenarios", default="locomotive,walker")
     parser.add_argument("--seeds", default="1,2,3")
-    parser.add_argument("--crater", type=Path, default=Path("run/sim/crater.npz"))
+    parser.add_argument("--crater", type=Path, default=SIM_CRATER_FILE)
     args = parser.parse_args()
     scenarios = args.scenarios.split(",")
     seeds = [int(s) for s in args.seeds.split(",")]

@@ -28,7 +28,7 @@ PAPER = ("basic", "pf-position", "pf-velocity")
 
 
 def one(job: tuple[str, str, int, str | None]) -> dict:
-    from common.lab_paths import DEFAULT_HEIGHT_MAP
+    from common.lab_paths import SIM_CRATER_FILE
     from common.settings import load_settings
     from services.experiment.gantry import run_scenario
     from services.gantry.settings import GantrySettings
@@ -37,7 +37,7 @@ def one(job: tuple[str, str, int, str | None]) -> dict:
     path, algorithm, seed, lab = job
     lab_file = Path(lab) if lab else None
     gantry, sim = load_settings(GantrySettings, lab_file), load_settings(SimSettings, lab_file)
-    summary = run_scenario(path, algorithm, seed=seed, crater_file=DEFAULT_HEIGHT_MAP,  # type: ignore[arg-type]
+    summary = run_scenario(path, algorithm, seed=seed, crater_file=SIM_CRATER_FILE,  # type: ignore[arg-type]
                            gantry=gantry, sim=sim).summary()
     return {"path": path, "seed": seed, **summary}
 

@@ -1,9 +1,10 @@
 """What tools read of another service's lab-file section, defined once here so that no tool
 imports a service: the PTZ cameras and how to reach them (``[ptz] cameras``, which the PTZ
-services, ``stb record --video`` and the recording's video read) and where the crater's
-height map is (``height_map``, read by the gantry, the page, Foxglove, recordings and
-``stb report``). A view reads its fields of a section and leaves the rest to the service
-that owns it."""
+services, ``stb record --video`` and the recording's video read), where the crater's height
+map is (``[gantry] height_map``, read by the gantry, the page, Foxglove, recordings and
+``stb report``) and the sim's own crater (``[sim] crater_file``, for ``stb up``'s first
+start). A view reads its fields of a section and leaves the rest to the service that owns
+it."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from typing import TYPE_CHECKING, ClassVar, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, SecretStr
 
-from common.lab_paths import DEFAULT_HEIGHT_MAP
+from common.lab_paths import DEFAULT_HEIGHT_MAP, SIM_CRATER_FILE
 from common.settings import ServiceSettings
 
 if TYPE_CHECKING:  # httpx is imported where a camera is reached, not by tools that only read
@@ -71,3 +72,12 @@ class GantryHeightMap(ServiceSettings):
     section: ClassVar[str] = "gantry"
 
     height_map: Path = DEFAULT_HEIGHT_MAP
+
+
+class SimCraterFile(ServiceSettings):
+    """``[sim] crater_file`` alone: the sim's own crater (its truth)."""
+
+    model_config = ConfigDict(extra="ignore", frozen=True, validate_default=True)
+    section: ClassVar[str] = "sim"
+
+    crater_file: Path = SIM_CRATER_FILE

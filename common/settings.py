@@ -1,7 +1,8 @@
 """Settings of every service: one lab config file plus environment variables, validated once.
 
-Precedence, lowest first: defaults < the lab file (``[bus]`` for everyone, then the service's own
-``[<section>]`` table) < environment (``STB_BUS__<FIELD>`` for everyone, then
+Precedence, lowest first: defaults < the lab file (``[bus]`` for everyone, a field another
+section names for the whole lab (``borrowed``: the crater's ``[gantry] height_map``), then the
+service's own ``[<section>]`` table) < environment (``STB_BUS__<FIELD>`` for everyone, then
 ``STB_<SECTION>__<FIELD>``; nested fields with ``__``; lists and tables as JSON) < command-line
 overrides. With no configuration at all a service runs against the simulator on loopback.
 
@@ -143,6 +144,10 @@ class ServiceSettings(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
     section: ClassVar[str] = "service"
+    borrowed: ClassVar[dict[str, str]] = {}
+    """Fields that another section names for the whole lab: field → that section (e.g. the
+    crater's height map, ``[gantry] height_map``, which the page and the recorders draw).
+    Taken from there when the service's own section does not set it."""
 
     instance: str = Field("main", pattern=r"^[A-Za-z0-9_.-]{1,64}$")
     log_level: LogLevel = "INFO"
@@ -171,7 +176,12 @@ def load_settings(
     if config_file is not None:
         lab = read_lab_file(config_file)
         _deep_merge(merged, {"bus": lab.get("bus", {})})
-        _deep_merge(merged, lab.get(cls.section, {}))
+        own = lab.get(cls.section, {})
+        for name, section in cls.borrowed.items():
+            other = lab.get(section, {})
+            if isinstance(other, dict) and name in other and name not in own:
+                merged[name] = other[name]
+        _deep_merge(merged, own)
     _deep_merge(merged, {"bus": _env("STB_BUS__", environ)})
     _deep_merge(merged, _env(f"STB_{cls.section.upper()}__", environ))
     _deep_merge(merged, dict(overrides or {}))

@@ -7,8 +7,8 @@ cells of --cell-mm (15), a plane fitted in each cell; cells the scanner did not 
 by interpolation from their neighbours and reported (how many, and the largest hole), and
 --plot draws the map with the filled cells marked. --units: the file's length unit (auto:
 metres if the scan spans less than 50 units, else millimetres). The map is written with the
-filled cells marked (``filled``, beside the heights). Then point [gantry]
-height_map (and [web] height_map) at the output. Exit status: 0 written, 2 a bad file or
+filled cells marked (``filled``, beside the heights). Then point [gantry] height_map at the
+output (the page and the recorders read it too). Exit status: 0 written, 2 a bad file or
 argument.
 """
 

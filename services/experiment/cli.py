@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 from common.errors import ConfigError
-from common.lab_paths import DEFAULT_HEIGHT_MAP
+from common.lab_paths import SIM_CRATER_FILE
 from common.names import ALGORITHMS
 from services.args import Parser, plain
 from services.experiment.paper import TABLES
@@ -98,7 +98,7 @@ def _parser() -> argparse.ArgumentParser:
     for sub in (g, i):
         sub.add_argument("--lab", type=Path, metavar="FILE",
                          help="the lab file: its [gantry] and [sim] settings (else defaults)")
-        sub.add_argument("--crater", type=Path, default=DEFAULT_HEIGHT_MAP,
+        sub.add_argument("--crater", type=Path, default=SIM_CRATER_FILE,
                          help="height map (made from the sim's default seed if missing)")
     return parser
 

@@ -82,13 +82,13 @@ def run(node: Node[GantrySettings]) -> None:
 
 
 def _height_map(node: Node[GantrySettings]) -> HeightMap | None:
-    """The crater's height map. Not there yet (a fresh lab: the sim writes it as it starts),
-    it is waited for, saying so in the health; a file that is there but not a height map
-    stops the start (exit 4, naming the field)."""
+    """The crater's height map. Not there yet (a fresh simulated lab: ``stb up`` imports the
+    sim's scan as it starts), it is waited for, saying so in the health; a file that is there
+    but not a height map stops the start (exit 4, naming the field)."""
     path = node.settings.height_map
     if not path.exists():
-        log.warning("waiting for gantry.height_map %s (the sim writes it as it starts; a real "
-                    "lab's comes from stb crater import)", path)
+        log.warning("waiting for gantry.height_map %s (a simulated lab's first stb up makes "
+                    "it from the sim's scan; a real lab's comes from stb crater import)", path)
         node.set_status("degraded", f"waiting for the crater height map {path}")
         while not path.exists():
             if node.stop.wait(0.2):

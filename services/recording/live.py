@@ -39,13 +39,15 @@ JSON_PREFIX = "json/"
 
 class FoxgloveSettings(ServiceSettings):
     section = "foxglove"
+    borrowed = {"height_map": "gantry"}  # the lab's crater, named once
 
     log_level: LogLevel = "WARNING"
     host: str = Field("127.0.0.1", description="address to serve Foxglove on; 0.0.0.0 for the "
                       "lab LAN")
     port: int = Field(8765, ge=0, le=65535, description="Foxglove's default is 8765")
     height_map: Path | None = Field(DEFAULT_HEIGHT_MAP, description="the crater in "
-                                    "the 3D scene (.npz); missing: a scene without it")
+                                    "the 3D scene (.npz; [gantry] height_map unless set here); "
+                                    "missing: a scene without it")
     scene_hz: float = Field(10.0, gt=0, le=100, description="3D scene updates a second")
     allowed_origins: list[str] = Field([], description="web pages (their Origin, e.g. "
                                        "\"https://app.foxglove.dev\") that may connect besides "

@@ -49,6 +49,7 @@ NO_SPLIT = SplitRule()
 
 class RecordSettings(ServiceSettings):
     section = "record"
+    borrowed = {"height_map": "gantry"}  # the lab's crater, named once
 
     log_level: LogLevel = "WARNING"
     progress_s: float = Field(5.0, gt=0, description="a progress line this often (stderr)")
@@ -56,7 +57,8 @@ class RecordSettings(ServiceSettings):
     typed: bool = Field(True, description="also write Foxglove's typed channels: the 3D "
                         "scene, camera transforms, images and their annotations")
     height_map: Path | None = Field(DEFAULT_HEIGHT_MAP, description="the crater in "
-                                    "the 3D scene (.npz); missing: a scene without it")
+                                    "the 3D scene (.npz; [gantry] height_map unless set here); "
+                                    "missing: a scene without it")
     video: list[str] = Field(default_factory=list, description="cameras of [ptz.cameras] whose "
                              "video (VAPIX MJPEG) goes into the recording on video/<camera>")
     video_fps: float = Field(5.0, gt=0, le=30, description="video frames a second per camera")

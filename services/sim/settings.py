@@ -13,7 +13,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from common.crane_frame import CraneFrame
 from common.crane_registers import RegisterMap
-from common.lab_paths import DEFAULT_HEIGHT_MAP
+from common.lab_paths import SIM_CRATER_FILE
 from common.lens import NO_DISTORTION
 from common.ptz_lens import STRAIGHT_LINE, PtzLens, ZoomCurve
 from common.settings import ServiceSettings, above_its_minimum
@@ -237,7 +237,7 @@ class SimSettings(ServiceSettings):
                                "(commissioning: stb gantry identify)")
     loop: bool = Field(True, description="start the scenario again when it ends")
     seed: int = 1
-    crater_file: Path = Field(DEFAULT_HEIGHT_MAP,
+    crater_file: Path = Field(SIM_CRATER_FILE,
                               description="height map; generated from the seed if missing")
     truth_rate_hz: float = Field(20.0, gt=0, le=200)
     calibrate_first: list[str] = Field(

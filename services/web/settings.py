@@ -15,6 +15,7 @@ from common.settings import ServiceSettings
 
 class WebSettings(ServiceSettings):
     section = "web"
+    borrowed = {"height_map": "gantry"}  # the lab's crater, named once
 
     host: str = Field("127.0.0.1", description="address to listen on; 0.0.0.0 for the lab LAN "
                       "(needs users_file)")
@@ -42,7 +43,8 @@ class WebSettings(ServiceSettings):
                                    "started from the page collects")
     height_map: Path | None = Field(DEFAULT_HEIGHT_MAP,
                                     description="crater height map (.npz) drawn under the "
-                                    "tracks; missing file: a plain grid")
+                                    "tracks ([gantry] height_map unless set here); missing "
+                                    "file: a plain grid")
     track_s: float = Field(60.0, gt=0, le=3600, description="robot track shown, seconds")
     history_s: float = Field(300.0, gt=0, le=3600, description="crane error and sideways "
                              "pull plotted, seconds")
