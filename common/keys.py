@@ -156,6 +156,21 @@ def alive_pattern(prefix: str) -> str:
     return f"{prefix}/alive/**"
 
 
+RECORDING = "recording/{recorder}"
+"""Liveliness tokens (no payload) held by each running recording (``stb record``, the page's
+too): while one is there the PTZ cameras leave their IR-cut filter alone (the pointing check's
+switch flickers in the video; ``[ptz] pointing_infrared_while_recording``). Apart from
+``alive/``: a recording that ends is no service gone."""
+
+
+def recording_key(prefix: str, recorder: str) -> str:
+    return f"{prefix}/{RECORDING.format(recorder=recorder)}"
+
+
+def recording_pattern(prefix: str) -> str:
+    return f"{prefix}/recording/*"
+
+
 def parse_alive(prefix: str, key: str) -> tuple[str, str] | None:
     """(service, instance) of a liveliness key, or None if it is not one."""
     parts = key.split("/")

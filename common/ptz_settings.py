@@ -45,9 +45,16 @@ class PtzSettings(ServiceSettings):
     pointing_persist: int = Field(2, ge=1, le=100, description="this many disagreeing previews "
                                   "in a row degrade the service's status")
     pointing_infrared_s: float = Field(
-        2.0, ge=0, description="a preview in infrared (IR-cut filter off for one snapshot: the "
-        "markers bright) this often, for the pointing check; 0 = never (then it judges only "
-        "previews that show markers anyway)")
+        300.0, ge=0, description="a preview in infrared (IR-cut filter off for one snapshot: "
+        "the markers bright) this often for the pointing check, and at once for a new pose or "
+        "a camera back; each is a mechanical switch, seen in the video; 0 = never (then it "
+        "judges only previews that show markers anyway)")
+    pointing_confirm_s: float = Field(
+        2.0, gt=0, description="the next infrared preview this soon while the latest one "
+        "disagreed with the pose (a wrong pose reported within seconds, and its end seen)")
+    pointing_infrared_while_recording: bool = Field(
+        False, description="infrared previews while a recording runs (stb record, the "
+        "page's); off: the filter is left alone then, and the pointing check waits")
     preview_hz: float = Field(2.0, ge=0, le=5, description="preview snapshots a second while "
                               "following (stb/ptz/{camera}/preview); 0 = none")
     calibration_snapshot_hz: float = Field(10.0, gt=0, le=30,

@@ -12,7 +12,7 @@ are drivers beside it.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -23,7 +23,7 @@ from common.ptz_lens import PtzLens, measured_lens
 from services.ptz.aim import aim_error_deg
 from services.ptz.follow import Command, Follower
 from services.ptz.override import ManualOverride
-from services.ptz.pointing import NOT_SEEN, PointingCheck
+from services.ptz.pointing import NOT_SEEN, InfraredSchedule, PointingCheck
 
 log = logging.getLogger(__name__)
 RETRY_FIRST_S = 0.5
@@ -49,6 +49,7 @@ class PtzControl:
     pointing: PointingCheck
     name: str = "ptz"
     max_future_s: float = 1.0
+    infrared: InfraredSchedule = field(default_factory=lambda: InfraredSchedule(0.0, 0.0))
     pose_msg: m.CameraPose | None = None
     pose: Pose | None = None  # converted once, when it arrives (robot samples come at 1 kHz)
     robot: m.RobotPosition | None = None
@@ -75,6 +76,7 @@ class PtzControl:
                 self.pose_msg.model_dump(exclude={"sent_s"}):
             return "same"
         self.pointing.forget()
+        self.infrared.again()
         self.pose_msg, self.pose = msg, Pose.of(msg)
         self.follower.lens = measured_lens(
             [(p.zoom, p.focal_mm, p.distortion) for p in msg.lens])
@@ -108,6 +110,16 @@ class PtzControl:
         self.limits = None
         self.override.lost_sight()
         self.follower.forget()
+        self.infrared.again()
+
+    def infrared_due(self, now: float, recording: bool) -> bool:
+        """Whether the preview about to be taken goes in infrared for the pointing check
+        (``InfraredSchedule``); if so, it counts as taken."""
+        if self.pose is None or not self.infrared.due(
+                now, doubting=self.pointing.doubting(), recording=recording):
+            return False
+        self.infrared.taken(now)
+        return True
 
     def answered(self) -> None:
         self.retry_s = RETRY_FIRST_S

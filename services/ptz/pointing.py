@@ -9,7 +9,8 @@ marker is then far from where the pose puts it, or not in the picture at all.
 
 The robot's retro-reflective marker is bright only when the camera sees infrared (IR-cut
 filter off): so a preview without any marker counts only if it was taken in infrared (the
-preview loop takes one every ``pointing_infrared_s``), and while infrared previews are taken,
+preview loop takes one when ``InfraredSchedule`` says a check is due), and while infrared
+previews are taken,
 only they are judged: in daylight the bright spots found are reflections and other lights
 (with previews at 2 Hz and an infrared one every 2 s, three daylight previews in a row that
 showed a reflection far from the robot made a problem of a camera that pointed right).
@@ -22,6 +23,7 @@ row make a problem, and one agreeing preview ends it.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -73,18 +75,24 @@ class PointingCheck:
         self.error_deg: float | None = None  # of the latest judged preview
         self._misses = 0
 
-    def observe(self, preview: m.PtzPreview, intr: Intrinsics, infrared: bool) -> None:
+    def observe(self, preview: m.PtzPreview, intr: Intrinsics, infrared: bool) -> bool:
+        """Judge ``preview``; False when there was nothing to judge in it."""
         if not infrared and not self.daylight:
-            return
+            return False
         error = pointing_error_deg(preview, intr, self.min_radius_px)
         if error is None or (error == NOT_SEEN and not infrared):
-            return
+            return False
         self.error_deg = error
         self._misses = self._misses + 1 if error > self.tolerance_deg else 0
+        return True
 
     def forget(self) -> None:
         """A new pose: what was measured with the old one no longer counts."""
         self.error_deg, self._misses = None, 0
+
+    def doubting(self) -> bool:
+        """The latest judged preview disagreed (a problem, or on the way to one)."""
+        return self._misses > 0
 
     def problem(self) -> str | None:
         """Why the camera's pointing is not to be trusted, or None."""
@@ -98,3 +106,49 @@ class PointingCheck:
         return (f"pointing: the nearest marker seen {self.error_deg:.1f}° from where the pose "
                 f"puts the robot's in {self._misses} previews in a row (wrong pose? the robot "
                 f"hidden?)")
+
+
+@dataclass
+class InfraredSchedule:
+    """When the next preview is taken in infrared for the check. The IR-cut filter is a
+    mechanical switch: each switch wears it and flickers the camera's video, so it is switched
+    only when a check is due — at the first preview with a pose, and again for each new pose
+    or after the camera was lost (``again``); then every ``every_s`` (minutes); every
+    ``confirm_s`` while the latest judged preview disagreed, so that a wrong pose is reported
+    (and its end seen) within seconds; never while a recording runs unless
+    ``while_recording``. An infrared preview that judged nothing (the robot out of the
+    picture, its marker too small there) is tried again after ``confirm_s``, then twice as
+    long each time, up to ``every_s``. ``every_s`` 0: never."""
+
+    every_s: float
+    confirm_s: float
+    while_recording: bool = False
+    last_s: float | None = None  # when the latest infrared preview was taken
+    _judged: bool = False  # and it judged the pose
+    _retry_s: float = 0.0  # the wait after one that did not
+
+    def due(self, now: float, *, doubting: bool, recording: bool) -> bool:
+        if self.every_s <= 0 or (recording and not self.while_recording):
+            return False
+        if self.last_s is None:
+            return True
+        if doubting:
+            wait = self.confirm_s
+        elif not self._judged:
+            wait = self._retry_s
+        else:
+            wait = self.every_s
+        return now - self.last_s >= min(wait, self.every_s)
+
+    def taken(self, now: float) -> None:
+        self._retry_s = self.confirm_s if self._judged or self.last_s is None else \
+            2 * self._retry_s
+        self.last_s, self._judged = now, False
+
+    def judged(self) -> None:
+        """The infrared preview just taken judged the pose."""
+        self._judged = True
+
+    def again(self) -> None:
+        """Check at the next preview (a new pose, the camera back)."""
+        self.last_s, self._judged = None, False

@@ -60,15 +60,16 @@ class PreviewLoop:
                  mount: Callable[[], Pose | None], robot: Callable[[], m.RobotPosition | None],
                  lens: Callable[[], PtzLens],
                  paused: Callable[[], bool], stop: threading.Event,
-                 infrared_every_s: float = 0.0,
+                 infrared: Callable[[float], bool] = lambda _now: False,
                  marker_diameter_mm: float = PAPER_MARKER_MM) -> None:
         """``publish(preview, intrinsics, infrared)``: the preview, the lens it was taken
         through (``lens()`` at its zoom), and whether the IR-cut filter was off for it (the
-        markers bright). Every ``infrared_every_s`` (0: never) a preview is taken with the
-        filter off, for the pointing check, and the filter is set back to auto right after.
-        ``marker_diameter_mm``: the robot marker's, for how large it should appear."""
+        markers bright). When ``infrared(now)`` says so (the pointing check's schedule:
+        ``PtzControl.infrared_due``) a preview is taken with the filter off, and the filter is
+        set back to auto right after. ``marker_diameter_mm``: the robot marker's, for how
+        large it should appear."""
         self.camera, self.period_s, self.publish = camera, period_s, publish
-        self.infrared_every_s, self._infrared_due = infrared_every_s, 0.0
+        self.infrared = infrared
         self.marker_diameter_mm = marker_diameter_mm
         self.mount, self.robot, self.paused, self.stop = mount, robot, paused, stop
         self.lens = lens
@@ -98,10 +99,8 @@ class PreviewLoop:
                 self._failing = True
 
     def _take_maybe_in_infrared(self) -> tuple[m.PtzPreview, Intrinsics, bool]:
-        now = time.monotonic()
-        if self.infrared_every_s <= 0 or now < self._infrared_due:
+        if not self.infrared(time.time()):
             return *self.take(), False
-        self._infrared_due = now + self.infrared_every_s
         self.camera.set_ir_cut_filter("off")
         try:
             return *self.take(), True

@@ -20,6 +20,8 @@ import logging
 import threading
 import time
 
+import zenoh
+
 from common import codec, keys
 from common import messages as m
 from common.camera import Intrinsics, PtzLimits
@@ -31,7 +33,7 @@ from services.ptz.camera import AxisPtzCamera, PtzCamera, PtzError, http_client
 from services.ptz.control import PtzControl
 from services.ptz.follow import Follower
 from services.ptz.override import ManualOverride
-from services.ptz.pointing import PointingCheck
+from services.ptz.pointing import InfraredSchedule, PointingCheck
 from services.ptz.pose_source import PoseAsking, choose
 from services.ptz.preview import PreviewLoop
 
@@ -67,6 +69,8 @@ def run(node: Node[PtzSettings], camera: PtzCamera | None = None) -> None:
     # latest wins: a burst of requests is not queued up to move the camera for seconds after
     node.bus.subscribe(keys.PTZ_CALIBRATION, loop.on_calibration, latest=True, camera=name)
     node.bus.subscribe(keys.PTZ_HAND, loop.on_hand, latest=False, camera=name)
+    recordings = node.bus.session.liveliness().declare_subscriber(
+        keys.recording_pattern(node.bus.prefix), loop.on_recording, history=True)
     preview = None
     if settings.preview_hz > 0:
         preview = PreviewLoop(
@@ -75,12 +79,13 @@ def run(node: Node[PtzSettings], camera: PtzCamera | None = None) -> None:
             mount=lambda: loop.control.pose, robot=lambda: loop.control.robot,
             lens=lambda: loop.control.lens,
             paused=lambda: loop.calibration.active(time.time()), stop=node.stop,
-            infrared_every_s=settings.pointing_infrared_s,
+            infrared=loop.infrared_now,
             marker_diameter_mm=settings.robot_marker_mm)
         preview.start()
     try:
         loop.run()
     finally:
+        recordings.undeclare()
         if preview is not None:
             preview.join(timeout=2 * settings.timeout_s)
 
@@ -103,7 +108,9 @@ class _Loop:
             PointingCheck(settings.pointing_tolerance_deg, settings.pointing_persist,
                           daylight=settings.pointing_infrared_s == 0,
                           min_radius_px=settings.pointing_min_marker_px),
-            name=camera.name, max_future_s=settings.bus.max_future_s)
+            name=camera.name, max_future_s=settings.bus.max_future_s,
+            infrared=InfraredSchedule(settings.pointing_infrared_s, settings.pointing_confirm_s,
+                                      settings.pointing_infrared_while_recording))
         self.lock = threading.Lock()
         name = settings.instance
         self.calibration = CalibrationHold(
@@ -116,12 +123,25 @@ class _Loop:
         self.presets: list[str] = []
         self.presets_due = 0.0
         self.asking = PoseAsking()
+        self.recordings: set[str] = set()  # the keys of the recordings running
+
+    def on_recording(self, sample: zenoh.Sample) -> None:
+        """A recording began or ended (its liveliness token, ``keys.RECORDING``)."""
+        with self.lock:
+            (self.recordings.add if sample.kind == zenoh.SampleKind.PUT
+             else self.recordings.discard)(str(sample.key_expr))
+
+    def infrared_now(self, now: float) -> bool:
+        """The preview loop's question: this preview in infrared?"""
+        with self.lock:
+            return self.control.infrared_due(now, recording=bool(self.recordings))
 
     def on_preview(self, preview: m.PtzPreview, intr: Intrinsics, infrared: bool) -> None:
         """Publish it, and judge from it how well the camera points (services/ptz/pointing)."""
         self.node.bus.publish(keys.PTZ_PREVIEW, preview, camera=self.settings.instance)
         with self.lock:
-            self.control.pointing.observe(preview, intr, infrared)
+            if self.control.pointing.observe(preview, intr, infrared) and infrared:
+                self.control.infrared.judged()
 
     def ask_pose(self) -> None:
         """Ask the calibration service for the camera's pose when it is due; take its answer

@@ -5,7 +5,10 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import queue
+import re
+import socket
 import sys
 import threading
 import time
@@ -326,6 +329,9 @@ def record(args: argparse.Namespace) -> int:
         out.close()
         paths[0].unlink(missing_ok=True)
         raise
+    # while it records, the PTZ cameras leave their IR-cut filter alone (keys.RECORDING)
+    token = session.liveliness().declare_token(
+        keys.recording_key(settings.bus.prefix, _recorder_id()))  # held: dropped, it goes
     stop = threading.Event()
     restore = stop_on_signals(stop)
     metadata = {"prefix": settings.bus.prefix, "key_exprs": " ".join(exprs),
@@ -348,6 +354,7 @@ def record(args: argparse.Namespace) -> int:
             video.stop()
         reserve.release()  # the room to finish the file, however full the disk is now
         recorder.close()
+        token.undeclare()
         try:
             recorder.out.close()
         except OSError as err:  # the rest of a full disk's buffer
@@ -361,6 +368,12 @@ def record(args: argparse.Namespace) -> int:
                         f"{' (the parts before it are complete)' if len(paths) > 1 else ''}"
                         " — free space, or record to another disk", EXIT_DISK)
     return 0
+
+
+def _recorder_id() -> str:
+    """This recording's name on the bus: the host's and the process's."""
+    host = re.sub(r"[^A-Za-z0-9_.-]", "-", socket.gethostname())[:48] or "host"
+    return f"{host}-{os.getpid()}"
 
 
 def _wait(recorder: Recorder, stop: threading.Event, duration: float | None,

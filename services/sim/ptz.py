@@ -44,6 +44,7 @@ class PtzHead:
     zoom_steps_s: float = 4000.0
     latency_s: float = 0.12
     ir_cut_filter: str = "auto"
+    ir_cut_moves: int = 0  # how often the filter moved in or out (a mechanical switch)
     _time: float = 0.0
     _pan: _Axis = field(default_factory=lambda: _Axis(0.0, 0.0))
     _tilt: _Axis = field(default_factory=lambda: _Axis(0.0, 0.0))
@@ -51,6 +52,12 @@ class PtzHead:
     _pending: list[tuple[float, str, tuple]] = field(default_factory=list)
 
     # --- commands (take effect after the latency) -----------------------------------------
+
+    def set_ir_cut_filter(self, mode: str) -> None:
+        """VAPIX ``ircutfilter``: on, off or auto (the sim's lab is lit: auto keeps it in)."""
+        if (mode == "off") != (self.ir_cut_filter == "off"):
+            self.ir_cut_moves += 1
+        self.ir_cut_filter = mode
 
     def absolute(self, now: float, pan: float | None = None, tilt: float | None = None,
                  zoom: float | None = None, speed: float | None = None) -> None:

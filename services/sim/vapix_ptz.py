@@ -193,7 +193,7 @@ def _move(args: Mapping[str, str], head: PtzHead, memory: CameraMemory, now: flo
     if "ircutfilter" in args:
         if args["ircutfilter"] not in ("on", "off", "auto"):
             raise BadArgument(f'ircutfilter: invalid value "{args["ircutfilter"]}"')
-        head.ir_cut_filter = args["ircutfilter"]
+        head.set_ir_cut_filter(args["ircutfilter"])
     speed = number(args, "speed")
     if speed is not None and not 1 <= speed <= 100:
         raise BadArgument(f'speed: invalid value "{args["speed"]}"')

@@ -9,7 +9,7 @@ from common.camera import Pose, PtzLimits
 from services.ptz.control import RETRY_FIRST_S, RETRY_MAX_S, PtzControl
 from services.ptz.follow import Follower
 from services.ptz.override import ManualOverride
-from services.ptz.pointing import PointingCheck
+from services.ptz.pointing import InfraredSchedule, PointingCheck
 
 MOUNT = Pose(3550.0, 1090.0, 2190.0, 180.0, 30.0, 165.0)
 
@@ -124,3 +124,21 @@ def test_someone_elses_move_pauses_following_and_says_manual() -> None:
     back = control.status(231.0, command.pan_deg + 40.0, command.tilt_deg, calibrating=False)
     assert back.status == "tracking" and not control.manual
     assert control.command(_robot(231.0, x=500.0), 231.0, calibrating=False) is not None
+
+
+def test_an_infrared_check_is_due_with_a_pose_and_again_for_a_new_pose_or_a_lost_camera(
+        ) -> None:
+    control = _control()
+    control.infrared = InfraredSchedule(every_s=300.0, confirm_s=2.0)
+    assert not control.infrared_due(200.0, recording=False), "nothing to check without a pose"
+    assert control.take_pose(_pose(), 210.0) == "taken"
+    assert control.infrared_due(210.0, recording=False)
+    control.infrared.judged()
+    assert not control.infrared_due(211.0, recording=False), "taken: the next in minutes"
+    assert control.take_pose(_pose(measured_s=101.0), 220.0) == "taken"
+    assert control.infrared_due(220.0, recording=False), "a new pose is checked at once"
+    control.failed(230.0)  # a reboot may have moved it: checked when it is back
+    assert control.infrared_due(231.0, recording=False)
+    assert control.take_pose(_pose(measured_s=102.0), 240.0) == "taken"
+    assert not control.infrared_due(240.0, recording=True), "a recording runs"
+    assert control.infrared_due(241.0, recording=False)

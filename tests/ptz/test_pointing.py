@@ -6,11 +6,12 @@ from __future__ import annotations
 import math
 import time
 
+import numpy as np
 import pytest
 
 from common import messages as m
 from common.camera import Intrinsics
-from services.ptz.pointing import NOT_SEEN, PointingCheck, pointing_error_deg
+from services.ptz.pointing import NOT_SEEN, InfraredSchedule, PointingCheck, pointing_error_deg
 
 INTR = Intrinsics(3.8)
 
@@ -88,3 +89,56 @@ def test_a_marker_too_small_to_be_found_is_not_judged() -> None:
     for _ in range(2):
         check.observe(near, INTR, infrared=True)
     assert check.problem() is not None and "not seen" in check.problem()
+
+
+def test_the_filter_switches_only_when_a_check_is_due() -> None:
+    """A mechanical switch: at once the first time, then every ``every_s``; every
+    ``confirm_s`` while the latest judged preview disagreed; never while a recording runs
+    unless asked; at once again after ``again`` (a new pose, the camera back)."""
+    schedule = InfraredSchedule(every_s=300.0, confirm_s=2.0)
+    assert schedule.due(0.0, doubting=False, recording=False)
+    schedule.taken(0.0)
+    schedule.judged()
+    assert not schedule.due(299.0, doubting=False, recording=False)
+    assert schedule.due(300.0, doubting=False, recording=False)
+    assert not schedule.due(1.9, doubting=True, recording=False)
+    assert schedule.due(2.0, doubting=True, recording=False)
+    assert not schedule.due(1000.0, doubting=True, recording=True), "a recording runs"
+    schedule.again()
+    assert schedule.due(0.5, doubting=False, recording=False)
+    assert not schedule.due(0.5, doubting=False, recording=True)
+    asked = InfraredSchedule(every_s=300.0, confirm_s=2.0, while_recording=True)
+    assert asked.due(0.0, doubting=False, recording=True)
+    never = InfraredSchedule(every_s=0.0, confirm_s=2.0)
+    assert not never.due(1e9, doubting=True, recording=False)
+    brief = InfraredSchedule(every_s=0.7, confirm_s=2.0)
+    brief.taken(0.0)
+    brief.judged()
+    assert brief.due(0.7, doubting=True, recording=False), "never later than every_s"
+
+
+def test_doubting_is_a_disagreement_on_the_way_to_a_problem() -> None:
+    check = PointingCheck(tolerance_deg=3.0, persist=2, daylight=False)
+    assert not check.doubting()
+    check.observe(_preview([352.0, 288.0], (500, 500)), INTR, infrared=True)
+    assert check.doubting() and check.problem() is None
+    check.observe(_preview([352.0, 288.0], (353, 289)), INTR, infrared=True)
+    assert not check.doubting()
+
+
+def test_an_infrared_preview_that_judged_nothing_is_tried_again_ever_later() -> None:
+    """The robot out of the picture or too small in it: again after confirm_s, then 2×, 4×…
+    up to every_s, so that a robot long out of view does not switch the filter every 2 s."""
+    schedule = InfraredSchedule(every_s=60.0, confirm_s=2.0)
+    now, waits = 0.0, []
+    schedule.taken(now)
+    for _ in range(7):
+        wait = next(w for w in np.arange(0.5, 61.0, 0.5)
+                    if schedule.due(now + w, doubting=False, recording=False))
+        waits.append(float(wait))
+        now += wait
+        schedule.taken(now)
+    assert waits == [2.0, 4.0, 8.0, 16.0, 32.0, 60.0, 60.0]
+    schedule.judged()
+    assert not schedule.due(now + 59.5, doubting=False, recording=False)
+    assert schedule.due(now + 2.0, doubting=True, recording=False)

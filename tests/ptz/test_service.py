@@ -321,11 +321,15 @@ def test_answers_that_disagree_keep_the_pose_and_say_why(service: dict,
 def test_a_wrong_pose_is_caught_by_the_pointing_check(service: dict) -> None:
     """A pose with a wrong rotation (as a poisoned pose message would bring) points the
     camera away from the robot while its own aim error stays small; the infrared previews
-    show it (reported after 1.6 s here: two infrared previews 0.7 s apart)."""
+    show it: one at once for the new pose, then one every ``pointing_confirm_s`` (0.7 s
+    here) while they disagree — though the check's own period is the default 5 minutes, so
+    the filter moves only for these."""
     node, states = service["node"], service["states"]
     node.settings = node.settings.model_copy(update={"preview_hz": 5.0,
-                                                     "pointing_infrared_s": 0.7})
-    service["servers"].append(_camera_server(service["port"]))
+                                                     "pointing_confirm_s": 0.7})
+    assert node.settings.pointing_infrared_s == 300.0
+    server = _camera_server(service["port"])
+    service["servers"].append(server)
     service["thread"].start()
     wait_for(lambda: states, timeout=5)  # subscribed by now
     _publish_pose(service)
@@ -357,6 +361,47 @@ def test_a_wrong_pose_is_caught_by_the_pointing_check(service: dict) -> None:
     # PTZ service asks again every few seconds while its pictures disagree, and takes it
     wait_for(lambda: judged(lambda s: s.pointing_problem == ""), timeout=8, period=0.1)
     assert node.health().status == "ok"
+    head = server.camera.head
+    seen: list[tuple[float, int]] = []  # the right pose's own check done: no move for 2 s
+
+    def settled() -> bool:
+        _publish_robot(service["world"], TARGET)
+        seen.append((time.monotonic(), head.ir_cut_moves))
+        return seen[-1][0] - next(t for t, n in seen if n == seen[-1][1]) >= 2.0
+
+    wait_for(settled, timeout=15, period=0.1)
+    moves = head.ir_cut_moves
+    assert 2 * 4 <= moves <= 2 * 12, f"the filter moved {moves} times"  # out and in, each
+    start = time.monotonic()  # agreeing now: the next check is minutes away
+    while time.monotonic() - start < 3.0:  # "nothing happens" window: 4 × confirm_s
+        _publish_robot(service["world"], TARGET)
+        time.sleep(0.1)
+    assert head.ir_cut_moves == moves
+
+
+def test_the_filter_is_left_alone_while_a_recording_runs(service: dict,
+                                                         make_bus: Callable[..., Bus]) -> None:
+    """A recording's liveliness token (``stb record`` holds one): a new pose is not checked
+    in infrared while it is there; once it goes, the check comes at the next preview."""
+    node = service["node"]
+    node.settings = node.settings.model_copy(update={"preview_hz": 5.0})
+    recorder = make_bus()
+    token = recorder.session.liveliness().declare_token(
+        keys.recording_key(recorder.prefix, "host-1234"))
+    server = _camera_server(service["port"])
+    service["servers"].append(server)
+    service["thread"].start()
+    wait_for(lambda: service["states"], timeout=5)
+    _publish_pose(service)
+    wait_for(lambda: service["states"][-1].status == "tracking" or
+             _publish_robot(service["world"], TARGET), timeout=5, period=0.1)
+    start = time.monotonic()
+    while time.monotonic() - start < 2.0:  # "nothing happens" window: 10 previews at 5 Hz
+        _publish_robot(service["world"], TARGET)
+        time.sleep(0.1)
+    assert server.camera.head.ir_cut_moves == 0, "switched while recording"
+    token.undeclare()
+    wait_for(lambda: server.camera.head.ir_cut_moves >= 2, timeout=5, period=0.1)
 
 
 def test_a_move_by_someone_else_pauses_following_then_it_follows_again(service: dict) -> None:

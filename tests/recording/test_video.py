@@ -4,8 +4,11 @@ VAPIX into a recording of the whole lab: tests/operator/test_recording_e2e.py.)"
 
 from __future__ import annotations
 
+import signal
+import socket
 import threading
 import time
+from collections.abc import Callable
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
@@ -13,6 +16,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from common import keys
+from common.bus import Bus
 from common.lab_views import CameraConnection
 from common.mjpeg import ArrivalStamps, CameraVideo, MjpegParts, VideoError, boundary_of
 from tests.conftest import stb_process, wait_for
@@ -114,3 +119,26 @@ def test_stb_record_names_a_camera_it_does_not_know(tmp_path: Path) -> None:
                        "--connect", f"tcp/127.0.0.1:{free_port()}")
     assert proc.wait(timeout=30) == 2
     assert "no camera ptz7 in [ptz.cameras] (there: ptz1, ptz2)" in proc.stderr.read()
+
+
+def test_a_recording_says_on_the_bus_that_it_runs(tmp_path: Path, router_endpoint: str,
+                                                  make_bus: Callable[..., Bus]) -> None:
+    """``stb record`` holds a liveliness token on ``recording/<host>-<pid>`` while it records
+    (the PTZ cameras leave their IR-cut filter alone meanwhile), gone when it ends."""
+    watcher = make_bus()
+
+    def recordings() -> list[str]:
+        return [str(r.ok.key_expr) for r in watcher.session.liveliness().get(
+            keys.recording_pattern(watcher.prefix), timeout=1.0) if r.ok is not None]
+
+    proc = stb_process("record", str(tmp_path / "x.mcap"), "--connect", router_endpoint,
+                       "--set", "bus.zenoh.listen=[]", "--set", "typed=false")
+    try:
+        wait_for(lambda: recordings() or proc.poll() is not None, timeout=20, period=0.2)
+        assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
+        (key,) = recordings()
+        assert key == keys.recording_key(watcher.prefix, f"{socket.gethostname()}-{proc.pid}")
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=20)
+    wait_for(lambda: not recordings(), timeout=10, period=0.2)
