@@ -36,10 +36,11 @@ from qtm_rt.packet import QRTComponentType
 from common import codec, keys
 from common import messages as m
 from common.bus import declare_publisher, open_session
+from common.qtm_params import labels_from_xml
 from common.robot_picker import RobotPicker, Seen
 from common.settings import ZenohSettings
 from services.args import Parser
-from services.tracker.mocap import _XYZ, _XYZ_ID, ClockSync, _component, labels_from_xml
+from services.tracker.mocap import _XYZ, _XYZ_ID, ClockSync, _component
 
 LEVELS = ("receive", "read", "pick")
 

@@ -27,7 +27,7 @@ def run(node: Node[CameraSettings]) -> None:
     s = node.settings
     publisher = FramePublisher(node, s)
     reader = threading.Thread(target=capture, args=(s.source, node.stop, publisher.publish),
-                              name="camera", daemon=True)
+                              kwargs={"exposure_ms": s.exposure_ms}, name="camera", daemon=True)
     reader.start()
     log.info("camera %s: frames from %s on %s", s.name, s.source,
              keys.GANTRY_FRAME.key(node.bus.prefix))

@@ -21,3 +21,8 @@ class CameraSettings(ServiceSettings):
         "detector was measured on); jpeg: about a tenth of that")
     jpeg_quality: int = Field(95, ge=50, le=100)
     max_rate_hz: float = Field(30.0, gt=0, le=200, description="frames a second at most")
+    exposure_ms: float | None = Field(
+        None, gt=0, le=1000, description="the camera's exposure time, auto exposure off (V4L2 "
+        "devices through OpenCV); none: the camera's own. The paper lowers it until only the "
+        "IR marker is left: the shortest at which the marker still saturates "
+        "(docs/benchmarks.md, \"Exposure\")")

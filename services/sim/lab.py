@@ -345,17 +345,22 @@ class Lab:
         pixels, scales = cam.project(np.vstack([self.robot(t), self.targets, glints]), crane,
                                      frame)
         now, before = pixels[0], cam.project(self.robot(t - exposure), crane_before, frame)[0][0]
+        lit = self.settings.tracking_camera
+        ms = exposure * 1000.0  # below saturation a sensor's gray level is linear in exposure
+        marker = min(lit.marker_gray_per_ms * ms, 255.0)
         blobs = [Blob(now[0], now[1], MARKER_RADIUS_MM * scales[0], MARKER_RADIUS_MM * scales[0],
-                      smear_u=now[0] - before[0], smear_v=now[1] - before[1])]
-        blobs += [Blob(u, v, MARKER_RADIUS_MM * k, MARKER_RADIUS_MM * k)
+                      peak=marker, smear_u=now[0] - before[0], smear_v=now[1] - before[1])]
+        blobs += [Blob(u, v, MARKER_RADIUS_MM * k, MARKER_RADIUS_MM * k, peak=marker)
                   for (u, v), k in zip(pixels[1:1 + targets], scales[1:1 + targets], strict=True)
                   if -20 < u < cam.width_px + 20 and -20 < v < cam.height_px + 20]
+        glint = min(lit.glint_gray_per_ms * ms, 255.0)
         for g, (gu, gv), k in zip(self.ground_glints, pixels[1 + targets:],
                                   scales[1 + targets:], strict=True):
             if -50 < gu < cam.width_px + 50 and -50 < gv < cam.height_px + 50:
                 blobs.append(Blob(gu, gv, max(g.long_mm * k, 1.5), max(g.short_mm * k, 0.6),
-                                  g.angle_rad, 230.0))
-        return draw(blobs, cam.width_px, cam.height_px, rng, noise=self.noise)
+                                  g.angle_rad, glint))
+        return draw(blobs, cam.width_px, cam.height_px, rng,
+                    background=min(lit.ground_gray_per_ms * ms, 255.0), noise=self.noise)
 
     @functools.cached_property
     def _glint_points(self) -> np.ndarray:

@@ -156,7 +156,15 @@ class TrackingCameraSettings(_Section, TrackingCameraModel):
     rate_hz: float = Field(25.0, gt=0, le=120)
     delay_s: float = Field(0.04, ge=0, le=1, description="from the end of a frame's exposure "
                            "to its arrival at the gantry: readout, transfer, the bus")
-    exposure_s: float = Field(0.004, ge=0, le=0.1, description="a moving marker smears over it")
+    exposure_s: float = Field(0.004, ge=0, le=0.1, description="a moving marker smears over "
+                              "it, and the picture is that much brighter (the camera's "
+                              "exposure as the lab sets it: [camera] exposure_ms on a real one)")
+    ground_gray_per_ms: float = Field(4.0, ge=0, le=1000, description="the crater's floor "
+                                      "under the IR emitter, gray levels per ms of exposure")
+    glint_gray_per_ms: float = Field(57.5, ge=0, le=10_000, description="a stray reflection's "
+                                     "brightest point, gray levels per ms")
+    marker_gray_per_ms: float = Field(1000.0, ge=0, le=100_000, description="the robot's "
+                                      "retro-reflective marker, gray levels per ms (saturates)")
     noise: float = Field(2.5, ge=0, description="gray-level noise sigma")
     reflections_per_m2: float = Field(0.5, ge=0, le=20, description="stray reflections")
 

@@ -25,6 +25,7 @@ from qtm_rt.packet import QRTComponentType
 from common.backoff import Backoff
 from common.camera import quaternion_wxyz
 from common.messages import MarkerFrame, RigidBody
+from common.qtm_params import bodies_from_xml, labels_from_xml
 
 log = logging.getLogger(__name__)
 
@@ -38,19 +39,6 @@ class MotionCapture(Protocol):
 
     def run(self, on_frame: FrameHandler, stop: threading.Event,
             on_state: StateHandler = ...) -> None: ...
-
-
-def labels_from_xml(xml: bytes | str) -> list[str]:
-    """The 3D labels from a ``getparameters 3d`` reply, in QTM's order (at most the 64
-    characters a message's label may have: a longer one must not stop every frame)."""
-    root = ET.fromstring(xml)
-    return [(label.findtext("Name") or "").strip()[:64] for label in root.iter("Label")]
-
-
-def bodies_from_xml(xml: bytes | str) -> list[str]:
-    """The 6DOF bodies' names from a ``getparameters 6d`` reply, in QTM's order."""
-    root = ET.fromstring(xml)
-    return [(name.text or "").strip() for name in root.findall("*/Body/Name")]
 
 
 class ClockSync:

@@ -66,3 +66,28 @@ def test_a_camera_that_cannot_be_opened_is_reported_not_fatal(
     finally:
         node.stop.set()
         thread.join(5)
+
+
+def test_an_exposure_the_source_does_not_take_is_said_and_frames_still_come(
+        video: Path, make_bus: Callable[..., Bus], caplog: pytest.LogCaptureFixture) -> None:
+    """``exposure_ms`` on a source without exposure control (a file, as a stream would be):
+    OpenCV refuses it, the log says the camera keeps its own, and the frames flow."""
+    frames: list[m.CameraFrame] = []
+    make_bus().subscribe(keys.GANTRY_FRAME, frames.append, latest=False)
+    node = Node("camera", CameraSettings(source=str(video), exposure_ms=2.0, max_rate_hz=100.0),
+                make_bus())
+    thread = threading.Thread(target=run, args=(node,), daemon=True)
+    with caplog.at_level("INFO", logger="common.capture"):
+        thread.start()
+        try:
+            wait_for(lambda: len(frames) >= 5, timeout=15)
+        finally:
+            node.stop.set()
+            thread.join(5)
+    said = [r.getMessage() for r in caplog.records if r.name == "common.capture"]
+    assert any("did not take exposure_ms 2" in line and str(video) in line for line in said), said
+
+
+def test_a_bad_exposure_stops_the_start_naming_the_field() -> None:
+    with pytest.raises(ValueError, match="exposure_ms"):
+        CameraSettings(exposure_ms=0.0)

@@ -50,7 +50,7 @@ def test_a_packet_without_3d_components_has_no_markers() -> None:
 
 
 def test_a_label_longer_than_a_message_allows_is_cut_not_a_failure_per_frame() -> None:
-    from services.tracker.mocap import labels_from_xml
+    from common.qtm_params import labels_from_xml
     long = "x" * 80
     xml = f"<QTM_Parameters_Ver_1.25><The_3D><Label><Name>{long}</Name></Label>" \
           "</The_3D></QTM_Parameters_Ver_1.25>"

@@ -14,9 +14,10 @@ from common import keys
 from common import messages as m
 from common.bus import Bus
 from common.node import Node
+from common.qtm_params import bodies_from_xml, labels_from_xml
 from services.sim.lab import Lab
 from services.sim.mocap_server import MocapServer, MocapSource
-from services.tracker.mocap import QualisysMocap, bodies_from_xml, labels_from_xml
+from services.tracker.mocap import QualisysMocap
 from services.tracker.service import run
 from services.tracker.settings import TrackerSettings
 from tests.conftest import free_port, until_heard, wait_for
