@@ -73,6 +73,9 @@ TOOLS: dict[str, ServiceInfo] = {
                           "services.deploy.cli"),
     "crater": ServiceInfo("the crater's height map from a laser scan: stb crater import SCAN "
                           "--out crater.npz", "", "services.crater.cli"),
+    "doctor": ServiceInfo("everything a first run needs, checked against the lab file: "
+                          "stb doctor [--json]", "services.doctor.settings:DoctorSettings",
+                          "services.doctor.cli"),
     "detect": ServiceInfo("find markers in image files (paper §2.1): stb detect IMAGE --json",
                           "", "services.detect_cli"),
 }
