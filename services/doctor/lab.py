@@ -71,9 +71,19 @@ def pose(bus: Bus, camera: str, timeout_s: float) -> Check:
         return failed(row, "the calibration service has none (or is not running)",
                       f"start calib and calibrate: stb calib collect --camera {camera}")
     p = max(answers, key=lambda a: a.measured_s)
-    age_h = (time.time() - p.measured_s) / 3600
-    return passed(row, f"stored {age_h:.1f} h ago: ({p.x_mm:.0f}, {p.y_mm:.0f}, {p.z_mm:.0f}) mm, "
-                       f"{p.mean_error_px:.2f} px from {p.passpoints} passpoints")
+    return passed(row, f"solved {_ago(time.time() - p.measured_s)}: ({p.x_mm:.0f}, "
+                       f"{p.y_mm:.0f}, {p.z_mm:.0f}) mm, {p.mean_error_px:.2f} px from "
+                       f"{p.passpoints} passpoints")
+
+
+def _ago(seconds: float) -> str:
+    minutes = seconds / 60
+    if minutes < 1:
+        return "just now"
+    if minutes < 120:
+        return f"{minutes:.0f} min ago"
+    hours = minutes / 60
+    return f"{hours:.0f} h ago" if hours < 48 else f"{hours / 24:.0f} days ago"
 
 
 def disk(folder: Path, min_free_gb: float) -> Check:
