@@ -22,6 +22,7 @@ Publishes:  its own health and liveliness; stb/gantry/command when an operator p
 
 from __future__ import annotations
 
+import functools
 import sys
 from collections.abc import Sequence
 
@@ -39,7 +40,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from services.web.service import run
     from services.web.settings import WebSettings
 
-    return run_service("web", WebSettings, run, args)
+    return run_service("web", WebSettings, functools.partial(run, lab=args.lab), args)
 
 
 if __name__ == "__main__":

@@ -9,6 +9,8 @@ HTTP side; ``app.py`` guards each route (operators only, with the session's CSRF
     POST /calib/CAMERA/start|cancel|accept|discard
     POST /ptz/CAMERA/hold|follow|move|nudge|preset  {"pan_deg", "tilt_deg", "zoom"} | {"preset"}
     POST /record/start|stop                      {"seconds"} (start, optional)
+    POST /doctor/run                             the lab check (``doctor_desk.py``)
+    GET  /doctor.json                            its latest table
     GET  /recordings.json                        the recording under way and the past ones
     GET  /recordings/NAME/FILE                   a past recording's report (index.html, …)
 """
@@ -29,6 +31,7 @@ from starlette.routing import Route
 from common import keys
 from common import messages as m
 from common.bus import Bus
+from services.web.doctor_desk import DoctorBusy, DoctorDesk
 from services.web.gate import Caller
 from services.web.recordings import DeskError, RecordingDesk
 
@@ -39,8 +42,10 @@ Guard = Callable[[Request], Awaitable[Caller | Response]]
 
 
 class Console:
-    def __init__(self, bus: Bus, desk: RecordingDesk, calibration_count: int = 100) -> None:
+    def __init__(self, bus: Bus, desk: RecordingDesk, calibration_count: int = 100,
+                 doctor: DoctorDesk | None = None) -> None:
         self.bus, self.desk, self.calibration_count = bus, desk, calibration_count
+        self.doctor = doctor
 
     def calibrate(self, camera: str, action: str, by: str) -> dict[str, Any]:
         """A passpoint collection for ``camera``: started for an operator's review, or
@@ -115,7 +120,24 @@ def console_routes(console: Console, authorize: Guard,
                                         request.path_params["file"])
         return Response("no such report", 404) if path is None else FileResponse(path)
 
+    async def doctor_run(request: Request) -> Response:
+        caller = await authorize(request)
+        if isinstance(caller, Response):
+            return caller
+        if console.doctor is None:
+            return JSONResponse({"accepted": False, "detail": "no lab check here"}, 404)
+        try:
+            return JSONResponse({"accepted": True, **console.doctor.start(caller.label)})
+        except DoctorBusy as err:
+            return JSONResponse({"accepted": False, "detail": str(err)}, 409)
+
+    async def doctor_view(request: Request) -> Response:
+        view = console.doctor.view() if console.doctor is not None else {"rows": []}
+        return JSONResponse(view, headers={"Cache-Control": "no-store"})
+
     return [
+        Route("/doctor/run", doctor_run, methods=["POST"]),
+        Route("/doctor.json", signed_in(doctor_view)),
         Route("/calib/{camera:str}/{action:str}", calib, methods=["POST"]),
         Route("/ptz/{camera:str}/{action:str}", hand, methods=["POST"]),
         Route("/record/{action:str}", record, methods=["POST"]),

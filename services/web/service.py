@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 import zenoh
@@ -19,6 +20,7 @@ from services.web.app import build_app
 from services.web.commands import GantryCommander
 from services.web.console import Console
 from services.web.crater_image import CraterImage
+from services.web.doctor_desk import DoctorDesk
 from services.web.gate import Gate
 from services.web.hosts import HostCheck, own_names
 from services.web.recordings import RecordingDesk
@@ -57,7 +59,7 @@ def open_gate(settings: WebSettings) -> Gate:
     return Gate(users, session_s, tls=settings.tls is not None)
 
 
-def run(node: Node[WebSettings]) -> None:
+def run(node: Node[WebSettings], lab: Path | None = None) -> None:
     settings = node.settings
     gate = open_gate(settings)
     state = LiveState(track_s=settings.track_s, history_s=settings.history_s)
@@ -106,7 +108,8 @@ def run(node: Node[WebSettings]) -> None:
     app = build_app(gate, view, preview, video, crater,
                     push_period_s=1 / settings.push_hz, max_streams=settings.max_streams,
                     command=GantryCommander(node.bus, settings.bus.zenoh.identity("web")).send,
-                    console=Console(node.bus, desk, settings.calibration_count),
+                    console=Console(node.bus, desk, settings.calibration_count,
+                                    DoctorDesk(bus_environment(settings.bus), lab)),
                     hosts=HostCheck([*settings.server_names, *own_names()]))
     try:
         server = WebServer(app, settings.host, settings.port, settings.tls,

@@ -29,7 +29,8 @@ from tests.conftest import ROOT, client_settings, stb_process, wait_for
 from tests.ports import free_port
 from tests.services.test_processes import _stop
 from tests.smalldisk import NO_TMPFS
-from tests.uplab import SERVICES, write_up_lab
+from tests.uplab import OPERATOR, SERVICES, VIEWER, write_up_lab
+from tests.webpage import PageClient
 
 pytestmark = [pytest.mark.system, pytest.mark.timeout(600)]
 
@@ -37,10 +38,10 @@ pytestmark = [pytest.mark.system, pytest.mark.timeout(600)]
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
     folder = tmp_path_factory.mktemp("doctor")
-    path, endpoint, _ = write_up_lab(folder, SERVICES)
+    path, endpoint, web_port = write_up_lab(folder, SERVICES, users=True)
     up = stb_process("up", "--lab", str(path), "--no-view")
     try:
-        yield {"folder": folder, "lab": path, "endpoint": endpoint,
+        yield {"folder": folder, "lab": path, "endpoint": endpoint, "web_port": web_port,
                "doc": tomllib.loads(path.read_text())}
     finally:
         assert _stop(up, signal.SIGINT, timeout=30) == 0
@@ -188,3 +189,27 @@ def test_an_access_control_rule_missing(lab: dict) -> None:
     code, rows = _doctor(lab, {"doctor": {"router_config": str(config)}}, "acl")
     assert code == 1
     _fails(rows, "router access control", "stb deploy render")
+
+
+def test_the_page_runs_the_check_for_an_operator_and_shows_it_to_everyone(lab: dict) -> None:
+    _healthy(lab)
+    page = PageClient(f"http://127.0.0.1:{lab['web_port']}")
+    viewer, viewer_csrf, _ = page.sign_in(VIEWER)
+    status, _, _ = page.request("POST", "/doctor/run", cookie=viewer,
+                                headers={"X-CSRF-Token": viewer_csrf})
+    assert status == 403, "a viewer does not start checks"
+    operator, csrf, _ = page.sign_in(OPERATOR)
+    status, _, body = page.request("POST", "/doctor/run", cookie=operator,
+                                   headers={"X-CSRF-Token": csrf})
+    assert status == 200 and json.loads(body)["accepted"], body
+    views: list[dict] = []
+
+    def finished() -> bool:
+        views.append(json.loads(page.request("GET", "/doctor.json", cookie=viewer)[2]))
+        return not views[-1]["running"]
+
+    wait_for(finished, timeout=120, period=0.5)
+    view = views[-1]
+    assert view["exit"] == 0 and view["by"].startswith(OPERATOR[0]), view
+    rows = {r["name"]: r["verdict"] for r in view["rows"]}
+    assert rows["crane controller"] == "pass" and rows["pose of ptz1"] == "pass", rows

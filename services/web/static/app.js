@@ -607,6 +607,33 @@ document.getElementById("record-start").addEventListener("click", () => recordAc
 document.getElementById("record-stop").addEventListener("click", () => recordAction("stop"));
 setInterval(loadRecordings, 2000);
 loadRecordings();
+// The lab check (stb doctor on the page's host): an operator starts it; everyone sees the
+// latest table, each row's verdict and, when it failed, the fix.
+async function loadDoctor() {
+  try {
+    const reply = await fetch("doctor.json");
+    if (reply.status === 401) return signedOut();
+    const view = await reply.json();
+    const now = document.getElementById("doctor-now");
+    const failures = (view.rows || []).filter((r) => r.verdict === "fail").length;
+    now.textContent = view.running ? `checking (started by ${view.by}) …`
+      : view.error ? `the check failed: ${view.error}`
+      : view.finished_s ? `${failures ? failures + " failed" : "all passed"} — ${clock(view.finished_s)}, by ${view.by}`
+      : "not checked yet";
+    now.className = failures || view.error ? "warn" : "";
+    document.getElementById("doctor").innerHTML = (view.rows || []).map((r) =>
+      `<tr data-check="${esc(r.name)}" class="${r.verdict === "fail" ? "warn" : ""}">` +
+      `<td>${esc(r.name)}</td><td>${esc(r.verdict)}</td>` +
+      `<td>${esc(r.found)}${r.fix ? `<br>fix: ${esc(r.fix)}` : ""}</td></tr>`).join("");
+    if (view.running) setTimeout(loadDoctor, 1000);
+  } catch (err) { /* the next look tries again */ }
+}
+document.getElementById("doctor-run").addEventListener("click", async () => {
+  const reply = await post("doctor/run", null);
+  if (!reply.accepted) document.getElementById("doctor-now").textContent = `refused — ${reply.detail}`;
+  loadDoctor();
+});
+loadDoctor();
 // Stop from the keyboard at any moment: Escape.
 document.addEventListener("keydown", (event) => {
   if (event.key === "Escape") {
