@@ -100,6 +100,12 @@ class SetpointGuard:
         velocity = self._step_velocity + _limit(velocity - self._step_velocity,
                                                 self.max_accel_mm_s2 * dt)
         velocity = self._braking(velocity, target, last, dt, speed)
+        if self._last_target is not None and not np.allclose(target, self._last_target):
+            # braking for a target that moved (back toward the crane) may ask for more than
+            # the crane can: the acceleration limit comes first, it overshoots a little
+            # instead (towards a target that stands, the braking profile keeps to the limit)
+            velocity = self._step_velocity + _limit(velocity - self._step_velocity,
+                                                    self.max_accel_mm_s2 * dt)
         setpoint = self.workspace.clamp(last + velocity * dt)
         self._step_velocity = (setpoint - last) / dt
         self._last, self._last_t, self._last_target = setpoint, now_s, target

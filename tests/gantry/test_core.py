@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from common.crane_frame import CraneFrame
@@ -134,6 +134,9 @@ anything = st.one_of(st.floats(allow_nan=True, allow_infinity=True), finite)
 @given(st.lists(st.tuples(anything, anything, st.booleans(), st.floats(-2, 2)), min_size=1,
                 max_size=40),
        st.tuples(finite, finite))
+@example([(0.0, 0.0, False, 0.0), (0.0, 0.0, True, 0.0), (0.0, 0.0, False, 0.0),
+          (0.0, 0.0, True, 0.0), (-2.0, 0.0, True, 0.0)], (-71.0, 0.0))  # found 2026-12-05:
+# the braking for a target that came 2 mm back asked for 144.5 mm/s of change in a step
 def test_setpoints_never_leave_the_workspace_nor_jump(inputs: list, crane: tuple) -> None:
     """Every setpoint inside the workspace; holds on what it must not follow; while tracking,
     every step — also the first, from the crane, and the first after a hold, from standing —
