@@ -25,10 +25,11 @@ from compose_test.lab import (
     wait_until,
 )
 
-HOSTS = {"router-pc": ["router", "sim", "tracker", "calib", "web"],
+HOSTS = {"router-pc": ["router", "sim", "crater", "tracker", "calib", "web"],
          "camera-pc": ["ptz-1", "ptz-2"],
          "gantry-pc": ["gantry", "observation"]}  # the observation camera hangs on the crane
 # (a service named on the command line starts whatever its profile)
+ONE_SHOT = ("crater",)  # the sim's scan imported at the first start, then it has exited
 LAN = "stb-compose-lan"
 # On one engine the sim's crater reaches the gantry PC through a shared volume; on real hosts
 # the gantry PC has its own copy (its lab file's [gantry] height_map).
@@ -81,8 +82,9 @@ def test_each_host_runs_only_its_own_services_on_the_lan(hosts: dict) -> None:
     for host, services in HOSTS.items():
         running = engine.compose(hosts["folder"], hosts["files"], "ps", "--services",
                                  "--status", "running", project=_project(host)).stdout.split()
-        assert sorted(running) == sorted(services), host
-        for service in services:
+        staying = [s for s in services if s not in ONE_SHOT]
+        assert sorted(running) == sorted(staying), host
+        for service in staying:
             networks = engine.docker("inspect", "-f", "{{range $k, $v := .NetworkSettings."
                                      "Networks}}{{$k}} {{end}}",
                                      f"{_project(host)}-{service}-1").stdout.split()

@@ -1,5 +1,8 @@
 """``stb crater import SCAN --out crater.npz [--cell-mm N] [--units auto|mm|m] [--plot PNG]``:
 the gantry's height map (paper §3.1's look-up table) from a laser scan of the crater.
+``stb crater from-sim [--lab FILE]``: a simulated lab's first start — the sim's laser scan
+imported to ``[gantry] height_map`` unless it is there (what ``stb up`` does; the compose
+sim lab's one-shot service ``crater``).
 
 SCAN is a point cloud in the world's (the motion capture's) frame: PLY (ASCII or binary),
 LAS/LAZ, or XYZ/CSV text (three numbers a line, an optional header). Its points are binned to
@@ -27,13 +30,17 @@ METRES_BELOW = 50.0  # a scan spanning less than this many units is in metres
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = base_parser("stb crater", __doc__ or "")
-    parser.add_argument("action", choices=["import"])
-    parser.add_argument("scan", type=Path, metavar="SCAN")
-    parser.add_argument("--out", type=Path, required=True, metavar="crater.npz")
+    parser.add_argument("action", choices=["import", "from-sim"])
+    parser.add_argument("scan", type=Path, metavar="SCAN", nargs="?")
+    parser.add_argument("--out", type=Path, metavar="crater.npz")
     parser.add_argument("--cell-mm", type=float, default=15.0, help="grid cell (15 mm)")
     parser.add_argument("--units", choices=["auto", "mm", "m"], default="auto")
     parser.add_argument("--plot", type=Path, metavar="PNG", help="a picture of the map")
     args = parser.parse_args(sys.argv[1:] if argv is None else list(argv))
+    if args.action == "from-sim":
+        return _from_sim(args.lab)
+    if args.scan is None or args.out is None:
+        parser.error("import needs SCAN and --out")
     if not 1.0 <= args.cell_mm <= 1000.0:
         print("stb crater import: --cell-mm must be 1–1000 mm", file=sys.stderr)
         return EXIT_CONFIG
@@ -46,6 +53,36 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise ToolError(str(err), EXIT_CONFIG) from err
 
     return tool_main("crater import", run)
+
+
+def _from_sim(lab: Path | None) -> int:
+    from common.errors import ConfigError
+    from common.lab_views import GantryHeightMap, SimCraterFile
+    from common.node import configure_logging
+    from common.settings import load_settings
+    from services.crater.first_start import (
+        FirstStartError,
+        height_map_to_import,
+        import_sim_scan,
+    )
+
+    try:
+        height_map = load_settings(GantryHeightMap, lab).height_map
+        sim_crater = load_settings(SimCraterFile, lab).crater_file
+    except ConfigError as err:
+        print(f"stb crater from-sim: {err}", file=sys.stderr)
+        return EXIT_CONFIG
+    configure_logging("INFO")
+    if not height_map_to_import(["sim"], height_map, sim_crater):
+        print(f"{height_map}: there already (or the sim's own crater): nothing to do")
+        return 0
+    try:
+        import_sim_scan(lab, height_map)
+    except FirstStartError as err:
+        print(f"stb crater from-sim: {err}", file=sys.stderr)
+        return 1
+    print(f"wrote {height_map} from the sim's laser scan")
+    return 0
 
 
 def _import(args: argparse.Namespace) -> int:

@@ -6,6 +6,9 @@ what the lab file renders."""
 from __future__ import annotations
 
 import shutil
+import subprocess
+import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -13,7 +16,6 @@ from pathlib import Path
 from common import keys
 from common import messages as m
 from common.bus import Bus
-from services.deploy.render import RenderError, cameras_of, router_config
 from services.doctor.table import Check, failed, passed, skipped
 
 
@@ -97,7 +99,9 @@ def disk(folder: Path, min_free_gb: float) -> Check:
     return passed(row, f"{folder}: {free_gb:.1f} GB free")
 
 
-def access_control(config: Path | None, cameras: list[str]) -> Check:
+def access_control(config: Path | None, lab: Path | None) -> Check:
+    """The router's configuration against what ``stb deploy render`` makes of the lab file
+    (run as the command, into a folder of its own)."""
     row = "router access control"
     if config is None:
         return skipped(row, "no router configuration: an open bus (stb up without "
@@ -109,17 +113,20 @@ def access_control(config: Path | None, cameras: list[str]) -> Check:
                       "(--router-config or [router] config_file)")
     if "access_control" not in text:
         return skipped(row, f"{config} has no access control: an open bus")
-    try:
-        rendered = router_config(cameras_of(cameras))
-    except RenderError as err:
-        return failed(row, str(err), "rename the camera in the lab file")
+    with tempfile.TemporaryDirectory(prefix="stb-doctor-") as folder:
+        done = subprocess.run([sys.executable, "-m", "services.cli", "deploy", "render",
+                               "--out", folder, *(["--lab", str(lab)] if lab else [])],
+                              capture_output=True, text=True, timeout=60)
+        if done.returncode != 0:
+            said = (done.stderr.strip().splitlines() or ["no answer"])[-1]
+            return failed(row, f"stb deploy render: {said}", "correct the lab file's "
+                          "[ptz.cameras] (a camera's name is its bus identity)")
+        rendered = (Path(folder) / "deploy" / "zenoh" / "router.json5").read_text()
     if text != rendered:
-        changed = _first_difference(rendered, text)
-        return failed(row, f"{config} is not what the lab file's cameras ({', '.join(cameras)}) "
-                      f"render: {changed}", "stb deploy render --lab LAB, then restart the "
-                      "router (docs/deployment.md)")
-    return passed(row, f"{config}: each identity's rules as the lab file renders them "
-                       f"({', '.join(cameras)} included)")
+        return failed(row, f"{config} is not what stb deploy render makes of the lab file: "
+                      f"{_first_difference(rendered, text)}", "stb deploy render --lab LAB, "
+                      "then restart the router (docs/deployment.md)")
+    return passed(row, f"{config}: each identity's rules as the lab file renders them")
 
 
 def _first_difference(expected: str, actual: str) -> str:

@@ -49,7 +49,7 @@ def examine(lab: Path | None, settings: DoctorSettings, say: Callable[[str], Non
         checks.append(on_bus.disk(sections["web"].recordings_dir, settings.min_free_gb))
     router = sections["router"]
     config = settings.router_config or (router.config_file if router is not None else None)
-    checks.append(on_bus.access_control(config, list(cameras.cameras) if cameras else []))
+    checks.append(on_bus.access_control(config, lab))
     return checks
 
 

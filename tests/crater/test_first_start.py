@@ -94,3 +94,22 @@ def test_a_fresh_sim_lab_starts_on_an_imported_scan(tmp_path: Path) -> None:
     error = np.abs(imported.heights_mm - truth.height_at(*np.meshgrid(xs, ys)))
     assert np.percentile(error, 99) <= 5.0
     assert imported.resolution_mm != truth.resolution_mm, "the scan's cells, not the sim's grid"
+
+
+def test_stb_crater_from_sim_does_what_stb_up_does_once(tmp_path: Path) -> None:
+    """The compose sim lab's one-shot service: nothing to do when the map is there; a step
+    that fails is named (exit 1)."""
+    lab, gantry_map, sim_crater = _fresh_lab(tmp_path, ["sim"])
+
+    def from_sim() -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-m", "services.cli", "crater", "from-sim",
+                               "--lab", str(lab)], capture_output=True, text=True, timeout=120,
+                              cwd=ROOT)
+
+    sim_crater.write_bytes(b"not a height map")
+    failed = from_sim()
+    assert failed.returncode == 1 and "stb sim scan" in failed.stderr, failed.stderr
+    gantry_map.parent.mkdir(parents=True, exist_ok=True)
+    gantry_map.write_bytes(b"")  # there already
+    done = from_sim()
+    assert done.returncode == 0 and "nothing to do" in done.stdout, done.stderr

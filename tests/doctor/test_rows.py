@@ -54,16 +54,17 @@ def test_a_host_off_by_more_than_the_tolerance_is_named() -> None:
 
 
 def test_the_access_control_is_what_the_lab_file_renders(tmp_path: Path) -> None:
-    assert access_control(None, ["ptz1"]).verdict == "skip"
-    config = tmp_path / "router.json5"
+    assert access_control(None, None).verdict == "skip"
+    config, lab = tmp_path / "router.json5", tmp_path / "lab.toml"
     rendered = router_config(cameras_of(["ptz1", "ptz2"]))
     config.write_text(rendered)
-    assert access_control(config, ["ptz1", "ptz2"]).verdict == "pass"
-    assert access_control(config, ["ptz1", "ptz2", "ptz3"]).verdict == "fail"  # not rendered
+    assert access_control(config, None).verdict == "pass"  # the default cameras: ptz1, ptz2
+    lab.write_text('[ptz.cameras.ptz3]\nurl = "http://10.0.0.3"\n')
+    assert access_control(config, lab).verdict == "fail", "ptz3 has no rule"
     config.write_text(rendered.replace('"stb/recording/*"', ""))
-    row = access_control(config, ["ptz1", "ptz2"])
-    assert row.verdict == "fail" and "missing" in row.found
-    assert access_control(tmp_path / "none.json5", ["ptz1"]).verdict == "fail"
+    row = access_control(config, None)
+    assert row.verdict == "fail" and "missing" in row.found and "stb deploy render" in row.fix
+    assert access_control(tmp_path / "none.json5", None).verdict == "fail"
 
 
 def test_the_disk_row_looks_at_the_folder_or_where_it_will_be(tmp_path: Path) -> None:
