@@ -27,21 +27,28 @@ def video(tmp_path: Path) -> Path:
     return marker_video(tmp_path / "tracking.avi", 50, (320, 240), (60, 120), 6)
 
 
-@pytest.mark.parametrize("encoding", ["mono8", "jpeg"])
-def test_frames_reach_the_bus_stamped_when_grabbed(video: Path, encoding: str,
-                                                   make_bus: Callable[..., Bus]) -> None:
+def _frames(settings: CameraSettings, make_bus: Callable[..., Bus], count: int
+            ) -> list[m.CameraFrame]:
+    """``stb camera`` run until ``count`` of its frames have come over the bus."""
     frames: list[m.CameraFrame] = []
     make_bus().subscribe(keys.GANTRY_FRAME, frames.append, latest=False)
-    settings = CameraSettings(source=str(video), encoding=encoding, max_rate_hz=100.0)
     node = Node("camera", settings, make_bus())
     thread = threading.Thread(target=run, args=(node,), daemon=True)
-    started = time.time()
     thread.start()
     try:
-        wait_for(lambda: len(frames) >= 20, timeout=15)
+        wait_for(lambda: len(frames) >= count, timeout=15)
     finally:
         node.stop.set()
         thread.join(5)
+    return frames
+
+
+@pytest.mark.parametrize("encoding", ["mono8", "jpeg"])
+def test_frames_reach_the_bus_stamped_when_grabbed(video: Path, encoding: str,
+                                                   make_bus: Callable[..., Bus]) -> None:
+    started = time.time()
+    frames = _frames(CameraSettings(source=str(video), encoding=encoding, max_rate_hz=100.0),
+                     make_bus, 20)
     assert all(f.encoding == encoding and f.camera == "tracking" for f in frames)
     stamps = [f.measured_s for f in frames]
     assert started - 1 < stamps[0] and stamps == sorted(stamps)
@@ -72,18 +79,9 @@ def test_an_exposure_the_source_does_not_take_is_said_and_frames_still_come(
         video: Path, make_bus: Callable[..., Bus], caplog: pytest.LogCaptureFixture) -> None:
     """``exposure_ms`` on a source without exposure control (a file, as a stream would be):
     OpenCV refuses it, the log says the camera keeps its own, and the frames flow."""
-    frames: list[m.CameraFrame] = []
-    make_bus().subscribe(keys.GANTRY_FRAME, frames.append, latest=False)
-    node = Node("camera", CameraSettings(source=str(video), exposure_ms=2.0, max_rate_hz=100.0),
-                make_bus())
-    thread = threading.Thread(target=run, args=(node,), daemon=True)
     with caplog.at_level("INFO", logger="common.capture"):
-        thread.start()
-        try:
-            wait_for(lambda: len(frames) >= 5, timeout=15)
-        finally:
-            node.stop.set()
-            thread.join(5)
+        _frames(CameraSettings(source=str(video), exposure_ms=2.0, max_rate_hz=100.0),
+                make_bus, 5)
     said = [r.getMessage() for r in caplog.records if r.name == "common.capture"]
     assert any("did not take exposure_ms 2" in line and str(video) in line for line in said), said
 
