@@ -4,9 +4,10 @@ and the labels the lab uses (robot, crane, wand), each PTZ camera over VAPIX (id
 limits, picture sizes) and its stored pose, the crane controller over Modbus through the lab's
 register map, the tracking camera's frames on the bus, the observation camera's picture, the
 hosts' clocks, disk space for recordings and the router's access control. Exit status: 0 when
-every check passed (a skipped one does not apply to this lab), 1 when one failed, 2 a bad lab
-file. Settings: ``[doctor]`` (listen_s, timeout_s, min_frame_hz, clock_tolerance_s,
-min_free_gb, targets, router_config).
+every check passed (a skipped one does not apply to this lab), 1 when one failed (a lab-file
+section that does not validate is a failed row), 2 a bad ``[doctor]`` section. Settings:
+``[doctor]`` (listen_s, timeout_s, min_frame_hz, clock_tolerance_s, min_free_gb, targets,
+router_config).
 """
 
 from __future__ import annotations
