@@ -6,11 +6,13 @@ from __future__ import annotations
 
 import signal
 import subprocess
+import tomllib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+import tomli_w
 
 from common import keys
 from common import messages as m
@@ -39,6 +41,11 @@ class LiveLab:
 def live_lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveLab]:
     tmp = tmp_path_factory.mktemp("live")
     lab, endpoint, web_port = write_up_lab(tmp, LIVE_SERVICES, users=True)
+    doc = tomllib.loads(lab.read_text())
+    # the page's and the recording's pictures show the IR markers only in infrared previews:
+    # one every 2 s here (the pointing check's period, 5 min by default), as when watching them
+    doc["ptz"]["pointing_infrared_s"] = 2.0
+    lab.write_text(tomli_w.dumps(doc))
     up = stb_process("up", "--lab", str(lab), "--no-view")
     session = None
     try:
