@@ -375,7 +375,7 @@ def test_a_wrong_pose_is_caught_by_the_pointing_check(service: dict) -> None:
     start = time.monotonic()  # agreeing now: the next check is minutes away
     while time.monotonic() - start < 3.0:  # "nothing happens" window: 4 × confirm_s
         _publish_robot(service["world"], TARGET)
-        time.sleep(0.1)
+        time.sleep(0.1)  # pacing the robot samples in a window where no switch may come
     assert head.ir_cut_moves == moves
 
 
@@ -398,7 +398,7 @@ def test_the_filter_is_left_alone_while_a_recording_runs(service: dict,
     start = time.monotonic()
     while time.monotonic() - start < 2.0:  # "nothing happens" window: 10 previews at 5 Hz
         _publish_robot(service["world"], TARGET)
-        time.sleep(0.1)
+        time.sleep(0.1)  # pacing the robot samples in a window where no switch may come
     assert server.camera.head.ir_cut_moves == 0, "switched while recording"
     token.undeclare()
     wait_for(lambda: server.camera.head.ir_cut_moves >= 2, timeout=5, period=0.1)
