@@ -8,9 +8,11 @@ does not fill the count there (the lens's distortion is measured at the edges).
 The calibration marker is followed in the mocap stream (by label, or as the unlabelled marker
 that moves) and kept as a track. A snapshot's detections become a passpoint when exactly one
 detected spot can be the marker: spots that stay put while the marker moves (static markers,
-reflections, a parked robot) are left out. The marker's position is interpolated from the
-track at the snapshot's capture time — not "the next frame", the paper's source of error —
-and the track itself goes to the solver, which fits what clock offset remains.
+reflections, a parked robot) are left out — also a reflection that flickers, at the edge of
+the picture or at the threshold, seen at its place in only some of the snapshots. The
+marker's position is interpolated from the track at the snapshot's capture time — not "the
+next frame", the paper's source of error — and the track itself goes to the solver, which
+fits what clock offset remains.
 """
 
 from __future__ import annotations
@@ -25,7 +27,8 @@ from common.passpoints import Passpoints, Track
 from common.robot_picker import RobotPicker
 
 STATIC_WINDOW_S = 4.0
-STATIC_SHARE = 0.8
+STATIC_SHARE = 0.4  # of the last STATIC_WINDOW_S's snapshots: a flickering reflection is
+# there in about half; a wand held still for a passpoint (0.5 s) in an eighth
 STATIC_PX = 3.0
 MARKER_MOVED_MM = 150.0
 MAX_GAP_S = 0.1

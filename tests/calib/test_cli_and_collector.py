@@ -170,6 +170,30 @@ def test_collector_interpolates_the_wand_and_ignores_what_stays_put() -> None:
     assert isinstance(collector.passpoints(), Passpoints)
 
 
+def test_a_reflection_that_flickers_is_left_out_as_one_that_stays() -> None:
+    """A reflection at the threshold (or the picture's edge) shows in every other snapshot
+    only: it stays put while the wand moves, so it is not the wand."""
+    intr = Intrinsics(3.8)
+    collector = Collector(target=1000, marker_label="wand", min_spacing_mm=50.0)
+
+    def wand_at(t: float) -> np.ndarray:
+        return np.array([-1000.0 + 300 * t, -800.0 + 400 * t, 300.0 + 50 * t])
+
+    reasons = []
+    for i in range(800):
+        t = i / 100
+        collector.on_frame(_frame(t, wand_at(t)))
+        if i % 10 == 0 and i > 10:
+            shot = t - 0.063
+            wand_px = project(wand_at(shot)[None, :], PAPER_POSE, intr)[0]
+            spots = [(float(wand_px[0]), float(wand_px[1]))]
+            if (i // 10) % 2 == 0:
+                spots.append((STATIC_PX[0] + 0.7, STATIC_PX[1] - 0.5))
+            reasons.append(collector.on_detections(_detections(shot, spots)))
+    assert reasons[-40:].count(None) == 40, reasons[-40:]
+    assert reasons.count("too many") <= 4
+
+
 def test_collector_skips_a_marker_that_has_not_moved() -> None:
     collector = Collector(target=10, marker_label="wand", min_spacing_mm=50.0)
     for i in range(300):
