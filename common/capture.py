@@ -8,9 +8,12 @@ import logging
 import threading
 import time
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
-import cv2
 import numpy as np
+
+if TYPE_CHECKING:
+    import cv2
 
 log = logging.getLogger(__name__)
 Frame = tuple[float, np.ndarray]  # (capture time, gray uint8 image)
@@ -29,6 +32,8 @@ def set_exposure(camera: cv2.VideoCapture, exposure_ms: float, source: str) -> s
     """Auto exposure off and the exposure time set (V4L2's units, which OpenCV's V4L2 backend
     passes through); what the camera says it took, for the log. A camera or stream that does
     not take it keeps its own, and the answer says so."""
+    import cv2
+
     backend = camera.getBackendName() if hasattr(camera, "getBackendName") else "?"
     manual = camera.set(cv2.CAP_PROP_AUTO_EXPOSURE, V4L2_MANUAL_EXPOSURE)
     taken = camera.set(cv2.CAP_PROP_EXPOSURE, exposure_ms / V4L2_EXPOSURE_UNIT_MS)
@@ -44,6 +49,8 @@ def capture(source: str, stop: threading.Event, deliver: Callable[[Frame], None]
     """Read ``source`` until ``stop``, handing each frame to ``deliver``; reopen it (every
     ``retry_s``) when it fails. The capture time is taken when the frame is grabbed, before
     it is decoded. ``exposure_ms``: set each time the camera is opened (None: its own)."""
+    import cv2  # here: a gantry that takes its frames from the bus does without OpenCV
+
     device = parse_source(source)
     camera = None
     while not stop.is_set():

@@ -1,11 +1,18 @@
 """JPEG to a gray image, with its size read from the header first: a small file that declares
 a huge picture (a decode bomb: 6.75 MB declaring 24000 × 24000 took a service from 347 MB to
-1.2 GB) is refused before anything is decoded."""
+1.2 GB) is refused before anything is decoded.
+
+Decoded by Pillow (libjpeg-turbo, as OpenCV's), straight to gray: the same pixels as OpenCV's
+``imdecode`` as fast, and 30 MB less in a process that needs OpenCV for nothing else (each
+PTZ service, the gantry: docs/benchmarks.md, "Memory")."""
 
 from __future__ import annotations
 
-import cv2
-import numpy as np
+import io
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import numpy as np
 
 MAX_PIXELS = 4096 * 4096
 """Larger than any camera of the lab's (the PTZ cameras' 704 × 576, the tracking camera's
@@ -54,7 +61,13 @@ def decode_gray(data: bytes, size: tuple[int, int] | None = None) -> np.ndarray:
         raise JpegError(f"JPEG is {found[0]}×{found[1]}, not the {size[0]}×{size[1]} declared")
     if found[0] * found[1] > MAX_PIXELS or 0 in found:
         raise JpegError(f"JPEG of {found[0]}×{found[1]} pixels refused (at most {MAX_PIXELS})")
-    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
-    if image is None:
-        raise JpegError("JPEG does not decode")
-    return image
+    import numpy as np  # here: a process that only reads sizes (stb observation) does
+    from PIL import Image  # without them
+
+    try:
+        with Image.open(io.BytesIO(data), formats=["JPEG"]) as picture:
+            picture.draft("L", picture.size)  # libjpeg's own colour conversion: no RGB first
+            gray = picture.convert("L")
+    except (OSError, ValueError, SyntaxError) as err:  # Pillow's ways of saying "corrupt"
+        raise JpegError(f"JPEG does not decode: {err}") from None
+    return np.asarray(gray)

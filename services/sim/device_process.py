@@ -31,11 +31,9 @@ from multiprocessing.sharedctypes import Synchronized, SynchronizedArray
 import numpy as np
 
 from common.errors import StartupError
-from services.sim.camera_server import CameraServer
 from services.sim.clock import Clock
 from services.sim.lab import Lab
 from services.sim.mocap_server import MocapServer, MocapSource
-from services.sim.observation import observation_camera
 from services.sim.settings import SimSettings
 
 log = logging.getLogger(__name__)
@@ -156,6 +154,10 @@ def _serve_qtm(lab: Lab, settings: SimSettings, clock: Clock, started: Callable[
 def _serve_observation(lab: Lab, settings: SimSettings, clock: Clock,
                        started: Callable[[float], None], conn: Connection,
                        running: Callable[[], bool]) -> None:
+    # Here, not at the top: the QTM process draws no picture and does without OpenCV.
+    from services.sim.camera_server import CameraServer
+    from services.sim.observation import observation_camera
+
     o = settings.observation_camera
     assert lab.crane_feed is not None
     # A real camera renders on a processor of its own: here it takes only what the lab's

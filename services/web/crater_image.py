@@ -9,7 +9,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
 from common.heightmap import HeightMap
@@ -22,6 +21,7 @@ SCALE_STEPS = 11  # colours the page's scale is drawn from, lowest to highest
 
 def map_png(height_map: HeightMap) -> bytes:
     """The height map as a colour PNG, row 0 at the top = the largest y (north up)."""
+    import cv2  # with matplotlib, when the map is first drawn: not in every page's start-up
     from matplotlib import colormaps
 
     h = height_map.heights_mm.astype(float)

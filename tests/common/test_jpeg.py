@@ -31,9 +31,11 @@ def test_the_size_is_read_from_the_header(size: tuple[int, int], progressive: in
 
 def test_not_a_jpeg_or_a_wrong_or_huge_size_is_refused_before_decoding(
         monkeypatch: pytest.MonkeyPatch) -> None:
+    from PIL import Image
+
     decoded: list[int] = []
-    real = cv2.imdecode
-    monkeypatch.setattr(cv2, "imdecode", lambda *a: decoded.append(1) or real(*a))
+    real = Image.open
+    monkeypatch.setattr(Image, "open", lambda *a, **k: decoded.append(1) or real(*a, **k))
     big = _jpeg(2000, 2000)  # a black 2000 × 2000 picture: a few kB
     assert len(big) < 100_000
     with pytest.raises(JpegError, match="2000×2000, not the 640×480 declared"):
@@ -47,6 +49,21 @@ def test_not_a_jpeg_or_a_wrong_or_huge_size_is_refused_before_decoding(
     with pytest.raises(JpegError, match="refused"):
         decode_gray(bytes(bomb))
     assert decoded == [], "nothing was decoded"
+
+
+@pytest.mark.parametrize("colour", [False, True])
+def test_decoded_as_opencv_decodes_it_and_a_broken_one_is_refused(colour: bool) -> None:
+    rng = np.random.default_rng(5)
+    picture = (rng.random((576, 704, 3) if colour else (576, 704)) * 255).astype(np.uint8)
+    ok, encoded = cv2.imencode(".jpg", picture, [cv2.IMWRITE_JPEG_QUALITY, 85])
+    assert ok
+    data = encoded.tobytes()
+    ours = decode_gray(data, (704, 576))
+    theirs = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
+    assert ours.dtype == np.uint8 and ours.shape == (576, 704)
+    assert int(np.abs(ours.astype(int) - theirs).max()) <= 1
+    with pytest.raises(JpegError, match="does not decode"):
+        decode_gray(data[:len(data) // 2], (704, 576))
 
 
 def test_the_gantry_drops_a_frame_whose_jpeg_is_not_its_declared_size() -> None:
