@@ -1,6 +1,7 @@
 """What ``make demo`` does on a fresh checkout: the sim's wand moves and the robot waits, the
-calib service collects for both cameras by itself, the poses match the sim's mounts, the robot
-starts, and the cameras follow it."""
+calib service collects for both cameras by itself (as many passpoints as the demo's lab file
+asks), the poses match the sim's mounts, the robot starts, the cameras follow it, and the
+crane's observation camera (the page's bird's-eye view) is on the bus."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from common.camera import Pose
 from common.settings import load_settings
 from services.calib.settings import CalibSettings
 from services.sim.settings import SimSettings
+from services.supervisor import UpSettings
 from tests.calib.test_collect_e2e import _pose_of
 from tests.calib.test_solve import errors
 from tests.conftest import ROOT, client_settings, stb_process, wait_for
@@ -27,16 +29,21 @@ MOUNTS = {"ptz1": Pose(3550, 1090, 2190, 180, 30, 165),
           "ptz2": Pose(-3300, -1800, 2600, 164, -27, -33)}  # as write_lab configures the sim
 
 
-def test_demo_config_calibrates_first() -> None:
-    demo = ROOT / "config" / "demo.toml"
-    assert load_settings(SimSettings, demo).calibrate_first == ["ptz1", "ptz2"]
-    assert load_settings(CalibSettings, demo).collect_missing
+DEMO = ROOT / "config" / "demo.toml"
+
+
+def test_demo_config_calibrates_first_and_runs_the_observation_camera() -> None:
+    assert load_settings(SimSettings, DEMO).calibrate_first == ["ptz1", "ptz2"]
+    assert load_settings(CalibSettings, DEMO).collect_missing
+    assert "observation" in load_settings(UpSettings, DEMO).services
 
 
 @pytest.mark.system
 def test_fresh_lab_calibrates_both_cameras_then_the_robot_starts(tmp_path: Path) -> None:
-    lab, endpoint = _lab_for_up(tmp_path)
-    env = {"STB_SIM__CALIBRATE_FIRST": '["ptz1", "ptz2"]', "STB_CALIB__COLLECT_MISSING": "true"}
+    lab, endpoint = _lab_for_up(tmp_path)  # every service: the observation camera's too
+    count = load_settings(CalibSettings, DEMO).count
+    env = {"STB_SIM__CALIBRATE_FIRST": '["ptz1", "ptz2"]', "STB_CALIB__COLLECT_MISSING": "true",
+           "STB_CALIB__COUNT": str(count)}
     up = stb_process("up", "--lab", str(lab), "--no-view", env=env)
     session = None
     try:
@@ -48,6 +55,8 @@ def test_fresh_lab_calibrates_both_cameras_then_the_robot_starts(tmp_path: Path)
         bus.subscribe(keys.TRUTH_ROBOT, robot.append, latest=False)
         states: dict[str, m.PtzState] = {}
         bus.subscribe(keys.PTZ_STATE, lambda s: states.__setitem__(s.camera, s), latest=False)
+        bird: list[m.CameraFrame] = []
+        bus.subscribe(keys.VIDEO, bird.append, latest=False, camera="observation")
 
         wait_for(lambda: robot, timeout=20)
         started = time.monotonic()
@@ -63,6 +72,10 @@ def test_fresh_lab_calibrates_both_cameras_then_the_robot_starts(tmp_path: Path)
             print(f"{camera}: {position:.1f} mm, {angle:.3f}° from the mount; "
                   f"{pose.mean_error_px:.2f} px")
             assert position < 10.0 and angle < 0.2
+            assert 0.9 * count <= pose.passpoints <= count, "the demo's count (inliers)"
+        wait_for(lambda: bird, timeout=10)
+        assert bird[-1].encoding == "jpeg" and (bird[-1].width_px, bird[-1].height_px) == \
+            (640, 480)
         wait_for(lambda: np.hypot(robot[-1].x_mm - first[0], robot[-1].y_mm - first[1]) > 100,
                  timeout=10)
         wait_for(lambda: all(states.get(c) is not None and states[c].status == "tracking"
