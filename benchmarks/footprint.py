@@ -1,11 +1,13 @@
 """What the demo lab's processes hold in memory: each service's resident memory under
 ``stb up``, as a lab engineer starts it (``make demo`` without the live view).
 
-    .venv/bin/python -m benchmarks.footprint [--lab config/demo.toml] [--settle 60]
+    .venv/bin/python -m benchmarks.footprint [--lab config/demo.toml] [--settle 70]
 
 Starts ``stb up --lab LAB --no-view``, waits until ``stb up`` has started every service
-and they have run for ``--settle`` seconds (the demo calibrates its cameras and follows the
-robot meanwhile; it says how many services ``stb up`` had to restart), then samples each
+and they have run for ``--settle`` seconds (70: the lab is sampled from about 75 s after its
+start, the 5 s in which no service was added included; the demo calibrates its cameras and
+follows the robot meanwhile; it says how many services ``stb up`` had to restart and when
+each camera's pose was stored), then samples each
 process five times a second for ``--seconds`` and prints, per process, the peak of:
 
 * VmRSS — what ``top`` shows: the process's resident memory, shared libraries and Zenoh's
@@ -101,9 +103,11 @@ def measure(lab: Path, settle_s: float, seconds: float) -> dict[str, dict[str, f
             restarts = (Path(folder) / "up.log").read_text().count(" exited with ")
             print(f"restarts while it ran: {restarts}", file=sys.stderr)
             solved = solved_since(started)
-            print(f"cameras calibrated while it ran: {solved}" + (
-                "" if solved else " (their stored poses in run/calib/ were "
-                "loaded; delete that folder to measure a lab that solves)"), file=sys.stderr)
+            print(f"cameras calibrated while it ran: {len(solved)}" + (
+                " (" + ", ".join(f"{camera} {s:.0f} s" for camera, s in sorted(solved.items()))
+                + " after stb up started)" if solved else " (their stored poses in run/calib/ "
+                "were loaded; delete that folder to measure a lab that solves)"),
+                file=sys.stderr)
             return peak
         finally:
             up.send_signal(signal.SIGINT)
@@ -114,10 +118,12 @@ def measure(lab: Path, settle_s: float, seconds: float) -> dict[str, dict[str, f
                 up.wait()
 
 
-def solved_since(started: float) -> int:
-    """How many camera poses the calib service stored (solved) since ``started``."""
-    return sum(path.stat().st_mtime >= started
-               for path in (ROOT / "run" / "calib").glob("*/pose.json"))
+def solved_since(started: float) -> dict[str, float]:
+    """The cameras whose pose the calib service stored (solved) since ``started``, and when
+    (seconds after it)."""
+    stored = {path.parent.name: path.stat().st_mtime - started
+              for path in (ROOT / "run" / "calib").glob("*/pose.json")}
+    return {camera: s for camera, s in stored.items() if s >= 0}
 
 
 def table(peak: dict[str, dict[str, float]]) -> str:
@@ -136,7 +142,7 @@ def table(peak: dict[str, dict[str, float]]) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--lab", type=Path, default=ROOT / "config" / "demo.toml")
-    parser.add_argument("--settle", type=float, default=60.0)
+    parser.add_argument("--settle", type=float, default=70.0)
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
