@@ -11,7 +11,12 @@ Runs the whole simulated lab under ``stb up`` (every service, the gantry armed),
   ``--video-fps``, 704×576, recorded as H.264);
 * that, with the raw frames too (``--raw-frames``: what a replay into a gantry needs);
 * both cameras' video without Foxglove's typed channels (``--set typed=false``, the tracking
-  camera's frames left out) — what the typed channels cost.
+  camera's frames left out) — what the typed channels cost;
+* the first minute of a fresh demo lab (``--first-minute``, another lab started for it): the
+  cameras calibrated as ``make demo`` does (``config/demo.toml``'s passpoint count, the wand,
+  the calibration snapshots ten a second a camera), then the robot followed; every camera —
+  both PTZ cameras' video, the tracking camera, the observation camera — recorded from the
+  lab's start for ``--seconds`` (60 by default then). The issue's bound: ≤ 30 MB a minute.
 
 Per variant: the file's size per minute; how it splits (the messages' bytes before the file's
 zstd compression: bus samples, video — H.264 channels and raw video frames —, JSON copies,
@@ -26,6 +31,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -35,14 +41,16 @@ from pathlib import Path
 
 from mcap.reader import make_reader
 
-from benchmarks.faults.lab import open_when_up, running_lab
+from benchmarks.faults.lab import interrupt, open_when_up, running_lab
 from benchmarks.tracker import _cpu_s, _lab_processes
 from common import keys
 from common.bus import Bus
-from common.settings import BusSettings, ZenohSettings
+from common.settings import BusSettings, ZenohSettings, load_settings
 from services.args import Parser
+from services.calib.settings import CalibSettings
 from services.recording.typed import GANTRY_IMAGE
 from tests.gantry.rig import Operator
+from tests.uplab import SERVICES, write_up_lab
 
 ROOT = Path(__file__).resolve().parent.parent
 FRAMES = "stb/gantry/camera/frame"
@@ -125,6 +133,38 @@ def run(seconds: float, video_fps: float, workdir: Path) -> list[dict]:
     return results
 
 
+def first_minute(seconds: float, video_fps: float, workdir: Path) -> dict:
+    """A fresh demo lab (no stored poses, the observation camera on) recorded from its start
+    with every camera: calibration included."""
+    folder = workdir / "first-minute"
+    folder.mkdir()
+    lab, endpoint, _ = write_up_lab(folder, [*SERVICES, "observation"])
+    shutil.rmtree(folder / "calib")  # as on a fresh checkout: the cameras have no pose
+    count = load_settings(CalibSettings, ROOT / "config" / "demo.toml").count
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", "STB_CALIB__COLLECT_MISSING": "true",
+           "STB_SIM__CALIBRATE_FIRST": '["ptz1", "ptz2"]', "STB_CALIB__COUNT": str(count)}
+    with open(folder / "up.log", "w") as log:
+        up = subprocess.Popen([sys.executable, "-m", "services.cli", "up", "--lab", str(lab),
+                               "--no-view"], cwd=ROOT, stdout=log, stderr=subprocess.STDOUT,
+                              env=env)
+    try:
+        open_when_up(ZenohSettings(connect=[endpoint], connect_timeout_ms=0)).close()
+        deadline = time.monotonic() + 30
+        while "sim" not in (processes := _lab_processes(up.pid)):
+            if time.monotonic() > deadline:
+                raise RuntimeError("the sim did not start within 30 s")
+            time.sleep(0.2)
+        video = ["--video", "ptz1", "--video", "ptz2", "--video-fps", f"{video_fps:g}"]
+        result = record(lab, folder / "crater.npz", workdir / "first-minute.mcap", seconds,
+                        video, processes["sim"])
+        poses = sorted(path.parent.name for path in (folder / "calib").glob("*/pose.json"))
+        result["variant"] = (f"the first minute of a fresh demo lab: {', '.join(poses) or 'no'}"
+                             f" camera calibrated, all four cameras")
+        return result
+    finally:
+        interrupt(up, 30)
+
+
 def _armed(operator: Operator) -> bool:
     import pytest
 
@@ -152,9 +192,15 @@ def main() -> None:
                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=30.0)
     parser.add_argument("--video-fps", type=float, default=5.0)
+    parser.add_argument("--first-minute", action="store_true",
+                        help="only the first minute of a fresh demo lab, calibration included")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="stb-bench-rec-") as tmp:
-        results = run(args.seconds, args.video_fps, Path(tmp))
+        if args.first_minute:
+            seconds = args.seconds if "--seconds" in sys.argv else 60.0
+            results = [first_minute(seconds, args.video_fps, Path(tmp))]
+        else:
+            results = run(args.seconds, args.video_fps, Path(tmp))
     print(table(results))
 
 

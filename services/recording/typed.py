@@ -16,7 +16,8 @@ and plot panels show a run without any extension.
                         CompressedVideo  in a recording: H.264 (``encode.py``)
     /CAMERA/video       CompressedImage  a camera's video as ``stb record --video`` took it, or
                         CompressedVideo  in a recording: H.264
-    /CAMERA/snapshot    CompressedImage  its snapshots in calibration mode
+    /CAMERA/snapshot    CompressedImage  its snapshots in calibration mode (JPEG), or
+                        CompressedVideo  in a recording: H.264
 
 Positions in metres (Foxglove's unit), frame ``world`` = the mocap's frame. Each output is a
 ``Typed`` record of plain bytes (schema and payload), so that the MCAP writer and the live
@@ -56,8 +57,11 @@ JPEG_QUALITY = 80
 FRAME_TOPICS = {keys.GANTRY_FRAME: GANTRY_IMAGE, keys.VIDEO: "/{camera}/video",
                 keys.PTZ_SNAPSHOT: "/{camera}/snapshot"}
 """Where each kind of camera frame goes (all are ``CameraFrame`` on the bus)."""
-VIDEO_TOPICS = {keys.GANTRY_FRAME, keys.VIDEO}
-"""Camera streams that go as H.264 video where the scene encodes video (a recording)."""
+VIDEO_TOPICS = {keys.GANTRY_FRAME, keys.VIDEO, keys.PTZ_SNAPSHOT}
+"""Camera streams that go as H.264 video where the scene encodes video (a recording): each
+picture stored once, the bus samples too only with ``--raw-frames``. (The calibration
+snapshots, about 52 kB of JPEG ten a second a camera, were stored twice — the bus sample and
+a JPEG image —: 57 MB of the first minute of ``make demo``, docs/benchmarks.md.)"""
 
 
 @dataclass(frozen=True)

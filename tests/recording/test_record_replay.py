@@ -207,6 +207,43 @@ def test_a_recording_that_was_never_finished_is_read_up_to_where_it_breaks_off(
     assert recorded_keys(path) == {"stb/tracker/robot": len(salvaged)}
 
 
+def test_a_calibration_snapshot_is_stored_once_as_h264(make_bus: Callable[..., Bus],
+                                                      tmp_path: Path) -> None:
+    """A PTZ camera's snapshots in calibration mode are a camera stream: in the file as H.264
+    on /CAMERA/snapshot only, not also as bus samples (those with --raw-frames)."""
+    import cv2
+
+    publisher, recorder_bus = make_bus(), make_bus()
+    path = tmp_path / "run.mcap"
+    t0, rng = time.time(), np.random.default_rng(2)
+    background = (rng.random((576, 704, 3)) * 120).astype(np.uint8)  # a noisy still scene
+    snapshots = []
+    for i in range(12):
+        picture = background.copy()
+        cv2.circle(picture, (100 + 40 * i, 300), 6, (255, 255, 255), -1)  # the wand
+        jpeg = cv2.imencode(".jpg", picture, [cv2.IMWRITE_JPEG_QUALITY, 85])[1].tobytes()
+        snapshots.append(m.CameraFrame(measured_s=t0 + i / 10, camera="ptz1", seq=i + 1,
+                                       width_px=704, height_px=576, encoding="jpeg",
+                                       data=jpeg))
+
+    def publish() -> None:
+        for snapshot in snapshots:
+            publisher.publish(keys.PTZ_SNAPSHOT, snapshot, camera="ptz1")
+            time.sleep(0.02)  # a camera's pace: the bus may drop a burst
+
+    recorder = _record(recorder_bus, path, publish, expect=10, scene=LabScene(video=True),
+                       raw_frames=False, heard=(publisher, "stb/ptz/ptz1/snapshot"))
+    count = recorder.stats.samples["stb/ptz/ptz1/snapshot"]
+    assert "stb/ptz/ptz1/snapshot" not in recorded_keys(path), "stored once: no bus samples"
+    video = decoded_typed(path, "/ptz1/snapshot")
+    assert len(video) == count and {v.format for v in video} == {"h264"}
+    decoder = av.CodecContext.create("h264", "r")
+    decoded = [image for v in video for image in decoder.decode(av.Packet(v.data))]
+    assert [(d.width, d.height) for d in decoded] == [(704, 576)] * count
+    jpeg_bytes = sum(len(s.data) for s in snapshots[:count])
+    assert path.stat().st_size < jpeg_bytes, (path.stat().st_size, jpeg_bytes)
+
+
 def test_camera_frames_are_recorded_as_h264_video_that_decodes_in_order_on_their_times(
         make_bus: Callable[..., Bus], tmp_path: Path) -> None:
     """Without --raw-frames the tracking camera's frames are in the file only as Foxglove's
