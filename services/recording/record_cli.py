@@ -20,7 +20,8 @@ Camera streams — the tracking camera's frames (``stb/gantry/camera/frame``) an
 its capture time. Their raw frames (about 8 MB/s for the tracking camera) only with
 ``--raw-frames``: what ``stb replay`` needs to feed a gantry again. The observation camera's
 bird's-eye view (``stb observation``, on ``stb/video/observation``) is recorded the same way,
-on ``/observation/video``.
+on ``/observation/video``, and so are a PTZ camera's snapshots in calibration mode
+(``stb/ptz/<camera>/snapshot``) on ``/<camera>/snapshot``.
 
 Long runs: ``--split-size MB`` and ``--split-time S`` start a new file when the current one is
 that large or long — ``OUT-001.mcap``, ``OUT-002.mcap``, …, each a complete recording (its
