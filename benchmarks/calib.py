@@ -32,7 +32,7 @@ from common.camera import Intrinsics, Pose, pose_distance
 from common.passpoints import Passpoints
 from services.args import Parser
 from services.calib.pnp import camera_matrix, pose_from_cv
-from services.calib.solve import Options, Solution, solve
+from services.calib.solve import Options, Solution, solve, warm_up
 from services.calib.synthetic import PAPER_GUESS, PAPER_POSE, passpoints
 
 PAPER = {"cmaes": (0.08, 4446), "simplex": (0.04, None)}
@@ -65,6 +65,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
     cv2.setNumThreads(1)
+    warm_up()
     runs = methods()
     results: dict[str, dict[str, list]] = {name: {"s": [], "evals": [], "mm": [], "deg": []}
                                            for name in [*runs, "auto, 10 % wrong"]}

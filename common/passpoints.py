@@ -64,6 +64,15 @@ class Passpoints:
 
 
 @dataclass(frozen=True)
+class AtZoom:
+    """The passpoints taken at one zoom step, their markers where the mocap saw them."""
+
+    zoom: int
+    world_mm: np.ndarray  # (N, 3)
+    pixels: np.ndarray  # (N, 2)
+
+
+@dataclass(frozen=True)
 class Track:
     """A marker's mocap track; ``at`` interpolates linearly between samples."""
 

@@ -70,30 +70,36 @@ class Solution:
         return out
 
 
-_warm = False
-
-
 def prepare(options: Options) -> None:
     """Import what the solve will need before it is timed (cma about 1 s with matplotlib,
-    scipy.optimize 0.4 s; ``auto`` without a track or a focal fit needs neither), and once
-    per process run the closed form on a few synthetic passpoints (first calls into OpenCV
-    and numpy cost milliseconds): a reported solve time is the solve's, warm."""
-    global _warm
+    scipy.optimize 0.4 s; ``auto`` without a track or a focal fit needs neither)."""
     if options.method == "cmaes":
         import cma  # noqa: F401
     if options.method == "simplex" or options.fit_focal or options.track is not None:
         import scipy.optimize  # noqa: F401
         import scipy.spatial.transform  # noqa: F401
-    if not _warm:
-        _warm = True
-        from services.calib.synthetic import PAPER_POSE, passpoints
 
-        with contextlib.suppress(CalibrationError):  # a warm-up only
-            solve(passpoints(PAPER_POSE, np.random.default_rng(0), count=30)[0])
+
+_warm = False
+
+
+def warm_up() -> None:
+    """Once per process, before the first solve that is timed (the solving worker's start,
+    ``stb calib solve``, the benchmarks): the closed form on a few synthetic passpoints — the
+    first calls into OpenCV and numpy cost milliseconds —, so that a reported solve time is
+    the solve's, warm."""
+    global _warm
+    if _warm:
+        return
+    _warm = True
+    from services.calib.synthetic import PAPER_POSE, passpoints
+
+    with contextlib.suppress(CalibrationError):  # a warm-up only
+        solve(passpoints(PAPER_POSE, np.random.default_rng(0), count=30)[0])
 
 
 def solve(points: Passpoints, options: Options = Options()) -> Solution:
-    prepare(options)  # imports are not the solve's time
+    prepare(options)  # imports are not the solve's time (warm_up: nor the first calls)
     started = time.perf_counter()
     check_input(points, options)
     intr = Intrinsics(options.focal_mm)

@@ -6,9 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from common.camera import Intrinsics, Pose, project, undistort_pixels
-from common.passpoints import Passpoints, Track
+from common.passpoints import AtZoom, Passpoints, Track
 from common.ptz_lens import PtzLens
-from services.calib.zoom_fit import AtZoom
 
 PAPER_POSE = Pose(3413.0, 1093.0, 2163.0, 197.0, 27.0, 159.0)
 """Near the paper's optimum for its camera (Table 2)."""

@@ -45,7 +45,11 @@ def in_worker(call: Callable[P, R], *args: P.args, **kwargs: P.kwargs) -> R:
 
 
 def _serve() -> int:
-    """The worker's side: one call from standard input, its outcome to standard output."""
+    """The worker's side: one call from standard input, its outcome to standard output. The
+    solver warms up first (while the call is on its way)."""
+    from services.calib.solve import warm_up
+
+    warm_up()
     call, args, kwargs = pickle.loads(sys.stdin.buffer.read())
     out, sys.stdout = sys.stdout.buffer, sys.stderr  # a print in the solve is a log line
     outcome: tuple[bool, Any]

@@ -20,7 +20,7 @@ import numpy as np
 
 from common.camera import Intrinsics, Pose, project
 from common.lens import NO_DISTORTION
-from common.passpoints import CalibrationError, Passpoints
+from common.passpoints import AtZoom, CalibrationError, Passpoints
 from common.ptz_lens import STRAIGHT_LINE, Distortion, PtzLens, measured_lens
 from services.calib.solve import Options, Solution, solve
 
@@ -28,15 +28,6 @@ PRIOR_PX = np.array([0.5, 0.5, 0.5, 0.5, 5.0])
 ROUNDS = 3
 MIN_PER_ZOOM = 6
 POSE_PARAMS, LENS_PARAMS = 6, 6  # rotation vector + position; focal + five coefficients
-
-
-@dataclass(frozen=True)
-class AtZoom:
-    """The passpoints taken at one zoom step, their markers where the mocap saw them."""
-
-    zoom: int
-    world_mm: np.ndarray  # (N, 3)
-    pixels: np.ndarray  # (N, 2)
 
 
 @dataclass(frozen=True)
