@@ -24,7 +24,7 @@ import numpy as np
 
 from common.tracking_camera import TrackingCameraModel
 from services.args import Parser
-from services.gantry.geometry_fit import distortion_difference_px
+from services.gantry.commissioning.geometry_fit import distortion_difference_px
 from services.sim.lab import load_or_make_crater
 from services.sim.settings import SimSettings
 from tests.conftest import ROOT, client_settings, open_when_up, stb_process

@@ -20,11 +20,11 @@ from services.args import service_args
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["identify"]:
-        from services.gantry.commission_cli import main as identify_main
+        from services.gantry.commissioning.identify_cli import main as identify_main
 
         return identify_main(argv[1:])
     if argv[:1] == ["commission"]:
-        from services.gantry.first_day_cli import main as commission_main
+        from services.gantry.commissioning.commission_cli import main as commission_main
 
         return commission_main(argv[1:])
     if argv[:1] and not argv[0].startswith("-"):  # an operator's command: arm, disarm, …

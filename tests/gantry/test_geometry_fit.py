@@ -12,8 +12,12 @@ import pytest
 from common.crane_frame import CraneFrame
 from common.markers import detect
 from common.tracking_camera import TrackingCameraModel
-from services.gantry.first_day import REPLAN, frame_pattern, survey_camera
-from services.gantry.geometry_fit import FitRefused, distortion_difference_px, fit_frame
+from services.gantry.commissioning.commission import REPLAN, frame_pattern, survey_camera
+from services.gantry.commissioning.geometry_fit import (
+    FitRefused,
+    distortion_difference_px,
+    fit_frame,
+)
 from services.sim.lab import Lab
 from services.sim.settings import CraneSettings, TrackingCameraSettings
 from services.sim.world import CraterMap

@@ -1,4 +1,4 @@
-"""What ``stb gantry identify`` does once its flags are parsed (services/gantry/commission_cli.py
+"""What ``stb gantry identify`` does once its flags are parsed (``identify_cli.py`` beside it
 has the command and its documentation)."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import time
 
 from common.bus import Bus, BusUnreachable, open_session
 from common.heightmap import HeightMap
-from services.gantry.commissioning_run import (
+from services.gantry.commissioning.identify_run import (
     CommissioningError,
     Measurements,
     Recorder,

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from common.bus import Bus
-from services.gantry.commission_cli import main
+from services.gantry.commissioning.identify_cli import main
 from services.sim.crane import CraneParams, ramp_following_s
 from tests.gantry.rig import MARKER_MM, CraneRig, feeding
 

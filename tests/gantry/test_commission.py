@@ -20,7 +20,7 @@ import tomli_w
 
 from common.heightmap import HeightMap
 from common.tracking_camera import TrackingCameraModel
-from services.gantry.geometry_fit import distortion_difference_px
+from services.gantry.commissioning.geometry_fit import distortion_difference_px
 from services.sim.lab import load_or_make_crater
 from services.sim.settings import SimSettings
 from tests.conftest import ROOT, client_settings, open_when_up, poll, stb_process

@@ -60,6 +60,6 @@ def main(argv: Sequence[str]) -> int:
         print("stb gantry commission: --box must be 200–10000 mm, --steps 2–100, and at least "
               "one target", file=sys.stderr)
         return EXIT_CONFIG
-    from services.gantry.first_day_run import commission
+    from services.gantry.commissioning.commission_run import commission
 
     return commission(args)

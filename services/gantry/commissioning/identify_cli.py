@@ -30,6 +30,6 @@ def main(argv: Sequence[str]) -> int:
     if not 50 <= args.box <= 2000 or not 2 <= args.steps <= 100:
         print("stb gantry identify: --box must be 50–2000 mm, --steps 2–100", file=sys.stderr)
         return EXIT_CONFIG
-    from services.gantry.commission_tool import identify
+    from services.gantry.commissioning.identify_tool import identify
 
     return identify(args)

@@ -1,6 +1,6 @@
 """Driving and recording a commissioning run (``stb gantry identify``): the crane polled at
 100 Hz, the tracking camera's marker in every frame, the planned moves; then the figures
-(``commission.py`` does the arithmetic)."""
+(``identify.py`` does the arithmetic)."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ from common.markers import closest, detect, warm_up
 from common.node import configure_logging
 from common.settings import load_settings
 from services.args import EXIT_CONFIG, overrides_from
-from services.gantry.commission import (
+from services.gantry.commissioning.identify import (
     Figure,
     Series,
     ramp_lag,

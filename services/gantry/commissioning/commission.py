@@ -1,7 +1,7 @@
 """Driving a crane's first day (``stb gantry commission``): the crane moved from stop to stop,
 and at each, once it stands still, what its controller reports, where the motion capture sees
 the marker on its carriage and the targets below it, and where the tracking camera sees the
-targets (the fits: ``geometry_fit.py``; the dynamics: ``commissioning_run.py``)."""
+targets (the fits: ``geometry_fit.py``; the dynamics: ``identify_run.py``)."""
 
 from __future__ import annotations
 
@@ -20,10 +20,10 @@ from common.bus import Bus
 from common.crane_frame import CraneFrame
 from common.markers import Spot, detect
 from common.tracking_camera import TrackingCameraModel
-from services.gantry.commissioning_run import CommissioningError
+from services.gantry.commissioning.geometry_fit import CameraFit, Sighting, fit_camera
+from services.gantry.commissioning.identify_run import CommissioningError
 from services.gantry.crane import RegisterCrane
 from services.gantry.frames import FrameInbox, decode
-from services.gantry.geometry_fit import CameraFit, Sighting, fit_camera
 from services.gantry.reading import CraneError, CraneReading
 
 REST_MM, REST_MM_S, REST_FOR_S = 2.0, 2.0, 0.3  # standing still: near the target, not moving

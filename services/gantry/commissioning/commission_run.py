@@ -1,4 +1,4 @@
-"""``stb gantry commission`` once its flags are parsed (``first_day_cli.py`` has the command and
+"""``stb gantry commission`` once its flags are parsed (``commission_cli.py`` has the command and
 its documentation): the frame, the camera, the dynamics, in that order, and the TOML."""
 
 from __future__ import annotations
@@ -17,15 +17,7 @@ from common.crane_frame import CraneFrame
 from common.files import write_atomically
 from common.heightmap import HeightMap
 from common.tracking_camera import TrackingCameraModel
-from services.gantry.commissioning_run import (
-    CommissioningError,
-    Measurements,
-    Recorder,
-    lab_of,
-    run_moves,
-)
-from services.gantry.crane import ModbusCrane
-from services.gantry.first_day import (
+from services.gantry.commissioning.commission import (
     Stands,
     Watch,
     confirm,
@@ -33,7 +25,15 @@ from services.gantry.first_day import (
     heartbeat,
     survey_camera,
 )
-from services.gantry.geometry_fit import CameraFit, FitRefused, FrameFit, fit_frame
+from services.gantry.commissioning.geometry_fit import CameraFit, FitRefused, FrameFit, fit_frame
+from services.gantry.commissioning.identify_run import (
+    CommissioningError,
+    Measurements,
+    Recorder,
+    lab_of,
+    run_moves,
+)
+from services.gantry.crane import ModbusCrane
 from services.gantry.reading import CraneError
 from services.gantry.settings import GantrySettings
 
