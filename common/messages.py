@@ -18,7 +18,28 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from common.names import AlgorithmName, GantryCommandName, GantryMode
 
-Name = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")]
+NAME_CHARS, WHO_CHARS, TEXT_CHARS = 64, 128, 500
+Name = Annotated[str, Field(min_length=1, max_length=NAME_CHARS, pattern=r"^[A-Za-z0-9_.-]+$")]
+"""A camera's, a service's, a body's name: what a key expression may hold."""
+Who = Annotated[str, Field(max_length=WHO_CHARS)]
+"""Who sent or holds something: a user or an operator's name, with where from."""
+Text = Annotated[str, Field(max_length=TEXT_CHARS)]
+"""Why: a reason, a refusal's detail, a status's explanation, for people to read."""
+
+
+def who(text: str) -> str:
+    """``text`` cut to what a ``Who`` field holds (a producer's own, long, name)."""
+    return text[:WHO_CHARS]
+
+
+def text(words: str) -> str:
+    """``words`` cut to what a ``Text`` field holds."""
+    return words[:TEXT_CHARS]
+
+
+def name(words: str) -> str:
+    """``words`` cut to a ``Name``'s length (its pattern is the sender's to meet)."""
+    return words[:NAME_CHARS]
 
 
 class Message(BaseModel):
@@ -142,7 +163,7 @@ class PtzState(Message):
         "robot marker to the nearest marker found; None: not judged or no marker seen")
     pointing_problem: str = Field("", max_length=300, description="why the pointing is not to "
                                   "be trusted (previews disagreeing in a row); empty: fine")
-    held_by: str = Field("", max_length=128, description="the operator who holds the camera "
+    held_by: Who = Field("", description="the operator who holds the camera "
                          "(status held: it does not follow until released); empty: nobody")
     presets: list[str] = Field(default_factory=list, max_length=64,
                                description="the camera's own preset positions, by name")
@@ -163,7 +184,7 @@ class PtzHand(Message):
     zoom: int | None = Field(None, ge=-19999, le=19999, description="move (1…19999): the "
                              "VAPIX zoom step; nudge: by how many steps")
     preset: str = Field("", max_length=64, description="preset: its name")
-    operator: str = Field(max_length=128, description="who (from the page: 'user (web "
+    operator: Who = Field(description="who (from the page: 'user (web "
                           "address)')")
 
     @model_validator(mode="after")
@@ -266,7 +287,7 @@ class CollectProgress(Message):
     target: int = Field(ge=0)
     snapshots: int = Field(ge=0, description="snapshots seen so far")
     skipped: dict[str, int] = Field(description="snapshots not used, by reason")
-    message: str = Field("", max_length=500)
+    message: Text = ""
     mean_error_px: float | None = Field(None, ge=0, description="of the solved pose (review, "
                                         "done)")
     zoom: int | None = Field(None, ge=1, le=19999, description="the zoom step being collected "
@@ -352,16 +373,16 @@ class CraneState(Message):
     safety_ok: bool = Field(True, description="the controller's safety circuit is closed")
     mode: GantryMode = Field("disarmed", description="disarmed: never moves the crane; "
                              "armed: tracks; stopped: latched until an operator's reset")
-    mode_by: str = Field("", max_length=128, description="who changed the mode last")
-    mode_reason: str = Field("", max_length=500, description="why")
+    mode_by: Who = Field("", description="who changed the mode last")
+    mode_reason: Text = Field("", description="why")
     mode_since_s: float = Field(0.0, description="when, UNIX seconds")
     command: str = Field("", max_length=16, description="the last operator's command the "
                          "gantry answered (arm, disarm, stop, reset; empty: none yet)")
-    command_by: str = Field("", max_length=128, description="who sent it (a name; from the "
+    command_by: Who = Field("", description="who sent it (a name; from the "
                             "page: 'user (web address)')")
     command_s: float = Field(0.0, description="when the gantry answered it, UNIX seconds")
     command_accepted: bool = Field(False, description="its answer")
-    command_detail: str = Field("", max_length=500, description="why refused, or what changed")
+    command_detail: Text = Field("", description="why refused, or what changed")
 
 
 class GantryCommand(Message):
@@ -369,9 +390,9 @@ class GantryCommand(Message):
     it (deploy/zenoh/router.json5)."""
 
     command: GantryCommandName
-    operator: str = Field(max_length=128, description="who asks (a name; from the page: "
+    operator: Who = Field(description="who asks (a name; from the page: "
                           "'user (web address)')")
-    reason: str = Field("", max_length=500)
+    reason: Text = ""
     id: str = Field(max_length=64, description="chosen by the sender; the reply repeats it")
 
 
@@ -381,7 +402,7 @@ class GantryCommandReply(Message):
     id: str = Field(max_length=64)
     command: GantryCommandName
     accepted: bool
-    detail: str = Field(max_length=500, description="why refused, or what changed")
+    detail: Text = Field(description="why refused, or what changed")
     mode: GantryMode = Field(description="the gantry's mode after it")
 
 
@@ -454,5 +475,5 @@ class ServiceHealth(Message):
     pid: int = Field(ge=0)
     started_s: float
     status: HealthStatus
-    detail: str = Field("", max_length=500, description="why degraded, if it is")
+    detail: Text = Field("", description="why degraded, if it is")
     keys: dict[str, KeyStats] = Field(description="per concrete key expression")

@@ -20,7 +20,7 @@ from typing import Any, Generic, TypeVar
 from common import keys
 from common.bus import Bus, BusUnreachable, open_session
 from common.errors import StartupError
-from common.messages import HealthStatus, ServiceHealth
+from common.messages import HealthStatus, ServiceHealth, text
 from common.realtime import use_realtime_priority
 from common.settings import ServiceSettings
 
@@ -59,7 +59,7 @@ class Node(Generic[S]):
         return ServiceHealth(
             measured_s=time.time(), service=self.service, instance=self.settings.instance,
             host=socket.gethostname()[:255], pid=os.getpid(), started_s=self.started_s,
-            status=status, detail=detail[:500], keys=self.bus.key_stats())
+            status=status, detail=text(detail), keys=self.bus.key_stats())
 
     def publish_health(self) -> None:
         self.bus.publish(keys.HEALTH, self.health(), service=self.service,

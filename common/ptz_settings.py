@@ -7,7 +7,7 @@ from __future__ import annotations
 from pydantic import Field, model_validator
 
 from common.lab_views import PAPER_MARKER_MM, CameraConnection, default_cameras
-from common.settings import ServiceSettings
+from common.settings import NAME_PATTERN, ServiceSettings
 
 
 class PtzSettings(ServiceSettings):
@@ -15,7 +15,7 @@ class PtzSettings(ServiceSettings):
 
     section = "ptz"
 
-    instance: str = Field("ptz1", pattern=r"^[A-Za-z0-9_.-]{1,64}$")
+    instance: str = Field("ptz1", pattern=NAME_PATTERN)
     cameras: dict[str, CameraConnection] = Field(default_factory=default_cameras)
     timeout_s: float = Field(1.0, gt=0, description="every HTTP request to the camera")
     command_hz: float = Field(10.0, gt=0, le=30, description="at most this many moves a second")

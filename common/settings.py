@@ -37,6 +37,9 @@ from common.keys import DEFAULT_PREFIX, check_prefix
 from common.setting_text import setting_value
 
 S = TypeVar("S", bound="ServiceSettings")
+NAME_PATTERN = r"^[A-Za-z0-9_.-]{1,64}$"
+"""A name in a lab file that goes into key expressions and identities: an instance, a camera,
+a user (the bus's ``Name``, common/messages.py)."""
 
 CONFIG_ENV = "STB_LAB"
 LogLevel = Literal["DEBUG", "INFO", "WARNING", "ERROR"]
@@ -63,7 +66,7 @@ class ZenohSettings(_Strict):
     connect: list[str] = Field(default_factory=lambda: ["tcp/127.0.0.1:7447"])
     listen: list[str] = Field(default_factory=list)
     multicast_scouting: bool = False
-    user: str | None = Field(None, pattern=r"^[A-Za-z0-9_.-]{1,64}$", description="the "
+    user: str | None = Field(None, pattern=NAME_PATTERN, description="the "
                              "router's user name: this node's identity on the bus")
     password: SecretStr | None = None
     password_file: Path | None = Field(
@@ -149,7 +152,7 @@ class ServiceSettings(BaseModel):
     crater's height map, ``[gantry] height_map``, which the page and the recorders draw).
     Taken from there when the service's own section does not set it."""
 
-    instance: str = Field("main", pattern=r"^[A-Za-z0-9_.-]{1,64}$")
+    instance: str = Field("main", pattern=NAME_PATTERN)
     log_level: LogLevel = "INFO"
     realtime_priority: int = Field(
         0, ge=0, le=99, description="SCHED_FIFO priority 1-99 for this service's threads, so "

@@ -357,7 +357,7 @@ class Session:
             measured_s=time.time(), camera=self.camera, state=self.state,
             passpoints=sum(len(k.times) for k in self.collectors),
             target=sum(k.target for k in self.collectors), snapshots=c.snapshots,
-            skipped=dict(c.skipped), message=(self.message or self._coverage_text())[:500],
+            skipped=dict(c.skipped), message=m.text(self.message or self._coverage_text()),
             mean_error_px=self.mean_error_px, zoom=self.zoom,
             zooms_done=sum(k.done for k in self.collectors), zooms=len(self.zooms)),
             camera=self.camera)

@@ -6,7 +6,7 @@ from typing import Literal
 
 from pydantic import Field
 
-from common.settings import ServiceSettings
+from common.settings import NAME_PATTERN, ServiceSettings
 
 
 class CameraSettings(ServiceSettings):
@@ -14,7 +14,7 @@ class CameraSettings(ServiceSettings):
 
     source: str = Field("0", description='OpenCV source: a device number ("0") or a stream '
                         'URL ("rtsp://…", a video file)')
-    name: str = Field("tracking", pattern=r"^[A-Za-z0-9_.-]{1,64}$",
+    name: str = Field("tracking", pattern=NAME_PATTERN,
                       description="the camera's name in each frame")
     encoding: Literal["mono8", "jpeg"] = Field(
         "mono8", description="mono8: raw gray pixels (640×480: 300 kB a frame, what the "

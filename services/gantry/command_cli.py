@@ -49,6 +49,7 @@ def main(argv: Sequence[str]) -> int:
 
 
 def _send(args: argparse.Namespace) -> int:
+    from common import messages as m
     from common.bus import Bus
     from services.entry import tool_session, tool_settings
     from services.gantry.settings import GantrySettings
@@ -57,7 +58,7 @@ def _send(args: argparse.Namespace) -> int:
     session = tool_session(settings)
     bus = Bus(session, settings.bus)
     try:
-        return send(bus, args.command, args.operator[:128], args.reason[:500], args.timeout,
+        return send(bus, args.command, m.who(args.operator), m.text(args.reason), args.timeout,
                     settings.bus.zenoh.identity("operator"))
     finally:
         bus.close()

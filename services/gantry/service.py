@@ -159,7 +159,7 @@ class Control:
             by, rate_key = msg.operator, f"{sender}/{msg.operator}"
         else:
             by, rate_key = f"{sender} (as {msg.operator})", sender
-        self.loop.request(Request(msg.command, by[:128], msg.reason, msg.id, msg.measured_s,
+        self.loop.request(Request(msg.command, m.who(by), msg.reason, msg.id, msg.measured_s,
                                   rate_key))
 
     def heartbeat(self) -> None:
@@ -187,8 +187,8 @@ class Control:
     def _reply(self, now: float, reply: Reply) -> None:
         r, d = reply.request, reply.decision
         self.node.bus.publish(keys.GANTRY_COMMAND_REPLY, m.GantryCommandReply(
-            measured_s=now, id=r.id[:64], command=r.command, accepted=d.accepted,
-            detail=d.detail[:500], mode=d.mode))
+            measured_s=now, id=m.name(r.id), command=r.command, accepted=d.accepted,
+            detail=m.text(d.detail), mode=d.mode))
 
     def _publish(self, now: float, step: Step, reading: CraneReading) -> None:
         if step.detection is not None and step.frame_s is not None:
@@ -242,7 +242,7 @@ class Control:
         self.node.bus.publish(keys.GANTRY_STATE, m.CraneState(
             measured_s=now, status="unreachable", x_mm=0.0, y_mm=0.0, target_x_mm=0.0,
             target_y_mm=0.0, enabled=False, moving=False, fault_bits=0,
-            mode=modes.mode, mode_by=modes.by[:128], mode_reason=modes.reason[:500],
+            mode=modes.mode, mode_by=m.who(modes.by), mode_reason=m.text(modes.reason),
             mode_since_s=modes.since_s, **self._last_command()))
 
     def _last_command(self) -> CommandAudit:
@@ -250,9 +250,9 @@ class Control:
         if self.loop.last_reply is None:
             return {}
         at_s, reply = self.loop.last_reply
-        return {"command": reply.request.command, "command_by": reply.request.by[:128],
+        return {"command": reply.request.command, "command_by": m.who(reply.request.by),
                 "command_s": at_s, "command_accepted": reply.decision.accepted,
-                "command_detail": reply.decision.detail[:500]}
+                "command_detail": m.text(reply.decision.detail)}
 
     def _state(self, now: float, reading: CraneReading, *, hold: bool,
                reacquiring: bool = False) -> None:
@@ -262,5 +262,5 @@ class Control:
             status=crane_status(modes.mode, reading, hold=hold, reacquiring=reacquiring),
             target_x_mm=reading.target_x_mm, target_y_mm=reading.target_y_mm,
             enabled=reading.enabled, moving=reading.moving, fault_bits=reading.faults & 0xFFFF,
-            safety_ok=reading.safety_ok, mode=modes.mode, mode_by=modes.by[:128],
-            mode_reason=modes.reason[:500], mode_since_s=modes.since_s, **self._last_command()))
+            safety_ok=reading.safety_ok, mode=modes.mode, mode_by=m.who(modes.by),
+            mode_reason=m.text(modes.reason), mode_since_s=modes.since_s, **self._last_command()))

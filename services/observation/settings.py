@@ -7,7 +7,7 @@ from typing import Literal
 from pydantic import Field, SecretStr
 
 from common.lab_views import CameraConnection
-from common.settings import ServiceSettings
+from common.settings import NAME_PATTERN, ServiceSettings
 
 
 class ObservationSettings(ServiceSettings):
@@ -19,7 +19,7 @@ class ObservationSettings(ServiceSettings):
     user: str = "root"
     password: SecretStr = SecretStr("pass")
     auth: Literal["digest", "basic", "none"] = "digest"
-    name: str = Field("observation", pattern=r"^[A-Za-z0-9_.-]{1,64}$",
+    name: str = Field("observation", pattern=NAME_PATTERN,
                       description="the camera's name: its frames go on stb/video/<name>")
     fps: float = Field(5.0, gt=0, le=30, description="frames a second asked of the camera")
     resolution: str = Field("640x480", pattern=r"^[1-9][0-9]{1,4}x[1-9][0-9]{1,4}$",

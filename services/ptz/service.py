@@ -282,13 +282,13 @@ class _Loop:
 
     def _publish(self, status: m.PtzStatus, pan: float, tilt: float, zoom: int, error: float,
                  now: float, pointing_error: float | None = None, problem: str = "") -> None:
-        held_by = self.control.held_by[:128]
+        held_by = m.who(self.control.held_by)
         self.node.bus.publish(keys.PTZ_STATE, m.PtzState(
             measured_s=now, camera=self.settings.instance, status=status,
             pan_deg=min(max(pan, -180.0), 180.0), tilt_deg=min(max(tilt, -90.0), 90.0),
             zoom=min(max(zoom, 1), 19999), focal_mm=self.control.lens.focal_mm(zoom),
             aim_error_deg=error, pointing_error_deg=pointing_error, pointing_problem=problem,
-            held_by=held_by, presets=[p[:64] for p in self.presets]),
+            held_by=held_by, presets=[m.name(p) for p in self.presets]),
             camera=self.settings.instance)
 
     def _unreachable(self, now: float, err: PtzError) -> None:

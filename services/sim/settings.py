@@ -16,7 +16,7 @@ from common.crane_registers import RegisterMap
 from common.lab_paths import SIM_CRATER_FILE
 from common.lens import NO_DISTORTION
 from common.ptz_lens import STRAIGHT_LINE, PtzLens, ZoomCurve
-from common.settings import ServiceSettings, above_its_minimum
+from common.settings import NAME_PATTERN, ServiceSettings, above_its_minimum
 from common.tracking_camera import TrackingCameraModel
 from services.sim.crane import CraneParams
 from services.sim.crane_server import ESTOP_REGISTER
@@ -46,7 +46,7 @@ class MocapSettings(_Section):
 
 
 class PtzCameraSettings(_Section):
-    name: str = Field(pattern=r"^[A-Za-z0-9_.-]{1,64}$")
+    name: str = Field(pattern=NAME_PATTERN)
     host: str = "127.0.0.1"
     port: int = Field(ge=0, le=65535)
     x_mm: float
@@ -182,7 +182,7 @@ class ObservationCameraSettings(_Section):
     (about 2.8 × 2.1 m of ground below it). Nothing in the code models it (it is for people)."""
 
     enabled: bool = Field(True, description="serve it")
-    name: str = Field("observation", pattern=r"^[A-Za-z0-9_.-]{1,64}$")
+    name: str = Field("observation", pattern=NAME_PATTERN)
     host: str = "127.0.0.1"
     port: int = Field(8083, ge=0, le=65535)
     user: str = "root"

@@ -22,6 +22,7 @@ import numpy as np
 import qtm_rt
 from qtm_rt.packet import QRTComponentType
 
+from common import messages as m
 from common.backoff import Backoff
 from common.camera import quaternion_wxyz
 from common.messages import MarkerFrame, RigidBody
@@ -118,7 +119,7 @@ def _bodies(packet: qtm_rt.QRTPacket, names: Sequence[str]) -> list[RigidBody]:
             continue
         matrix = np.array(rotation.matrix, dtype=float).reshape(3, 3).T  # column by column
         qw, qx, qy, qz = quaternion_wxyz(matrix)
-        bodies.append(RigidBody(name=name[:64], x_mm=position.x, y_mm=position.y,
+        bodies.append(RigidBody(name=m.name(name), x_mm=position.x, y_mm=position.y,
                                 z_mm=position.z, qw=qw, qx=qx, qy=qy, qz=qz))
     return bodies[:100]
 

@@ -33,6 +33,7 @@ from starlette.responses import JSONResponse, Response, StreamingResponse
 from starlette.routing import Route
 
 from common.names import GANTRY_COMMANDS
+from common.settings import NAME_PATTERN
 from services.web.console import Console, console_routes
 from services.web.crater_image import CraterImage
 from services.web.gate import COOKIE, Caller, Gate, command_refusal
@@ -41,7 +42,7 @@ from services.web.lanes import Busy, command_lane, password_lane
 from services.web.limits import BodyLimit
 
 log = logging.getLogger(__name__)
-CAMERA = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
+CAMERA = re.compile(NAME_PATTERN)
 STATIC = {"index.html": "text/html; charset=utf-8", "app.js": "text/javascript; charset=utf-8",
           "signin.html": "text/html; charset=utf-8",
           "signin.js": "text/javascript; charset=utf-8"}

@@ -39,7 +39,7 @@ class GantryCommander:
             raise ValueError(f"unknown command {command!r}")
         ident = f"web-{os.getpid()}-{next(self._ids)}"
         self.bus.publish(keys.GANTRY_COMMAND, m.GantryCommand(
-            measured_s=time.time(), command=command, operator=operator[:128],
+            measured_s=time.time(), command=command, operator=m.who(operator),
             reason="from the operator page", id=ident), sender=self.sender)
         with self._changed:
             answered = self._changed.wait_for(lambda: ident in self._replies, self.timeout_s)

@@ -19,6 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from urllib.parse import urlsplit
 
+from common.messages import who
 from services.web.access import Session, Sessions, SignInBrake, basic_credentials
 from services.web.users import Role, User, Users
 
@@ -41,7 +42,7 @@ class Caller:
     @property
     def label(self) -> str:
         """How a command names them on the bus and in the logs: ``alice (web 10.0.0.5)``."""
-        return f"{self.user.name} (web {self.address})"[:128]
+        return who(f"{self.user.name} (web {self.address})")
 
 
 @dataclass(frozen=True)
