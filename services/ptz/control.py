@@ -26,6 +26,8 @@ from services.ptz.override import ManualOverride
 from services.ptz.pointing import NOT_SEEN, InfraredSchedule, PointingCheck
 
 log = logging.getLogger(__name__)
+HAND_MAX_AGE_S = 5.0  # an operator's hand older than this was meant for another moment
+HAND_MOVES = ("move", "nudge", "preset")  # the hands that move the camera
 RETRY_FIRST_S = 0.5
 RETRY_MAX_S = 5.0
 
@@ -132,6 +134,24 @@ class PtzControl:
         """Calibration mode moved the camera: the next sample sends a fresh command."""
         self.follower.forget()
 
+    def take_hand(self, msg: m.PtzHand, now: float, calibrating: bool) -> str | None:
+        """An operator's hand (the page): None when it is taken — the camera held by them, or
+        following again for ``follow``; a move (``HAND_MOVES``) is then the caller's to make,
+        and ``moved_by_hand`` its to say — or why it is not: sent too long ago (it was meant
+        for another moment), or a move while the camera is in calibration mode (it would spoil
+        the passpoints)."""
+        age = now - msg.measured_s
+        if abs(age) > HAND_MAX_AGE_S:
+            return f"sent {age:.1f} s ago (at most {HAND_MAX_AGE_S:g} s)"
+        if msg.action in HAND_MOVES and calibrating:
+            return (f"{msg.camera} is in calibration mode (a move would spoil its passpoints); "
+                    "again once the calibration has ended")
+        if msg.action == "follow":
+            self.release()
+        else:
+            self.hold(msg.operator)
+        return None
+
     def hold(self, by: str) -> None:
         """An operator holds the camera: it follows no more, and their moves are not someone
         else's hand (``moved_by_hand``)."""
@@ -148,6 +168,13 @@ class PtzControl:
         self.override.forget()
         self.follower.forget()
     # --- what goes out --------------------------------------------------------------------
+
+    @staticmethod
+    def on_the_wire(pan_deg: float, tilt_deg: float, zoom: int) -> tuple[float, float, int]:
+        """A position as ``PtzState`` carries it: a camera that reports beyond the message's
+        ranges (a pan of 181°, zoom 0) is shown at their edge, not refused by the bus."""
+        return (min(max(pan_deg, -180.0), 180.0), min(max(tilt_deg, -90.0), 90.0),
+                min(max(zoom, 1), 19999))
 
     def status(self, now: float, pan_deg: float, tilt_deg: float, calibrating: bool,
                zoom: int | None = None) -> Status:

@@ -30,7 +30,7 @@ from common.node import Node, run_every
 from common.ptz_settings import PtzSettings
 from services.ptz.calibration import CalibrationHold
 from services.ptz.camera import AxisPtzCamera, PtzCamera, PtzError, http_client
-from services.ptz.control import PtzControl
+from services.ptz.control import HAND_MOVES, PtzControl
 from services.ptz.follow import Follower
 from services.ptz.override import ManualOverride
 from services.ptz.pointing import InfraredSchedule, PointingCheck
@@ -40,7 +40,6 @@ from services.ptz.preview import PreviewLoop
 log = logging.getLogger(__name__)
 ASK_TICK_S = 0.1  # how often the pose asker looks whether asking is due
 ASK_TIMEOUT_S = 1.0
-HAND_MAX_AGE_S = 5.0  # an operator's hand older than this was meant for another moment
 PRESETS_EVERY_S = 30.0  # the camera's presets asked for again (someone may add one)
 
 
@@ -184,29 +183,19 @@ class _Loop:
     def on_hand(self, msg: m.PtzHand) -> None:
         """An operator's hand (the page): hold, move, a preset, or follow again."""
         now = time.time()
-        if abs(now - msg.measured_s) > HAND_MAX_AGE_S:
-            log.warning("%s from %s ignored: sent %.1f s ago", msg.action, msg.operator,
-                        now - msg.measured_s)
-            return
         with self.lock:
-            if msg.action in ("move", "nudge", "preset") and self.calibration.active(now):
-                log.warning("%s from %s refused: %s is in calibration mode (a move would spoil "
-                            "its passpoints); again once the calibration has ended",
-                            msg.action, msg.operator, msg.camera)
+            refused = self.control.take_hand(msg, now, self.calibration.active(now))
+            if refused is not None:
+                log.warning("%s from %s refused: %s", msg.action, msg.operator, refused)
                 return
             try:
-                if msg.action == "follow":
-                    self.control.release()
-                else:
-                    self.control.hold(msg.operator)
                 if msg.action == "move":
                     self.camera.move_to(msg.pan_deg, msg.tilt_deg, msg.zoom, self.settings.speed)
-                    self.control.moved_by_hand()
                 elif msg.action == "nudge":
                     self.camera.nudge(msg.pan_deg or 0.0, msg.tilt_deg or 0.0, msg.zoom or 0)
-                    self.control.moved_by_hand()
                 elif msg.action == "preset":
                     self.camera.goto_preset(msg.preset)
+                if msg.action in HAND_MOVES:
                     self.control.moved_by_hand()
             except PtzError as err:
                 log.warning("%s from %s: %s", msg.action, msg.operator, err)
@@ -283,10 +272,10 @@ class _Loop:
     def _publish(self, status: m.PtzStatus, pan: float, tilt: float, zoom: int, error: float,
                  now: float, pointing_error: float | None = None, problem: str = "") -> None:
         held_by = m.who(self.control.held_by)
+        pan, tilt, zoom = self.control.on_the_wire(pan, tilt, zoom)
         self.node.bus.publish(keys.PTZ_STATE, m.PtzState(
             measured_s=now, camera=self.settings.instance, status=status,
-            pan_deg=min(max(pan, -180.0), 180.0), tilt_deg=min(max(tilt, -90.0), 90.0),
-            zoom=min(max(zoom, 1), 19999), focal_mm=self.control.lens.focal_mm(zoom),
+            pan_deg=pan, tilt_deg=tilt, zoom=zoom, focal_mm=self.control.lens.focal_mm(zoom),
             aim_error_deg=error, pointing_error_deg=pointing_error, pointing_problem=problem,
             held_by=held_by, presets=[m.name(p) for p in self.presets]),
             camera=self.settings.instance)

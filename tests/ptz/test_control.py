@@ -6,7 +6,7 @@ import pytest
 
 from common import messages as m
 from common.camera import Pose, PtzLimits
-from services.ptz.control import RETRY_FIRST_S, RETRY_MAX_S, PtzControl
+from services.ptz.control import HAND_MAX_AGE_S, RETRY_FIRST_S, RETRY_MAX_S, PtzControl
 from services.ptz.follow import Follower
 from services.ptz.override import ManualOverride
 from services.ptz.pointing import InfraredSchedule, PointingCheck
@@ -142,3 +142,40 @@ def test_an_infrared_check_is_due_with_a_pose_and_again_for_a_new_pose_or_a_lost
     assert control.take_pose(_pose(measured_s=102.0), 240.0) == "taken"
     assert not control.infrared_due(240.0, recording=True), "a recording runs"
     assert control.infrared_due(241.0, recording=False)
+
+
+def _hand(action: str, sent_s: float, operator: str = "ada (web 10.0.0.5)") -> m.PtzHand:
+    return m.PtzHand(measured_s=sent_s, camera="ptz1", action=action,
+                     operator=operator, pan_deg=10.0 if action == "move" else None)
+
+
+def test_a_hand_holds_the_camera_and_follow_lets_it_go() -> None:
+    control = _control()
+    assert control.take_hand(_hand("hold", 100.0), 100.2, calibrating=False) is None
+    assert control.held_by == "ada (web 10.0.0.5)"
+    assert control.take_hand(_hand("follow", 101.0), 101.0, calibrating=False) is None
+    assert control.held_by == ""
+
+
+def test_a_hand_sent_too_long_ago_is_not_taken() -> None:
+    control = _control()
+    late = control.take_hand(_hand("move", 100.0), 100.0 + HAND_MAX_AGE_S + 0.5,
+                             calibrating=False)
+    assert late is not None and "s ago" in late and control.held_by == ""
+    early = control.take_hand(_hand("hold", 100.0), 100.0 - HAND_MAX_AGE_S - 0.5,
+                              calibrating=False)  # a sender whose clock is ahead
+    assert early is not None and control.held_by == ""
+
+
+@pytest.mark.parametrize("action", ["move", "nudge", "preset"])
+def test_no_move_by_hand_while_the_camera_calibrates(action: str) -> None:
+    control = _control()
+    refused = control.take_hand(_hand(action, 100.0), 100.0, calibrating=True)
+    assert refused is not None and "calibration mode" in refused and control.held_by == ""
+    assert control.take_hand(_hand("hold", 100.0), 100.0, calibrating=True) is None, \
+        "holding it moves nothing"
+
+
+def test_a_position_beyond_the_messages_ranges_is_shown_at_their_edge() -> None:
+    assert PtzControl.on_the_wire(181.0, -95.0, 0) == (180.0, -90.0, 1)
+    assert PtzControl.on_the_wire(-35.5, 12.0, 500) == (-35.5, 12.0, 500)
