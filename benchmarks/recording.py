@@ -31,7 +31,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -41,7 +40,7 @@ from pathlib import Path
 
 from mcap.reader import make_reader
 
-from benchmarks.faults.lab import interrupt, open_when_up, running_lab
+from benchmarks.faults.lab import open_when_up, running_lab
 from benchmarks.tracker import _cpu_s, _lab_processes
 from common import keys
 from common.bus import Bus
@@ -50,7 +49,7 @@ from services.args import Parser
 from services.calib.settings import CalibSettings
 from services.recording.typed import GANTRY_IMAGE
 from tests.gantry.rig import Operator
-from tests.uplab import SERVICES, write_up_lab
+from tests.uplab import SERVICES
 
 ROOT = Path(__file__).resolve().parent.parent
 FRAMES = "stb/gantry/camera/frame"
@@ -138,16 +137,11 @@ def first_minute(seconds: float, video_fps: float, workdir: Path) -> dict:
     with every camera: calibration included."""
     folder = workdir / "first-minute"
     folder.mkdir()
-    lab, endpoint, _ = write_up_lab(folder, [*SERVICES, "observation"])
-    shutil.rmtree(folder / "calib")  # as on a fresh checkout: the cameras have no pose
     count = load_settings(CalibSettings, ROOT / "config" / "demo.toml").count
-    env = {**os.environ, "PYTHONUNBUFFERED": "1", "STB_CALIB__COLLECT_MISSING": "true",
-           "STB_SIM__CALIBRATE_FIRST": '["ptz1", "ptz2"]', "STB_CALIB__COUNT": str(count)}
-    with open(folder / "up.log", "w") as log:
-        up = subprocess.Popen([sys.executable, "-m", "services.cli", "up", "--lab", str(lab),
-                               "--no-view"], cwd=ROOT, stdout=log, stderr=subprocess.STDOUT,
-                              env=env)
-    try:
+    env = {"STB_CALIB__COLLECT_MISSING": "true", "STB_SIM__CALIBRATE_FIRST": '["ptz1", "ptz2"]',
+           "STB_CALIB__COUNT": str(count)}
+    with running_lab(folder, services=[*SERVICES, "observation"], poses=False, env=env) as (
+            up, lab, endpoint):
         open_when_up(ZenohSettings(connect=[endpoint], connect_timeout_ms=0)).close()
         deadline = time.monotonic() + 30
         while "sim" not in (processes := _lab_processes(up.pid)):
@@ -161,8 +155,6 @@ def first_minute(seconds: float, video_fps: float, workdir: Path) -> dict:
         result["variant"] = (f"the first minute of a fresh demo lab: {', '.join(poses) or 'no'}"
                              f" camera calibrated, all four cameras")
         return result
-    finally:
-        interrupt(up, 30)
 
 
 def _armed(operator: Operator) -> bool:
@@ -190,17 +182,17 @@ def table(results: list[dict]) -> str:
 def main() -> None:
     parser = Parser(description=__doc__,
                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--seconds", type=float, default=30.0)
+    parser.add_argument("--seconds", type=float, default=None,
+                        help="per variant; 30 s, or 60 s with --first-minute")
     parser.add_argument("--video-fps", type=float, default=5.0)
     parser.add_argument("--first-minute", action="store_true",
                         help="only the first minute of a fresh demo lab, calibration included")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="stb-bench-rec-") as tmp:
         if args.first_minute:
-            seconds = args.seconds if "--seconds" in sys.argv else 60.0
-            results = [first_minute(seconds, args.video_fps, Path(tmp))]
+            results = [first_minute(args.seconds or 60.0, args.video_fps, Path(tmp))]
         else:
-            results = run(args.seconds, args.video_fps, Path(tmp))
+            results = run(args.seconds or 30.0, args.video_fps, Path(tmp))
     print(table(results))
 
 

@@ -61,8 +61,9 @@ def decode_gray(data: bytes, size: tuple[int, int] | None = None) -> np.ndarray:
         raise JpegError(f"JPEG is {found[0]}×{found[1]}, not the {size[0]}×{size[1]} declared")
     if found[0] * found[1] > MAX_PIXELS or 0 in found:
         raise JpegError(f"JPEG of {found[0]}×{found[1]} pixels refused (at most {MAX_PIXELS})")
-    import numpy as np  # here: a process that only reads sizes (stb observation) does
-    from PIL import Image  # without them
+    # Here, not at the top: a process that only reads sizes (stb observation) loads neither.
+    import numpy as np
+    from PIL import Image
 
     try:
         with Image.open(io.BytesIO(data), formats=["JPEG"]) as picture:

@@ -4,6 +4,7 @@ says about its processes."""
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -25,17 +26,23 @@ ALIVE = {"sim": "sim/main", "tracker": "tracker/main", "calib": "calib/main",
 
 
 @contextmanager
-def running_lab(folder: Path, mocap: dict[str, float] | None = None
+def running_lab(folder: Path, mocap: dict[str, float] | None = None, *,
+                services: list[str] = SERVICES, poses: bool = True,
+                env: dict[str, str] | None = None
                 ) -> Iterator[tuple[subprocess.Popen, Path, str]]:
-    """``stb up`` with every service; ``mocap``: settings of the sim's QTM to change."""
-    lab, endpoint, _ = write_up_lab(folder, SERVICES, pose_version=1, users=True)
+    """``stb up`` with ``services`` (every one by default); ``mocap``: settings of the sim's
+    QTM to change; ``poses``: the cameras' poses stored (False: a fresh checkout's lab, none);
+    ``env``: settings to set in ``stb up``'s environment (``STB_SECTION__FIELD``)."""
+    lab, endpoint, _ = write_up_lab(folder, services, pose_version=1, users=True)
+    if not poses:
+        shutil.rmtree(folder / "calib")
     if mocap:
         settings = "".join(f"{name} = {value}\n" for name, value in mocap.items())
         lab.write_text(lab.read_text().replace("[sim.mocap]\n", "[sim.mocap]\n" + settings, 1))
     with open(folder / "up.log", "w") as log:
         up = subprocess.Popen([sys.executable, "-m", "services.cli", "up", "--lab", str(lab),
                                "--no-view"], cwd=ROOT, stdout=log, stderr=subprocess.STDOUT,
-                              env={**os.environ, "PYTHONUNBUFFERED": "1"})
+                              env={**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})})
     try:
         yield up, lab, endpoint
     finally:
