@@ -6,7 +6,6 @@ import json
 import subprocess
 import sys
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -249,93 +248,12 @@ def test_a_binary_passpoint_file_is_named(tmp_path: Path, capsys) -> None:  # no
     assert str(path) in err and "not a CSV text file" in err and "Traceback" not in err
 
 
-def test_the_pose_is_solved_at_the_pan_and_tilt_the_camera_was_held_at(tmp_path: Path) -> None:
-    """Once the collection is over and the camera released, it may still say "calibrating"
-    while it turns back home: that state is not the passpoints' pan and tilt (a collection
-    held at pan 6° once stored pan 0°)."""
-    from services.calib.session import Session
-    from services.calib.settings import CalibSettings
-    from services.calib.store import PoseStore
-
-    session = Session(None, CalibSettings(), PoseStore(tmp_path), "ptz1", 10, 60.0,  # type: ignore[arg-type]
-                      lambda pose, report: None)
-
-    def state(pan: float) -> m.PtzState:
-        return m.PtzState(measured_s=session._started + 1, camera="ptz1", status="calibrating",
-                          pan_deg=pan, tilt_deg=-4.0, zoom=1, focal_mm=3.8, aim_error_deg=0.0)
-
-    session.on_state(state(6.0))
-    session.stop_holding()
-    session.on_state(state(0.0))  # turning home, still "calibrating"
-    assert session.camera_state is not None and session.camera_state.pan_deg == 6.0
-
-
-def test_a_stalled_collection_names_what_to_check_for_every_reason_seen(tmp_path: Path) -> None:
-    """A clean-clone CI's slow start gave more snapshots before the motion capture streamed
-    ("marker not in mocap") than with the camera looking at the sky ("no marker"): both hints
-    are given, the most frequent first, not only the top one."""
-    from collections import Counter
-
-    from services.calib.session import Session
-    from services.calib.settings import CalibSettings
-    from services.calib.store import PoseStore
-
-    session = Session(None, CalibSettings(stall_s=4), PoseStore(tmp_path), "ptz1", 100,  # type: ignore[arg-type]
-                      60.0, lambda pose, report: None)
-    session.collector.skipped.update({"marker not in mocap": 4, "no marker": 2})
-    text = session._stalled_text(Counter(), 4.0)
-    assert text.startswith("no passpoint for 4 s (0 of 100; since the last: 4 marker not in "
-                           "mocap, 2 no marker): the motion capture does not see the wand")
-    assert text.index("motion capture") < text.index("not in the camera's view")
-    assert "no snapshot at all" in session._stalled_text(session.collector.skipped.copy(), 15.0)
-    assert "has not taken the camera into calibration mode" in session._stalled_text(
-        session.collector.skipped.copy(), 15.0)
-    session.on_state(m.PtzState(measured_s=session._started + 1, camera="ptz1",
-                                status="calibrating", pan_deg=0.0, tilt_deg=0.0, zoom=1,
-                                focal_mm=3.8, aim_error_deg=0.0))
-    assert "sends no detections" in session._stalled_text(session.collector.skipped.copy(), 4.0)
-
-
 def _quiet_node() -> object:
     """What a session needs of its node: a stop event and a bus to publish on."""
     from types import SimpleNamespace
 
     return SimpleNamespace(stop=threading.Event(),
                            bus=SimpleNamespace(publish=lambda *args, **kwargs: None))
-
-
-def test_a_collection_never_held_stalls_after_stall_s_naming_the_ptz_service(
-        tmp_path: Path) -> None:
-    from services.calib.session import Session
-    from services.calib.settings import CalibSettings
-    from services.calib.store import PoseStore
-
-    session = Session(_quiet_node(), CalibSettings(stall_s=0.3, hold_wait_s=0.5),  # type: ignore[arg-type]
-                      PoseStore(tmp_path), "ptz1", 100, 60.0, lambda pose, report: None)
-    assert session._collect() is False
-    assert session.state == "failed"
-    assert "has not taken the camera into calibration mode" in session.message
-
-
-def test_the_stall_clock_starts_again_when_the_camera_is_held(tmp_path: Path) -> None:
-    """A collection started before the PTZ service is up (calib starts faster) gets its whole
-    ``stall_s`` of snapshots once the camera is held (a CI run failed after 4 s with "no
-    snapshot at all": the PTZ service was still starting)."""
-    from services.calib.session import Session
-    from services.calib.settings import CalibSettings
-    from services.calib.store import PoseStore
-
-    session = Session(_quiet_node(), CalibSettings(stall_s=0.3), PoseStore(tmp_path),  # type: ignore[arg-type]
-                      "ptz1", 100, 60.0, lambda pose, report: None)
-    held_after_s = 0.2
-    timer = threading.Timer(held_after_s, session.on_state, [m.PtzState(
-        measured_s=time.time() + held_after_s, camera="ptz1", status="calibrating",
-        pan_deg=0.0, tilt_deg=0.0, zoom=1, focal_mm=3.8, aim_error_deg=0.0)])
-    started = time.monotonic()
-    timer.start()
-    assert session._collect() is False
-    assert time.monotonic() - started >= held_after_s + 0.3
-    assert "sends no detections" in session.message
 
 
 @pytest.mark.parametrize(("accept", "state"), [(True, "review"), (False, "discarded")])

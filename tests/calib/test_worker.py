@@ -48,10 +48,11 @@ def test_the_solvers_never_load_in_the_service_and_the_fit_comes_back(tmp_path: 
         poses = []
         session = Session(node, CalibSettings(), PoseStore(Path({str(tmp_path)!r})), "ptz1",
                           60, 60.0, lambda pose, report: poses.append(pose), zooms={ZOOMS})
-        for zoom, collector in zip({ZOOMS}, session.collectors):
+        for zoom, collector in zip({ZOOMS}, session.collection.collectors):
             collector.passpoints = lambda z=zoom: Passpoints(data[f"world{{z}}"],
                                                             data[f"pixels{{z}}"])
-        session.collector.track = lambda: None  # passpoints without times: no clock offset
+        # passpoints without times: no clock offset
+        session.collection.collector.track = lambda: None
         session.store.save_inputs = lambda *args: None
         session._solve_zooms(m.PtzState(measured_s=0.0, camera="ptz1", status="calibrating",
                                         pan_deg=0.0, tilt_deg=0.0, zoom=1, focal_mm=3.8,
