@@ -15,6 +15,7 @@ from common.crane_registers import RegisterMap
 from services.gantry.control import Fix
 from services.gantry.crane import RegisterCrane
 from services.gantry.frames import Frame
+from services.sim.crane import CraneModel
 from services.sim.crane_server import input_registers, write_holding
 from services.sim.lab import Lab
 
@@ -33,22 +34,22 @@ class ModelCrane(RegisterCrane):
     """The ``Crane`` Protocol over the sim's crane model, through the register map and the
     crane's frame as the gantry's settings give it."""
 
-    def __init__(self, lab: Lab, clock: SimClock, registers: RegisterMap,
+    def __init__(self, model: CraneModel, clock: Callable[[], float], registers: RegisterMap,
                  frame: CraneFrame = CRANE_COUNTS_IN_THE_WORLD) -> None:
         super().__init__(registers, frame)
-        self.lab, self.clock = lab, clock
+        self.model, self.clock = model, clock
         self._holding = [0] * registers.holding_count
 
     def _read_input(self) -> list[int]:
-        self.lab.crane.advance_to(self.clock())
-        return input_registers(self.lab.crane, self.registers)
+        self.model.advance_to(self.clock())
+        return input_registers(self.model, self.registers)
 
     def _read_holding(self, start: int, count: int) -> list[int]:
         return self._holding[start:start + count]
 
     def _write(self, address: int, values: list[int]) -> None:
         self._holding[address:address + len(values)] = values
-        write_holding(self.lab.crane, self.clock(), range(address, address + len(values)),
+        write_holding(self.model, self.clock(), range(address, address + len(values)),
                       self._holding, self.registers)
 
 

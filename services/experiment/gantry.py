@@ -114,7 +114,8 @@ def run(lab: Lab, settings: GantrySettings, *, end_s: float | None = None,
     clock = SimClock(START_S)
     controller = Controller(settings, lab.crater if heights is None else heights,
                             None if oracle_ahead_s is None else Oracle(lab.robot, oracle_ahead_s))
-    loop = GantryLoop(settings, ModelCrane(lab, clock, settings.crane, settings.crane.frame()),
+    crane = ModelCrane(lab.crane, clock, settings.crane, settings.crane.frame())
+    loop = GantryLoop(settings, crane,
                       SimFrames(lab, clock, np.random.default_rng((settings.seed, 2))),
                       controller, START_S,
                       crane_marker=SimCraneMarker(lab, clock,
