@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import asyncio
 import os
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Awaitable, Callable, Iterator
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 import pytest
@@ -20,6 +22,7 @@ from tests.ports import free_port
 from tests.simlab import crater, crater_file, lab  # noqa: F401 - shared fixtures
 
 ROOT = Path(__file__).resolve().parent.parent
+T = TypeVar("T")
 
 
 def client_settings(endpoint: str, **bus: object) -> BusSettings:
@@ -35,6 +38,19 @@ def poll(predicate: Callable[[], object], timeout: float = 5.0, period: float = 
         if value:
             return value
         time.sleep(period)
+    return None
+
+
+async def poll_async(step: Callable[[], Awaitable[T]], timeout: float = 5.0,
+                     period: float = 0.02) -> T | None:
+    """``poll`` on an event loop: await ``step()`` until it gives something truthy, and
+    return that; None on timeout."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = await step()
+        if value:
+            return value
+        await asyncio.sleep(period)
     return None
 
 

@@ -94,9 +94,13 @@ def only_allowed_arrive(session: Callable[[str], zenoh.Session],
     ``allowed`` payloads (any account may read). ``session(account)``: a session as it."""
     sessions = {account: session(account) for account, _, _ in puts}
     got, _sub = _collect(session("tracker"), "stb/**")
-    # a fixed pause: the reader's subscription must reach the router first, and a matching
-    # status cannot tell it for the accounts the router denies (theirs never match)
-    time.sleep(0.5)
+    # the reader's subscription must reach the router first (a matching status cannot tell
+    # it for the accounts the router denies: theirs never match): an allowed put, repeated
+    # until the reader has it, says it has
+    probe = next(((a, k, p) for a, k, p in puts if p in allowed), None)
+    if probe is not None:
+        wait_for(lambda: sessions[probe[0]].put(probe[1], probe[2])
+                 or any(p == probe[2] for _, p in got), timeout=10, period=0.05)
     for _ in range(3):
         for account, key, payload in puts:
             sessions[account].put(key, payload)

@@ -19,6 +19,7 @@ from services.experiment.gantry import gantry_for, make_lab, run
 from services.gantry.cycle import AFTER_REPORT_S, WRITE_MARGIN_S
 from services.gantry.frames import OpenCvFrames
 from services.gantry.settings import GantrySettings
+from tests.conftest import wait_for
 from tests.video import marker_video
 
 
@@ -197,11 +198,7 @@ def test_opencv_frames_from_a_video_file(tmp_path: Path) -> None:
     stop = threading.Event()
     source = OpenCvFrames(str(video), stop)
     try:
-        deadline = time.monotonic() + 5
-        frame = None
-        while frame is None and time.monotonic() < deadline:
-            frame = source.take()
-            time.sleep(0.01)  # the poll's period, within the deadline
+        frame = wait_for(source.take, timeout=5, period=0.01)
         assert frame is not None
         captured, image = frame
         assert image.shape == (48, 64) and image.dtype == np.uint8

@@ -8,7 +8,6 @@ import http.client
 import json
 import subprocess
 import threading
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -22,7 +21,7 @@ from services.web.lanes import PASSWORDS_QUEUED
 from services.web.server import WebServer
 from services.web.settings import WebSettings
 from services.web.users import Role, User, Users, UsersFileError
-from tests.conftest import stb_process
+from tests.conftest import stb_process, wait_for
 from tests.webpage import PageClient, basic
 
 ALICE, VICTOR = ("alice", "alice-password-1"), ("victor", "victor-password-1")
@@ -370,10 +369,8 @@ def test_event_streams_are_bounded(users_file: Path, tmp_path: Path) -> None:
             streams.append(conn)
         assert page.request("GET", "/events", auth=VICTOR)[0] == 503
         streams.pop().close()
-        deadline = time.monotonic() + 10
-        while page.request("GET", "/events", auth=VICTOR)[0] != 200:
-            assert time.monotonic() < deadline, "a closed stream frees its place"
-            time.sleep(0.05)  # the poll's period, within the deadline
+        wait_for(lambda p=page: p.request("GET", "/events", auth=VICTOR)[0] == 200, timeout=10,
+                 period=0.05, why=lambda: "a closed stream frees its place")
         for conn in streams:
             conn.close()
 

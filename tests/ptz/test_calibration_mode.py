@@ -126,11 +126,8 @@ def test_a_hold_command_lost_to_a_timeout_is_sent_again(lab: Lab) -> None:
     try:
         with pytest.raises(PtzUnreachable):
             mode.on_request(_request(6.0, -4.0), time.time(), PtzLimits())
-        deadline = time.monotonic() + 5.0
-        while not detections and time.monotonic() < deadline:
-            mode.cycle()
-            time.sleep(0.1)  # the calibration loop's pace, within the deadline
-        assert detections, "detections once it stands at its hold"
+        wait_for(lambda: mode.cycle() or detections, timeout=5, period=0.1,  # its loop's pace
+                 why=lambda: "no detections once it stands at its hold")
         assert mode.hold == (6.0, -4.0, 1)
         assert mode._last_position == mode.hold
     finally:
@@ -155,15 +152,19 @@ def test_the_hold_is_home_and_a_camera_moved_away_is_sent_back(lab: Lab) -> None
             """Cycles until ``done()``: whether each published detections while the camera
             was off its hold."""
             wrong: list[bool] = []
-            deadline = time.monotonic() + timeout
-            while not done():
-                assert time.monotonic() < deadline, f"not done after {timeout} s: {wrong}"
+
+            def cycle_unless_done() -> bool:
+                if done():
+                    return True
                 before = len(detections)
                 mode.cycle()
                 assert mode._last_position is not None
                 off = mode.hold is None or not mode._at_hold(*mode._last_position)
                 wrong.append(off and len(detections) > before)
-                time.sleep(0.1)  # the calibration loop's pace
+                return False
+
+            wait_for(cycle_unless_done, timeout=timeout, period=0.1,  # the loop's pace
+                     why=lambda: f"not done: {wrong}")
             return wrong
 
         def collecting_at_hold(since: int) -> bool:

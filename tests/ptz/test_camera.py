@@ -19,7 +19,7 @@ from services.ptz.camera import (
 )
 from services.sim.camera_server import CameraServer, SimCamera
 from services.sim.ptz import PtzHead
-from tests.conftest import free_port
+from tests.conftest import free_port, wait_for
 
 
 @pytest.fixture
@@ -44,10 +44,8 @@ def test_position_limits_and_a_move(server: CameraServer) -> None:
     assert camera.limits() == PtzLimits(-170, 170, -90, 90, 1, 9999)
     assert camera.position() == vapix.Position(0.0, 0.0, 1, "auto")
     camera.move_to(12.5, -7.25, zoom=400, speed=100)
-    deadline = time.monotonic() + 3
-    while camera.position() != vapix.Position(12.5, -7.25, 400, "auto"):
-        assert time.monotonic() < deadline, camera.position()
-        time.sleep(0.05)  # the poll's period, within the deadline
+    wait_for(lambda: camera.position() == vapix.Position(12.5, -7.25, 400, "auto"), timeout=3,
+             period=0.05, why=lambda: str(camera.position()))
 
 
 def test_ir_cut_filter_and_snapshot(server: CameraServer) -> None:

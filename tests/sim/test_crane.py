@@ -23,7 +23,7 @@ from services.sim.crane import (
     ramp_following_s,
 )
 from services.sim.crane_server import CraneServer
-from tests.conftest import free_port
+from tests.conftest import free_port, poll_async
 
 
 def _enabled(params: CraneParams | None = None) -> CraneModel:
@@ -152,14 +152,15 @@ def test_heartbeat_alone_keeps_the_watchdog_quiet() -> None:
 async def _connected(port: int, timeout_s: float = 10.0
                      ) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
     """A connection to the server as soon as it listens (it starts on the same loop)."""
-    deadline = time.monotonic() + timeout_s
-    while True:
+    async def connection() -> tuple[asyncio.StreamReader, asyncio.StreamWriter] | None:
         try:
             return await asyncio.open_connection("127.0.0.1", port)
         except OSError:
-            if time.monotonic() > deadline:
-                raise
-            await asyncio.sleep(0.02)  # the poll's period, within the deadline
+            return None
+
+    connected = await poll_async(connection, timeout_s)
+    assert connected is not None, f"nothing listens on {port} after {timeout_s:g} s"
+    return connected
 
 
 def test_modbus_client_drives_the_crane_over_tcp() -> None:

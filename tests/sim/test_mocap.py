@@ -13,6 +13,7 @@ import qtm_rt
 
 from services.sim.lab import Lab
 from services.sim.mocap_server import MocapServer, MocapSource
+from tests.conftest import poll_async
 from tests.simlab import sim_settings
 
 
@@ -38,10 +39,10 @@ def _run(lab: Lab, client: Callable[[int], Awaitable[object]], *, capturing: boo
 async def _packets_until(packets: list, count: int, timeout: float) -> None:
     """Waits on the event loop until the client's callback has put ``count`` packets in
     ``packets``; fails after ``timeout`` s."""
-    deadline = time.monotonic() + timeout
-    while len(packets) < count:
-        assert time.monotonic() < deadline, f"{len(packets)} of {count} packets in {timeout} s"
-        await asyncio.sleep(0.02)  # polls the list the client's callback fills
+    async def enough() -> bool:
+        return len(packets) >= count
+
+    assert await poll_async(enough, timeout), f"{len(packets)} of {count} packets in {timeout} s"
 
 
 async def _stream(port: int, components: list[str], frames: str = "allframes", *,

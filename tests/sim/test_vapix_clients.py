@@ -21,7 +21,7 @@ from axis.models.pwdgrp_cgi import SecondaryGroup
 from services.sim.camera_server import CameraServer, SimCamera
 from services.sim.lab import Lab
 from services.sim.vapix_device import serial_of
-from tests.conftest import wait_for
+from tests.conftest import poll_async, wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -88,14 +88,13 @@ def test_the_axis_library_moves_the_camera_and_reads_it_back(camera: tuple) -> N
 
     async def reaching(ptz: PtzControl, pan: float, tilt: float, zoom: int) -> bytes:
         """The position once it is the one asked for (or what it is after 10 s)."""
-        deadline = time.monotonic() + 10
-        while True:
+        async def there() -> bytes | None:
             now = await ptz.query("position")
             at = _pairs(now)
-            if (float(at["pan"]), float(at["tilt"]), int(at["zoom"])) == (pan, tilt, zoom) \
-                    or time.monotonic() > deadline:
-                return now
-            await asyncio.sleep(0.05)  # the poll's period, within the deadline
+            return now if (float(at["pan"]), float(at["tilt"]), int(at["zoom"])) == \
+                (pan, tilt, zoom) else None
+
+        return await poll_async(there, 10, 0.05) or await ptz.query("position")
 
     async def move(device: AxisDevice) -> tuple[bytes, bytes, bytes]:
         ptz = device.vapix.ptz
