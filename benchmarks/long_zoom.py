@@ -12,6 +12,10 @@ ptz1; ``[ptz] zoom = 9999``), as the system test does:
 * ``straight``: ``stb calib collect`` at zoom 1 — the pose alone, through the pinhole model,
   and the data sheet's straight line from 3.8 to 46 mm.
 
+For ``measured``, the lens against the truth as ``tests/calib/test_zoom_collect_e2e.py`` judges
+it (the focal length's worst step, the distortion at zoom 1): the system test runs seed 11,
+this one any other (``--seed 12``, the second lens the docs report).
+
 Then the locomotive runs and ptz1 follows it at zoom 9999 for ``--seconds``: the share of the
 sim's true views (20 a second) in which the robot's true marker is within the central 40 % of
 the picture's width, and the median and 95th percentile of its distance from the centre.
@@ -28,7 +32,7 @@ import numpy as np
 
 from common import keys
 from common.camera import Pose, pose_distance
-from common.ptz_lens import PtzLens
+from common.ptz_lens import PtzLens, measured_lens
 from tests.calib.test_collect_e2e import calibration_lab
 from tests.calib.test_zoom_collect_e2e import (
     PTZ1_MOUNT,
@@ -39,7 +43,7 @@ from tests.calib.test_zoom_collect_e2e import (
     true_pixels,
     with_lens,
 )
-from tests.calib.test_zoom_fit import drawn_lens
+from tests.calib.test_zoom_fit import STEPS, distortion_error_px, drawn_lens
 from tests.services.test_processes import _lab_for_up
 
 
@@ -62,7 +66,14 @@ def run(model: str, truth: PtzLens, seconds: float, count: int) -> dict:
             following = follow(bus, seconds)
     offsets = _offsets_px(following, truth)
     position, angle = pose_distance(Pose.of(pose), PTZ1_MOUNT)
-    return {"model": model, "views": len(following),
+    lens = {}
+    if pose.lens:  # the measured lens against the truth, as the system test judges it
+        fitted = measured_lens([(p.zoom, p.focal_mm, p.distortion) for p in pose.lens])
+        worst = max(abs(fitted.focal_mm(float(z)) / truth.focal_mm(float(z)) - 1) for z in STEPS)
+        lens = {"focal_error_percent_worst_step": round(100 * worst, 2),
+                "distortion_error_px_zoom_1": round(distortion_error_px(
+                    fitted.intrinsics(1), truth.intrinsics(1)), 2)}
+    return {"model": model, "views": len(following), **lens,
             "central_40_percent_share": round(central_share(following, truth), 3),
             "offset_px_median": round(float(np.median(offsets)), 1),
             "offset_px_p95": round(float(np.percentile(offsets, 95)), 1),
