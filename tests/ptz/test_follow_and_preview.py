@@ -41,6 +41,14 @@ def test_the_follower_keeps_quiet_within_its_dead_band_its_rate_and_outside_its_
     assert follower.command(102.15, ROBOT + [500, 0, 0], STILL, 102.15, MOUNT) is not None
 
 
+def test_the_services_follower_ignores_positions_far_outside_the_crater() -> None:
+    """As the PTZ service builds it (the lab's volume by default): a robot sample 90 m away
+    (a tracker's glitch) moves nothing."""
+    follower = Follower()
+    assert follower.command(100.0, np.array([90_000.0, 0.0, 0.0]), STILL, 100.0, MOUNT) is None
+    assert follower.command(100.2, ROBOT, STILL, 100.2, MOUNT) is not None
+
+
 def test_the_follower_stays_within_the_cameras_limits() -> None:
     follower = Follower(limits=PtzLimits(min_pan=-10.0, max_pan=10.0))
     command = follower.command(100.0, np.array([-3000.0, 2500.0, 80.0]), STILL, 100.0, MOUNT)
