@@ -183,3 +183,33 @@ def feeding(crane: CraneRig, world: Bus, robot: Callable[[float], np.ndarray | N
     finally:
         stop.set()
         thread.join(5)
+
+
+SETTLE_SAMPLE_S = 0.02  # the standing-robot tests sample the true crane every 20 ms …
+SETTLE_SAMPLES = 300  # … for 6 s from its first pass within 20 mm
+
+
+def off_from_the_first_pass(distance: Callable[[], float], step: Callable[[], None],
+                            now: Callable[[], float], until_s: float) -> list[float]:
+    """The crane's true distance to a robot standing still, once it first passed within
+    20 mm: ``distance()`` sampled, then ``step()`` (``SETTLE_SAMPLE_S`` on its clock)."""
+    off: list[float] = []
+    while len(off) < SETTLE_SAMPLES and now() < until_s:
+        d = distance()
+        if off or d < 20.0:
+            off.append(d)
+        step()
+    return off
+
+
+def assert_never_swings_off(off: list[float]) -> None:
+    """Within 15 mm at most a second after the first pass within 20 mm, never 15 mm off
+    after."""
+    assert len(off) == SETTLE_SAMPLES, f"never within 20 mm ({len(off)} samples after)"
+    closed = next((i for i, d in enumerate(off) if d <= 15.0), None)
+    assert closed is not None and closed * SETTLE_SAMPLE_S <= 1.0, \
+        "within 15 mm at most 1 s after the 20 mm"
+    after = off[closed:]
+    assert max(after) <= 15.0, f"swung {max(after):.1f} mm off, " \
+        f"{(closed + np.argmax(after)) * SETTLE_SAMPLE_S:.2f} s after"
+

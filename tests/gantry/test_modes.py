@@ -12,7 +12,13 @@ import numpy as np
 
 from common.crane_registers import FAULT_SAFETY, FAULT_WATCHDOG
 from tests.gantry.camera import CAMERA, pixel_of
-from tests.gantry.rig import GROUND_MM, MARKER_MM
+from tests.gantry.rig import (
+    GROUND_MM,
+    MARKER_MM,
+    SETTLE_SAMPLE_S,
+    assert_never_swings_off,
+    off_from_the_first_pass,
+)
 from tests.gantry.sim_rig import POLL_S, SimGantry, rig_settings
 
 TARGET = np.array([600.0, -300.0])
@@ -140,18 +146,9 @@ def test_a_robot_standing_still_is_not_overshot() -> None:
     latest report instead swung it ±35–75 mm for 1–3 s."""
     gantry = SimGantry(rig_settings(), lambda _t: TARGET)
     _moving(gantry)
-    off: list[float] = []  # the true crane's distance to the robot from the first pass
-    while len(off) < 300 and gantry.now < 20:
-        distance = float(np.linalg.norm(gantry.state()[0] - TARGET))
-        if off or distance < 20.0:
-            off.append(distance)
-        gantry.run(0.02)  # samples the crane every 20 ms for 6 s
-    assert len(off) == 300, f"never within 20 mm ({len(off)} samples after)"
-    closed = next((i for i, d in enumerate(off) if d <= 15.0), None)
-    assert closed is not None and closed <= 50, "within 15 mm at most 1 s after the 20 mm"
-    after = off[closed:]
-    assert max(after) <= 15.0, \
-        f"swung {max(after):.1f} mm off, {(closed + np.argmax(after)) * 0.02:.2f} s after"
+    off = off_from_the_first_pass(lambda: float(np.linalg.norm(gantry.state()[0] - TARGET)),
+                                  lambda: gantry.run(SETTLE_SAMPLE_S), lambda: gantry.now, 20.0)
+    assert_never_swings_off(off)
 
 
 def test_the_robot_is_found_again_from_the_motion_capture_after_it_left_the_view() -> None:

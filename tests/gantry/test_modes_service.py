@@ -14,7 +14,14 @@ from pymodbus.client import ModbusTcpClient
 
 from common.crane_registers import FAULT_SAFETY, RegisterMap
 from tests.conftest import wait_for
-from tests.gantry.rig import CraneRig, Operator, feeding
+from tests.gantry.rig import (
+    SETTLE_SAMPLE_S,
+    CraneRig,
+    Operator,
+    assert_never_swings_off,
+    feeding,
+    off_from_the_first_pass,
+)
 
 TARGET = np.array([600.0, -300.0])
 
@@ -129,19 +136,11 @@ def test_a_robot_standing_still_is_not_overshot(rig: dict) -> None:
     crane: CraneRig = rig["crane"]
     with feeding(crane, rig["world"], lambda _t: TARGET):
         _moving(rig)
-        off: list[float] = []  # the true crane's distance to the robot from the first pass
-        deadline = time.monotonic() + 20
-        while len(off) < 300 and time.monotonic() < deadline:
-            distance = float(np.linalg.norm(crane.state()[0] - TARGET))
-            if off or distance < 20.0:
-                off.append(distance)
-            time.sleep(0.02)  # samples the crane every 20 ms for 6 s
-    assert len(off) == 300, f"never within 20 mm ({len(off)} samples after)"
-    closed = next((i for i, d in enumerate(off) if d <= 15.0), None)
-    assert closed is not None and closed <= 50, "within 15 mm at most 1 s after the 20 mm"
-    after = off[closed:]
-    assert max(after) <= 15.0, \
-        f"swung {max(after):.1f} mm off, {(closed + np.argmax(after)) * 0.02:.2f} s after"
+        off = off_from_the_first_pass(
+            lambda: float(np.linalg.norm(crane.state()[0] - TARGET)),
+            lambda: time.sleep(SETTLE_SAMPLE_S),  # the sampling's pace
+            time.monotonic, time.monotonic() + 20)
+    assert_never_swings_off(off)
 
 
 def test_the_command_line_says_what_the_gantry_made_of_a_command(
