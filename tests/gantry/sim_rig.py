@@ -42,8 +42,9 @@ _ids = itertools.count()
 def rig_settings(**changes: object) -> GantrySettings:
     """The real-time rig's settings (``conftest.rig``): a flat crater, the rig's marker height,
     a stale estimate after 0.6 s, commands as fast as a test sends them."""
-    return GantrySettings(marker_height_mm=MARKER_MM, stale_after_s=0.6, command_burst=100,
-                          command_per_s=100.0, **changes)
+    defaults: dict[str, object] = {"marker_height_mm": MARKER_MM, "stale_after_s": 0.6,
+                                   "command_burst": 100, "command_per_s": 100.0}
+    return GantrySettings(**{**defaults, **changes})  # type: ignore[arg-type]
 
 
 class CountingCrane(ModelCrane):
@@ -108,6 +109,7 @@ class SimGantry:
         self._mocap, self._crane_marker = mocap, crane_marker
         self.loop = self._started_loop()
         self.replies: list[Reply] = []
+        self.setpoints: list[tuple[float, float, bool]] = []  # (x, y, hold) sent while armed
         self.status = "idle"
         self._fix: Fix | None = None
         self._last_step_s = -float("inf")
@@ -195,6 +197,9 @@ class SimGantry:
             return
         if tick.step is not None:
             self._last_step_s = self.now
+            if self.loop.armed:
+                x, y = tick.step.setpoint
+                self.setpoints.append((float(x), float(y), tick.step.hold))
         self.status = crane_status(self.mode, tick.reading,
                                    hold=tick.step.hold if tick.step else True,
                                    reacquiring=bool(tick.step and tick.step.reacquiring))

@@ -112,6 +112,32 @@ def test_a_crane_that_disagrees_with_its_marker_stops_the_gantry_and_will_not_ar
     gantry.arm_when_in_view()
 
 
+def test_it_follows_then_holds_when_frames_stop_or_the_marker_is_lost() -> None:
+    target = np.array([350.0, -250.0])
+    frames_stop, moves_at = [float("inf")], [float("inf")]
+
+    def robot(t: float) -> np.ndarray | None:  # stands; then drives 2 s and leaves the view
+        if t < moves_at[0]:
+            return target
+        return target + [150.0 * (t - moves_at[0]), 0.0] if t < moves_at[0] + 2 else None
+
+    gantry = SimGantry(rig_settings(), robot, paused=lambda t: frames_stop[0] <= t < moves_at[0])
+    gantry.arm_when_in_view()
+    assert gantry.run(8, lambda: np.linalg.norm(gantry.state()[0] - target) < 20.0)
+    assert gantry.state()[2] and not gantry.setpoints[-1][2]
+    assert gantry.run(5, lambda: _speed(gantry) < 1.0)  # settled
+    frames_stop[0] = gantry.now
+    assert gantry.run(5, lambda: gantry.setpoints[-1][2]), "frames stop: the estimate goes stale"
+    held = gantry.state()[0]
+    gantry.run(1.0)
+    position, velocity, _, _ = gantry.state()
+    assert np.linalg.norm(position - held) < 5.0 and np.linalg.norm(velocity) < 1.0
+    moves_at[0] = gantry.now
+    gantry.run(3.5)
+    assert gantry.setpoints[-1][2], "marker out of sight → hold"
+    assert all(abs(x) <= 2950 and abs(y) <= 2950 for x, y, _ in gantry.setpoints)
+
+
 def test_a_crane_disabled_at_the_controller_stops_the_gantry() -> None:
     gantry = SimGantry(rig_settings(), lambda t: TARGET + [60.0 * t, 0.0])
     _moving(gantry)
