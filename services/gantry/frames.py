@@ -36,6 +36,7 @@ class FrameInbox:
     """The last ``keep`` frames, handed over once."""
 
     def __init__(self, keep: int = 8) -> None:
+        self.keep = keep
         self._lock = threading.Lock()
         self._frames: deque[Frame] = deque(maxlen=keep)
 

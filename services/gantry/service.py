@@ -59,7 +59,13 @@ def run(node: Node[GantrySettings]) -> None:
     frames: FrameSource
     if s.frames == "bus":
         inbox = frames = FrameInbox()
-        node.bus.subscribe(keys.GANTRY_FRAME, inbox.put_message)
+        # every frame, in order (at most the inbox's worth waiting): a stream's newest-only
+        # delivery let a copy sent right after a real frame replace it whenever the handler
+        # lagged, and the copy, alone at its capture time, was taken (the fault campaign's
+        # drifting spoofed frames dragged the crane 190–202 mm on a busy machine); together,
+        # the controller takes the one of the two the motion capture agrees with
+        node.bus.subscribe(keys.GANTRY_FRAME, inbox.put_message, latest=False,
+                           queue_size=inbox.keep)
     else:
         frames = OpenCvFrames(s.frames.removeprefix("opencv:"), node.stop)
     fix, crane_marker = LatestFix(), LatestMarker(s.crane_marker)
