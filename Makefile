@@ -35,7 +35,7 @@ test: $(KERNEL)
 ## The long whole-lab runs on real time (fault campaign, demo calibration, live vs experiment,
 ## commissioning, collection and recording end to end, the lens at several zooms, the page in a
 ## browser against the whole lab, several hosts):
-## about 25 minutes on 2 cores. CI runs both.
+## about 22 minutes on 2 cores. CI runs both.
 test-system: $(KERNEL)
 	$(BIN)/python -m pytest -q -m system
 
