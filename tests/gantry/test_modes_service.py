@@ -138,7 +138,7 @@ def test_a_robot_standing_still_is_not_overshot(rig: dict) -> None:
         _moving(rig)
         off = off_from_the_first_pass(
             lambda: float(np.linalg.norm(crane.state()[0] - TARGET)),
-            lambda: time.sleep(SETTLE_SAMPLE_S),  # the sampling's pace
+            lambda: time.sleep(SETTLE_SAMPLE_S),  # pacing: samples every 20 ms
             time.monotonic, time.monotonic() + 20)
     assert_never_swings_off(off)
 
