@@ -25,12 +25,12 @@ setup: $(KERNEL)
 demo: $(KERNEL)
 	$(BIN)/stb up --lab $(or $(LAB),config/demo.toml)
 
-## Lint and type-check, then the test suite but for the long whole-lab runs (about 6 minutes
-## on 2 cores).
+## Lint and type-check, then the test suite but for the long whole-lab runs, on two workers
+## (pytest-xdist; about 4 minutes on 2 cores).
 test: $(KERNEL)
 	$(BIN)/ruff check common services tests benchmarks compose_test
 	$(BIN)/mypy
-	$(BIN)/python -m pytest -q -m "not system"
+	$(BIN)/python -m pytest -q -m "not system" -n 2
 
 ## The long whole-lab runs on real time (fault campaign, demo calibration, live vs experiment,
 ## commissioning, collection and recording end to end, the lens at several zooms, the page in a

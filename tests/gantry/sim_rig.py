@@ -92,12 +92,15 @@ class RenderedFrames:
 
 
 class SimGantry:
-    """The gantry's loop and the sim's crane on one simulated clock (seconds from 0)."""
+    """The gantry's loop and the sim's crane on one simulated clock (seconds from 0); the
+    gantry polls every ``POLL_S`` from ``poll_phase_s`` (its clock's phase against the crane
+    controller's cycle, which starts at 0)."""
 
     def __init__(self, settings: GantrySettings, robot: Robot, *,
                  registers: RegisterMap = DEFAULT_MAP, params: CraneParams = RIG_PARAMS,
                  mocap: bool = False, paused: Callable[[float], bool] = lambda _t: False,
-                 crane_marker: Callable[[float], np.ndarray] = lambda _t: np.zeros(2)) -> None:
+                 crane_marker: Callable[[float], np.ndarray] = lambda _t: np.zeros(2),
+                 poll_phase_s: float = 0.0) -> None:
         settings = settings.model_copy(update={
             "crane": CraneConnection(**{**settings.crane.model_dump(),
                                         **registers.model_dump()})})
@@ -113,7 +116,7 @@ class SimGantry:
         self.status = "idle"
         self._fix: Fix | None = None
         self._last_step_s = -float("inf")
-        self._next_poll_s, self._next_beat_s = 0.0, 0.0
+        self._next_poll_s, self._next_beat_s = poll_phase_s, 0.0  # polls: the gantry's clock
 
     def _started_loop(self) -> GantryLoop:
         heights = HeightMap(np.full((3, 3), GROUND_MM, np.float32), -5000, -5000, 5000)

@@ -89,3 +89,32 @@ def test_an_offset_outside_the_period_is_refused() -> None:
 def test_timing_settings_that_cannot_work_name_the_field(overrides: dict, field: str) -> None:
     with pytest.raises(ConfigError, match=field.replace(".", r"\.")):
         load_settings(GantrySettings, overrides=overrides, environ={})
+
+
+@pytest.mark.parametrize("poll_phase_s", [0.004, 0.013, 0.021])
+@pytest.mark.parametrize("after_report_s", [0.03, 0.15])
+def test_the_loop_writes_setpoints_a_fixed_time_after_the_controller_reports(
+        after_report_s: float, poll_phase_s: float) -> None:
+    """The gantry's loop over the sim's crane model on the simulated clock (sim_rig): each
+    setpoint is written ``after_report_s`` after the report it answers, within a poll, whatever
+    the phase of the gantry's polls against the controller's cycle. Over Modbus on real time:
+    tests/gantry/test_service.py (a system test)."""
+    from tests.gantry.sim_rig import POLL_S, SimGantry, rig_settings
+
+    start = np.array([-300.0, 0.0])
+    gantry = SimGantry(rig_settings(after_report_s=after_report_s),
+                       lambda t: start + [120.0 * t, 0.0], poll_phase_s=poll_phase_s)
+    ages: list[float] = []  # of the controller's report when a setpoint is written
+    write = gantry.crane.write_setpoint
+
+    def recording(x_mm: float, y_mm: float) -> None:
+        gantry.model.advance_to(gantry.now)
+        ages.append(gantry.now - gantry.model.published_s)
+        write(x_mm, y_mm)
+
+    gantry.crane.write_setpoint = recording  # type: ignore[method-assign]
+    gantry.arm_when_in_view()
+    assert gantry.run(10, lambda: len(ages) >= 24), "setpoints stopped"
+    settled = np.array(ages[-16:])
+    assert np.all((settled >= after_report_s - 1e-9) & (settled < after_report_s + POLL_S)), \
+        settled

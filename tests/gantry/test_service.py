@@ -67,9 +67,11 @@ def test_offload_figures_follow_the_error(rig: dict) -> None:
         assert not offloads[-1].warning and offloads[-1].vertical_loss_pct < 0.1
 
 
+@pytest.mark.system  # timing on real time: alone, not beside make test's parallel workers
 @pytest.mark.parametrize("rig", [{"after_report_s": 0.03}, {"after_report_s": 0.15}],
                          indirect=True)
 def test_setpoints_go_out_a_fixed_time_after_the_controller_reports(rig: dict) -> None:
+    """Over Modbus on real time (the rule on the simulated clock: test_cycle.py)."""
     crane, after_report_s = rig["crane"], rig["node"].settings.after_report_s
     ages: list[float] = []  # of the controller's report when a setpoint arrives
     write = crane.model.write_setpoint
