@@ -16,6 +16,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from common.lens import NO_DISTORTION, distort, undistort
+from common.pose_fields import POSE_FIELDS, PoseFields
 from common.volume import Box
 
 
@@ -89,17 +90,6 @@ class PositionFields(Protocol):
     def z_mm(self) -> float: ...
 
 
-class PoseFields(PositionFields, Protocol):
-    """Anything that names a pose with the six fields (messages, settings)."""
-
-    @property
-    def rx_deg(self) -> float: ...
-    @property
-    def ry_deg(self) -> float: ...
-    @property
-    def rz_deg(self) -> float: ...
-
-
 @dataclass(frozen=True)
 class Pose:
     """T_world_camera: where a camera is (mm) and how it is turned (deg, R = Rx·Ry·Rz)."""
@@ -121,14 +111,13 @@ class Pose:
 
     @classmethod
     def of(cls, f: PoseFields) -> Pose:
-        """The pose named by an object's ``x_mm … rz_deg`` fields (a CameraPose message, a sim
-        camera's settings)."""
-        return cls(f.x_mm, f.y_mm, f.z_mm, f.rx_deg, f.ry_deg, f.rz_deg)
+        """The pose in a model's six pose fields (a CameraPose message, a sim camera's
+        settings)."""
+        return cls(*(getattr(f, name) for name in POSE_FIELDS))
 
     def fields(self) -> dict[str, Any]:  # Any: spread into a message's other fields
-        """``x_mm … rz_deg`` as keyword arguments (for a CameraPose message)."""
-        return {"x_mm": self.x_mm, "y_mm": self.y_mm, "z_mm": self.z_mm,
-                "rx_deg": self.rx_deg, "ry_deg": self.ry_deg, "rz_deg": self.rz_deg}
+        """The six pose fields as keyword arguments (for a CameraPose message)."""
+        return {name: getattr(self, name) for name in POSE_FIELDS}
 
     @classmethod
     def from_matrix(cls, rotation: np.ndarray, position: np.ndarray) -> Pose:

@@ -17,6 +17,7 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from common.names import AlgorithmName, GantryCommandName, GantryMode
+from common.pose_fields import PoseFields
 
 NAME_CHARS, WHO_CHARS, TEXT_CHARS = 64, 128, 500
 Name = Annotated[str, Field(min_length=1, max_length=NAME_CHARS, pattern=r"^[A-Za-z0-9_.-]+$")]
@@ -211,16 +212,11 @@ class LensAtZoom(BaseModel):
     mean_error_px: float = Field(ge=0, description="mean reprojection error at this zoom")
 
 
-class CameraPose(Message):
-    """A camera's calibrated pose T_world_camera (paper eq. 1: R = Rx·Ry·Rz; x = optical axis)."""
+class CameraPose(PoseFields, Message):
+    """A camera's calibrated pose T_world_camera (paper eq. 1: R = Rx·Ry·Rz; x = optical axis;
+    its six fields: common/pose_fields.py)."""
 
     camera: Name
-    x_mm: float
-    y_mm: float
-    z_mm: float
-    rx_deg: float
-    ry_deg: float
-    rz_deg: float
     focal_mm: float = Field(gt=0, description="focal length the pose was fitted with")
     mean_error_px: float = Field(ge=0, description="mean reprojection error over the inliers")
     passpoints: int = Field(ge=0, description="passpoints used (inliers)")

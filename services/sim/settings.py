@@ -15,6 +15,7 @@ from common.crane_frame import CraneFrame
 from common.crane_registers import RegisterMap
 from common.lab_paths import SIM_CRATER_FILE
 from common.lens import NO_DISTORTION
+from common.pose_fields import PoseFields
 from common.ptz_lens import STRAIGHT_LINE, PtzLens, ZoomCurve
 from common.settings import NAME_PATTERN, ServiceSettings, above_its_minimum
 from common.tracking_camera import TrackingCameraModel
@@ -45,16 +46,13 @@ class MocapSettings(_Section):
                              'camera lens\'s height, as a lab would stick one there; "" = none')
 
 
-class PtzCameraSettings(_Section):
+class PtzCameraSettings(PoseFields, _Section):
+    """A simulated PTZ camera: where it truly is (the pose fields, common/pose_fields.py),
+    its VAPIX server, its head and its lens."""
+
     name: str = Field(pattern=NAME_PATTERN)
     host: str = "127.0.0.1"
     port: int = Field(ge=0, le=65535)
-    x_mm: float
-    y_mm: float
-    z_mm: float
-    rx_deg: float
-    ry_deg: float
-    rz_deg: float
     user: str = "root"
     password: str = "pass"
     auth: Literal["digest", "basic", "none"] = "digest"
