@@ -22,6 +22,8 @@ from services.tracker.service import run
 from services.tracker.settings import TrackerSettings
 from tests.conftest import free_port, until_heard, wait_for
 
+FRESH_S = 0.005  # between a fake driver's fresh frames (QTM at 200 Hz): captured in the last 0.2 s
+
 
 class QtmThread:
     """The sim's QTM RT server on a loop thread of its own; stop() and start() it again."""
@@ -106,7 +108,9 @@ def test_driver_reconnects_when_qtm_comes_back(qtm: QtmThread) -> None:
         qtm.stop()
         wait_for(lambda: states and states[-1][0] is False, timeout=5)
         count = len(frames)
-        time.sleep(0.5)  # QTM away for half a second
+        away = len(states)
+        # QTM stays away while the driver tries again (each try that fails says so)
+        wait_for(lambda: sum(not up for up, _ in states[away:]) >= 2, timeout=5)
         qtm.start()
         wait_for(lambda: len(frames) > count + 20, timeout=5)
         assert states[-1][0] is True
@@ -151,8 +155,8 @@ def test_service_publishes_markers_and_the_robot(lab: Lab, qtm: QtmThread,
 
 
 class BacklogMocap:
-    """Fresh frames, then a backlog as after a 2 s stall (captured 2.0 … 0.6 s ago, arriving
-    at once), then fresh frames again."""
+    """Fresh frames (200 Hz, the newest captured now), then a backlog as after a 2 s stall
+    (captured 2.0 … 0.6 s ago, arriving at once), then fresh frames again."""
 
     def __init__(self) -> None:
         self.stale = 0
@@ -165,16 +169,16 @@ class BacklogMocap:
             return m.MarkerFrame(measured_s=captured_s, frame=k, markers=[
                 m.Marker(label="robot", x_mm=float(k), y_mm=0.0, z_mm=100.0)])
 
+        now = time.time()
         for k in range(20):
-            on_frame(frame(k, time.time()))
-            time.sleep(0.01)  # paces the frames (100 Hz)
+            on_frame(frame(k, now - (19 - k) * FRESH_S))
         now = time.time()
         for k in range(20, 160):
             self.stale += 1
             on_frame(frame(k, now - 2.0 + (k - 20) * 0.01))
+        now = time.time()
         for k in range(160, 180):
-            on_frame(frame(k, time.time()))
-            time.sleep(0.01)  # paces the frames (100 Hz)
+            on_frame(frame(k, now - (179 - k) * FRESH_S))
         stop.wait(5)
 
 
@@ -263,12 +267,12 @@ class LosingBody:
     def run(self, on_frame: Callable[[m.MarkerFrame], None], stop: threading.Event,
             on_state: Callable[[bool, str], None]) -> None:
         on_state(True, "bodies")
-        for k in range(40):
+        now = time.time()
+        for k in range(41):  # frame 40 has the body again: it says the 20 before were seen
             bodies = [m.RigidBody(name="robot", x_mm=float(k), y_mm=5.0, z_mm=80.0, qw=1.0,
-                                  qx=0.0, qy=0.0, qz=0.0)] if k < 20 else []
-            on_frame(m.MarkerFrame(measured_s=time.time(), frame=k, markers=[
+                                  qx=0.0, qy=0.0, qz=0.0)] if k < 20 or k == 40 else []
+            on_frame(m.MarkerFrame(measured_s=now - (40 - k) * FRESH_S, frame=k, markers=[
                 m.Marker(label="robot", x_mm=1.0, y_mm=2.0, z_mm=3.0)], bodies=bodies))
-            time.sleep(0.01)  # paces the frames (100 Hz)
         stop.wait(5)
 
 
@@ -284,9 +288,10 @@ def test_a_body_lost_by_qtm_gives_no_robot_sample_never_a_zero_or_its_marker(
     thread = threading.Thread(target=run, args=(node, LosingBody()))
     thread.start()
     try:
-        wait_for(lambda: len(robots) >= 20, timeout=10)
-        time.sleep(0.5)  # the subject: the 20 frames without the body give no sample
-        assert [r.x_mm for r in robots] == [float(k) for k in range(20)]
+        # the frames are handled in order: the sample of frame 40 comes after 20–39 were seen
+        wait_for(lambda: any(r.x_mm == 40.0 for r in robots), timeout=10)
+        assert [r.x_mm for r in robots] == [*map(float, range(20)), 40.0], \
+            "the 20 frames without the body give no sample"
         assert all(r.body == "robot" and r.qw == 1.0 for r in robots)
     finally:
         node.stop.set()
