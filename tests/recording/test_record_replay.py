@@ -98,16 +98,19 @@ def test_every_sample_is_recorded_in_order_with_its_times_and_a_json_copy(
 
 def test_replay_puts_the_same_messages_back_in_order_and_on_time(
         make_bus: Callable[..., Bus], tmp_path: Path) -> None:
-    publisher, recorder_bus, listener = make_bus(), make_bus(), make_bus()
+    """A recording of 20 robot samples heard 50 ms apart (written as the recorder writes
+    them), replayed at speed 2."""
+    from common.mcap_file import RecordWriter
+
+    listener = make_bus()
     path = tmp_path / "run.mcap"
-    t0 = time.time()
-
-    def publish() -> None:
+    with open(path, "wb") as out:
+        writer = RecordWriter(out)
         for i in range(20):
-            publisher.publish(keys.TRACKER_ROBOT, _robot(i, t0 + i * 0.05))
-            time.sleep(0.05)  # the subject: 50 ms apart, replayed at speed 2
-
-    _record(recorder_bus, path, publish, expect=20, with_json=False, heard=(publisher, ROBOT))
+            t = 1000.0 + i * 0.05
+            writer.write(ROBOT, codec.encode(_robot(i, t)), encoding=codec.CONTENT_TYPE,
+                         model="RobotPosition", received_s=t, measured_s=t)
+        writer.finish()
     got: list[tuple[float, m.RobotPosition]] = []
     listener.subscribe(keys.TRACKER_ROBOT, lambda r: got.append((time.time(), r)),
                        latest=False)
