@@ -98,15 +98,19 @@ class Operator:
     def arm_within(self, timeout: float) -> m.GantryCommandReply:
         """Arm as an operator at a lab that is still starting would: wait for the gantry, ask
         again while it does not answer or refuses (no estimate yet), at most ``timeout``."""
-        deadline = time.monotonic() + timeout
-        answer = None
-        while time.monotonic() < deadline:
-            if self.states:
-                ident = self._publish("arm")
-                answer = poll(lambda i=ident: self._reply(i), timeout=3) or answer  # type: ignore[assignment]
-                if answer is not None and answer.accepted:
-                    return answer
-            time.sleep(0.5)  # the operator asks again, within the deadline
+        answer: m.GantryCommandReply | None = None
+
+        def armed() -> m.GantryCommandReply | None:
+            nonlocal answer
+            if not self.states:
+                return None
+            ident = self._publish("arm")
+            answer = poll(lambda: self._reply(ident), timeout=3) or answer  # type: ignore[assignment]
+            return answer if answer is not None and answer.accepted else None
+
+        accepted = poll(armed, timeout=timeout, period=0.5)  # the operator asks every 0.5 s
+        if accepted:
+            return accepted  # type: ignore[return-value]
         pytest.fail(f"the gantry was not armed within {timeout:g} s: "
                     + (f"last answer {answer.detail!r}" if answer else
                        "it answered nothing" if self.states else "it published no state"))

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 import tomli_w
 
+from common import messages as m
 from common.heightmap import HeightMap
 from common.tracking_camera import TrackingCameraModel
 from services.gantry.commissioning.geometry_fit import distortion_difference_px
@@ -50,15 +51,18 @@ def _arm_answer(endpoint: str, until: float) -> str:
     bus = Bus(session, client_settings(endpoint))
     try:
         operator = Operator(bus)
-        reply = None
-        while time.monotonic() < until:
-            if operator.states:  # the gantry is up
-                ident = operator._publish("arm")
-                reply = poll(lambda i=ident: operator._reply(i), timeout=3)
-                if reply is not None and (reply.accepted or not any(
-                        starting in reply.detail for starting in STARTING)):
-                    break
-            time.sleep(1.0)  # the operator asks again, within the deadline
+        reply: m.GantryCommandReply | None = None
+
+        def answered() -> bool:  # accepted, or refused for more than a lab still starting
+            nonlocal reply
+            if not operator.states:  # the gantry is not up yet
+                return False
+            ident = operator._publish("arm")
+            reply = poll(lambda: operator._reply(ident), timeout=3)  # type: ignore[assignment]
+            return reply is not None and (reply.accepted or not any(
+                starting in reply.detail for starting in STARTING))
+
+        poll(answered, timeout=until - time.monotonic(), period=1.0)  # asked again each second
         if reply is None:
             return "no answer"
         return ("accepted: " if reply.accepted else "refused: ") + reply.detail
