@@ -122,11 +122,18 @@ def test_a_crashed_gantry_is_restarted_by_the_engine_disarmed_with_the_fault_lat
     lab["client"].operator("arm")
 
 
+def _started_s(watch: Watch, who: tuple[str, str]) -> float:
+    """When the service ``who`` (service, instance) last heard says it started."""
+    health = watch.latest(who)
+    assert health is not None, f"{who} is heard"
+    return health.started_s
+
+
 def test_every_service_resumes_after_the_router_restarts(lab: dict, watch: Watch) -> None:
     lab["client"].armed()
     engine, services = lab["engine"], list(ON_THE_BUS)
     starts = {s: engine.container_starts(container(s)) for s in services}
-    started_s = {who: watch.latest(who).started_s for who in ON_THE_BUS.values()}
+    started_s = {who: _started_s(watch, who) for who in ON_THE_BUS.values()}
     restarted_at = time.monotonic()
     engine.compose(lab["folder"], lab["files"], "--profile", "sim", "restart", "-t", "5",
                    "router")
@@ -137,7 +144,7 @@ def test_every_service_resumes_after_the_router_restarts(lab: dict, watch: Watch
            round(back_at - restarted_at + resumed_s, 1))
     assert {s: engine.container_starts(container(s)) for s in services} == starts, \
         "a service's container was restarted with the router"
-    assert {who: watch.latest(who).started_s for who in ON_THE_BUS.values()} == started_s
+    assert {who: _started_s(watch, who) for who in ON_THE_BUS.values()} == started_s
     meter = FollowMeter(lab["client"].bus("monitor"))
     meter.caught_up()
     follow = meter.over(FOLLOW_WINDOW_S / 2)
@@ -151,7 +158,7 @@ def test_the_monitor_cannot_put_a_setpoint_through_the_router(lab: dict) -> None
     got: list[bytes] = []
     lock = threading.Lock()
 
-    def on_sample(sample) -> None:  # type: ignore[no-untyped-def]
+    def on_sample(sample) -> None:
         with lock:
             got.append(sample.payload.to_bytes())
 

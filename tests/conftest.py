@@ -9,7 +9,7 @@ import sys
 import time
 from collections.abc import Awaitable, Callable, Iterator
 from pathlib import Path
-from typing import TypeVar
+from typing import IO, Any, TypeVar
 
 import numpy as np
 import pytest
@@ -29,7 +29,8 @@ def client_settings(endpoint: str, **bus: object) -> BusSettings:
     return BusSettings(zenoh=ZenohSettings(mode="client", connect=[endpoint]), **bus)
 
 
-def poll(predicate: Callable[[], object], timeout: float = 5.0, period: float = 0.02) -> object:
+def poll(predicate: Callable[[], T | None], timeout: float = 5.0,
+         period: float = 0.02) -> T | None:
     """Poll ``predicate`` until it returns something truthy, and return that; None on
     timeout."""
     deadline = time.monotonic() + timeout
@@ -54,8 +55,8 @@ async def poll_async(step: Callable[[], Awaitable[T]], timeout: float = 5.0,
     return None
 
 
-def wait_for(predicate: Callable[[], object], timeout: float = 5.0, period: float = 0.02,
-             why: Callable[[], str] | None = None) -> object:
+def wait_for(predicate: Callable[[], T | None], timeout: float = 5.0, period: float = 0.02,
+             why: Callable[[], str] | None = None) -> T:
     """Poll ``predicate`` until it returns something truthy; fail the test on timeout (saying
     ``why()``, what was seen, if given)."""
     value = poll(predicate, timeout, period)
@@ -71,7 +72,8 @@ def until_heard(publisher: Bus, key: str, timeout: float = 10.0) -> None:
     puts next is delivered — instead of a fixed pause."""
     declared = publisher.session.declare_publisher(key)
     try:
-        wait_for(lambda: declared.matching_status.matching, timeout=timeout,
+        wait_for(lambda: declared.matching_status.matching,  # type: ignore[attr-defined]
+                 timeout=timeout,
                  why=lambda: f"no subscriber of {key} reached the publisher")
     finally:
         declared.undeclare()
@@ -85,7 +87,7 @@ def open_when_up(settings: ZenohSettings, timeout: float = 15.0) -> zenoh.Sessio
         except BusUnreachable:
             return None
 
-    return wait_for(attempt, timeout=timeout, period=0.2)  # type: ignore[return-value]
+    return wait_for(attempt, timeout=timeout, period=0.2)
 
 
 @pytest.fixture
@@ -132,9 +134,16 @@ def make_bus(router_endpoint: str) -> Iterator[Callable[..., Bus]]:
         session.close()
 
 
-def stb_process(*args: str, **popen: object) -> subprocess.Popen:
+class StbProcess(subprocess.Popen[str]):
+    """A command started by ``stb_process``: its output and errors are always pipes of text."""
+
+    stdout: IO[str]
+    stderr: IO[str]
+
+
+def stb_process(*args: str, **popen: Any) -> StbProcess:
     """Start ``python -m services.cli ARGS`` with the project on the path."""
-    env = {**os.environ, "PYTHONUNBUFFERED": "1", **popen.pop("env", {})}  # type: ignore[dict-item]
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", **popen.pop("env", {})}
     cwd = popen.pop("cwd", ROOT)
-    return subprocess.Popen([sys.executable, "-m", "services.cli", *args], cwd=cwd, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen)
+    return StbProcess([sys.executable, "-m", "services.cli", *args], cwd=cwd, env=env,
+                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen)

@@ -59,7 +59,7 @@ class ProcessFaults:
         gantry), and its new process is up: the times."""
         pid = self.meters.pid(service)
         at = time.monotonic()
-        os.kill(pid, signal.SIGKILL)  # type: ignore[arg-type]
+        os.kill(pid, signal.SIGKILL)
         wait_until(lambda: self.meters.alive_again(ALIVE[service], at) is not None, 20)
         figures = {"alive_again_s": self.meters.alive_again(ALIVE[service], at)}
         if service == "gantry":  # from an enabled crane only (else: None, the goal missed)

@@ -11,6 +11,7 @@ import subprocess
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +43,7 @@ def calibration_lab(lab: Path, endpoint: str, env: dict[str, str]) -> Iterator[B
         bus = Bus(session, client_settings(endpoint))
         alive = AliveWatcher(session)
         for key in ("calib/main", "ptz/ptz1", "tracker/main", "sim/main"):
-            wait_for(lambda k=key: alive.alive(f"stb/alive/{k}"), timeout=30)
+            wait_for(partial(alive.alive, f"stb/alive/{key}"), timeout=30)
         yield bus
         bus.close()
     finally:

@@ -42,8 +42,8 @@ def sparse_cells_off(heights: HeightMap) -> tuple[np.ndarray, np.ndarray]:
     """How far each cell of a map of ``sparse_quantised_scan`` is off its ground, and which
     cells lie inside the scanned square (a margin from its edge)."""
     rows, cols = np.indices(heights.heights_mm.shape)
-    x = heights.origin_x_mm + cols * heights.resolution_mm
-    y = heights.origin_y_mm + rows * heights.resolution_mm
+    x = np.asarray(heights.origin_x_mm + cols * heights.resolution_mm)
+    y = np.asarray(heights.origin_y_mm + rows * heights.resolution_mm)
     return np.abs(heights.heights_mm - sparse_terrain(x, y)), (np.abs(x) < 950) & (np.abs(y) < 950)
 
 

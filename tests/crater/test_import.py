@@ -83,7 +83,7 @@ def test_stb_sim_scan_then_stb_crater_import(tmp_path: Path, crater_file: Path) 
     scan_file, out = tmp_path / "crater.xyz", tmp_path / "imported.npz"
     made = stb_process("sim", "scan", "--out", str(scan_file), "--spacing-mm", "25",
                        "--set", f"crater_file={crater_file}")
-    assert made.wait(120) == 0, made.stderr.read()
+    assert made.wait(120) == 0, made.communicate()[1]
     imported = stb_process("crater", "import", str(scan_file), "--out", str(out),
                            "--cell-mm", "50", "--plot", str(tmp_path / "map.png"))
     said, err = imported.communicate(timeout=120)

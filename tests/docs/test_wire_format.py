@@ -9,6 +9,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import cast
 
 from common import keys
 from common import messages as m
@@ -32,7 +33,9 @@ def test_page_names_every_key_and_every_field() -> None:
 
 def test_example_subscriber_from_the_page_receives_messages(
         tmp_path: Path, router_endpoint: str, make_bus: Callable[..., Bus]) -> None:
-    code = re.search(r"```python\n(.*?)```", DOC_PATH.read_text(), re.S).group(1)
+    found = re.search(r"```python\n(.*?)```", DOC_PATH.read_text(), re.S)
+    assert found, "the page has its example subscriber"
+    code = found.group(1)
     imported = set(re.findall(r"^import (\w+)", code, re.M))
     assert imported == {"os", "sys", "time", "msgpack", "zenoh"}, "no project imports allowed"
     script = tmp_path / "subscriber.py"
@@ -44,14 +47,17 @@ def test_example_subscriber_from_the_page_receives_messages(
     producer = make_bus()
     alive_bus = make_bus()
     alive_bus.declare_alive("gantry", "main")
+    stdout = proc.stdout
+    assert stdout is not None
     try:
-        os.set_blocking(proc.stdout.fileno(), False)
+        os.set_blocking(stdout.fileno(), False)
         lines: list[str] = []
 
         def publish_and_read() -> bool:
-            producer.publish(keys.GANTRY_SETPOINT, EXAMPLES[m.CraneSetpoint].model_copy(
+            example = cast(m.CraneSetpoint, EXAMPLES[m.CraneSetpoint])
+            producer.publish(keys.GANTRY_SETPOINT, example.model_copy(
                 update={"measured_s": time.time()}))
-            lines.extend(iter(proc.stdout.readline, ""))
+            lines.extend(iter(stdout.readline, ""))
             return any("stb/gantry/setpoint" in line for line in lines) and any(
                 line.startswith("alive stb/alive/gantry/main") for line in lines)
 

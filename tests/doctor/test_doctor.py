@@ -67,7 +67,11 @@ def _doctor(lab: dict, changes: dict | None = None, name: str = "lab") -> tuple[
 def _healthy(lab: dict) -> tuple[int, dict]:
     """The doctor once the lab is up (services start, the sim's frames come, calib answers)."""
     result: list[tuple[int, dict]] = []
-    wait_for(lambda: result.append(_doctor(lab)) or result[-1][0] == 0, timeout=120, period=1)
+    def passed() -> bool:
+        result.append(_doctor(lab))
+        return result[-1][0] == 0
+
+    wait_for(passed, timeout=120, period=1)
     return result[-1]
 
 

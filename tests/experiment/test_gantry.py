@@ -14,6 +14,7 @@ import pytest
 from common import codec, keys
 from common import messages as m
 from common.mcap_file import RecordWriter
+from common.names import AlgorithmName
 from services.experiment.cli import main
 from services.experiment.gantry import gantry_for, make_lab, run
 from services.gantry.cycle import AFTER_REPORT_S, WRITE_MARGIN_S
@@ -178,7 +179,8 @@ def test_a_missing_crater_is_the_same_whichever_seed_runs_first(tmp_path: Path) 
 
 @pytest.mark.parametrize(("algorithm", "offset_s"), [("basic", AFTER_REPORT_S),
                                                    ("default", 0.25 - WRITE_MARGIN_S)])
-def test_the_gantry_ticks_a_fixed_time_after_the_crane_reports(crater_file: Path, algorithm: str,
+def test_the_gantry_ticks_a_fixed_time_after_the_crane_reports(crater_file: Path,
+                                                               algorithm: AlgorithmName,
                                                                offset_s: float) -> None:
     """The run starts out of step (its first tick 0.2 s after the controller's cycle) and,
     once the crane moves, settles at its offset after each report: the polls dithered, the

@@ -38,9 +38,9 @@ def _runs(scenario: str, crater_file: Path) -> dict[str, Run]:
     sim = SimSettings()
     sim = sim.model_copy(update={scenario: getattr(sim, scenario).model_copy(
         update=SHORT[scenario])})
-    out = {}
+    out: dict[str, Run] = {}
     for algorithm in (*PAPER_ALGORITHMS, "default"):
-        settings = gantry_for(GantrySettings(), algorithm, seed=SEED,  # type: ignore[arg-type]
+        settings = gantry_for(GantrySettings(), algorithm, seed=SEED,
                               marker_height_mm=MARKER_HEIGHT_MM[scenario])
         out[algorithm] = run(make_lab(scenario, SEED, crater_file, sim), settings)
     return out

@@ -93,7 +93,7 @@ class Operator:
     def send(self, command: str, timeout: float = 3.0) -> m.GantryCommandReply:
         wait_for(lambda: self.states, timeout=10)  # the gantry is up (and listening)
         ident = self._publish(command)
-        return wait_for(lambda: self._reply(ident), timeout=timeout)  # type: ignore[return-value]
+        return wait_for(lambda: self._reply(ident), timeout=timeout)
 
     def arm_within(self, timeout: float) -> m.GantryCommandReply:
         """Arm as an operator at a lab that is still starting would: wait for the gantry, ask
@@ -105,12 +105,12 @@ class Operator:
             if not self.states:
                 return None
             ident = self._publish("arm")
-            answer = poll(lambda: self._reply(ident), timeout=3) or answer  # type: ignore[assignment]
+            answer = poll(lambda: self._reply(ident), timeout=3) or answer
             return answer if answer is not None and answer.accepted else None
 
         accepted = poll(armed, timeout=timeout, period=0.5)  # the operator asks every 0.5 s
         if accepted:
-            return accepted  # type: ignore[return-value]
+            return accepted
         pytest.fail(f"the gantry was not armed within {timeout:g} s: "
                     + (f"last answer {answer.detail!r}" if answer else
                        "it answered nothing" if self.states else "it published no state"))
@@ -193,7 +193,7 @@ SETTLE_SAMPLE_S = 0.02  # the standing-robot tests sample the true crane every 2
 SETTLE_SAMPLES = 300  # … for 6 s from its first pass within 20 mm
 
 
-def off_from_the_first_pass(distance: Callable[[], float], step: Callable[[], None],
+def off_from_the_first_pass(distance: Callable[[], float], step: Callable[[], object],
                             now: Callable[[], float], until_s: float) -> list[float]:
     """The crane's true distance to a robot standing still, once it first passed within
     20 mm: ``distance()`` sampled, then ``step()`` (``SETTLE_SAMPLE_S`` on its clock)."""

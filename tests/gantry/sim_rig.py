@@ -44,7 +44,7 @@ def rig_settings(**changes: object) -> GantrySettings:
     a stale estimate after 0.6 s, commands as fast as a test sends them."""
     defaults: dict[str, object] = {"marker_height_mm": MARKER_MM, "stale_after_s": 0.6,
                                    "command_burst": 100, "command_per_s": 100.0}
-    return GantrySettings(**{**defaults, **changes})  # type: ignore[arg-type]
+    return GantrySettings(**{**defaults, **changes})
 
 
 class CountingCrane(ModelCrane):

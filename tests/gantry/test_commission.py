@@ -58,7 +58,7 @@ def _arm_answer(endpoint: str, until: float) -> str:
             if not operator.states:  # the gantry is not up yet
                 return False
             ident = operator._publish("arm")
-            reply = poll(lambda: operator._reply(ident), timeout=3)  # type: ignore[assignment]
+            reply = poll(lambda: operator._reply(ident), timeout=3)
             return reply is not None and (reply.accepted or not any(
                 starting in reply.detail for starting in STARTING))
 

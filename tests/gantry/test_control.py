@@ -104,6 +104,7 @@ def test_a_frame_sent_again_with_the_spot_moved_yields_to_the_one_the_motion_cap
     blind.step(1.0, (0.96, _frame([(100.0, 0.0)], crane)), crane)
     step = blind.step(1.25, (1.20, _frame([(160.0, 0.0)], crane)), crane,
                       older=[(1.20, _frame([(120.0, 0.0)], crane))])
+    assert step.measured_xyz is not None
     np.testing.assert_allclose(step.measured_xyz[:2], [160.0, 0.0], atol=1.5)
 
 

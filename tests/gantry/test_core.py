@@ -20,13 +20,20 @@ from services.gantry.algorithms import make_predictor
 from services.gantry.crane import RegisterCrane
 from services.gantry.frames import FrameInbox
 from services.gantry.locate import locate
-from services.gantry.predict import ParticleOptions
+from services.gantry.predict import ParticleOptions, Predictor
 from services.gantry.reading import CraneReading, CraneRejected
 from services.gantry.safety import SetpointGuard, TargetCheck, Workspace
 from tests.gantry.camera import pixel_of
 
 FLAT = HeightMap(np.full((3, 3), 100.0, dtype=np.float32), -5000.0, -5000.0, 5000.0)
 
+
+
+def _desired(predictor: Predictor, t: float, xy: np.ndarray) -> np.ndarray:
+    """Where the predictor sends the crane after a measurement at ``t``."""
+    estimate = predictor.update(t, xy)
+    assert estimate is not None, "a measurement gives an estimate"
+    return estimate.desired
 
 def test_eq_5_to_8_by_hand() -> None:
     camera = TrackingCameraModel(focal_mm=8.0, pixel_mm=0.01, principal_px=(320, 240),
@@ -177,8 +184,8 @@ def test_particle_filters_are_reproducible_from_their_seed() -> None:
         runs = []
         for _ in range(2):
             np.random.seed(None)  # whatever the global generator does must not matter
-            predictor = make_predictor(algorithm, seed=7)  # type: ignore[arg-type]
-            runs.append([predictor.update(0.25 * i, xy).desired for i, xy in enumerate(path)])
+            predictor = make_predictor(algorithm, seed=7)
+            runs.append([_desired(predictor, 0.25 * i, xy) for i, xy in enumerate(path)])
         assert np.array_equal(np.array(runs[0]), np.array(runs[1])), algorithm
 
 
@@ -225,8 +232,8 @@ def test_the_gaussian_perceptual_model_is_slower_than_the_linear_one() -> None:
     truth = _path("circle", t)
     lags = {}
     for algorithm in ("pf-position", "pf-position-gauss"):
-        predictor = make_predictor(algorithm, seed=1)  # type: ignore[arg-type]
-        desired = [predictor.update(ti, xy).desired for ti, xy in zip(t, truth, strict=True)]
+        predictor = make_predictor(algorithm, seed=1)
+        desired = [_desired(predictor, ti, xy) for ti, xy in zip(t, truth, strict=True)]
         lags[algorithm] = float(np.median(np.hypot(*(np.array(desired)[20:-1]
                                                      - truth[21:]).T)))
     assert lags["pf-position-gauss"] > lags["pf-position"], lags
@@ -339,4 +346,5 @@ def test_the_frame_inbox_hands_over_what_came_since_the_last_take_newest_first()
     assert inbox.take_recent() == [] and inbox.take() is None, "handed over once"
     inbox.put((5.0, image))
     inbox.put((6.0, image))
-    assert inbox.take()[0] == 6.0 and inbox.take() is None
+    newest = inbox.take()
+    assert newest is not None and newest[0] == 6.0 and inbox.take() is None

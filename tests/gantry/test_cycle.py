@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from common.settings import ConfigError, load_settings
+from common.errors import ConfigError
+from common.settings import load_settings
 from services.gantry.cycle import CycleSync, dithered_period_s
 from services.gantry.settings import GantrySettings
 

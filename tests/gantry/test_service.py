@@ -80,7 +80,7 @@ def test_setpoints_go_out_a_fixed_time_after_the_controller_reports(rig: dict) -
         ages.append(now - crane.model.published_s)
         write(now, x_mm, y_mm)
 
-    crane.model.write_setpoint = recording  # type: ignore[method-assign]
+    crane.model.write_setpoint = recording
     start = np.array([-300.0, 0.0])
     with _armed(rig, lambda t: start + [120.0 * t, 0.0]):
         wait_for(lambda: len(ages) >= 18, timeout=10)

@@ -57,7 +57,8 @@ def _lab_goes_on(live_lab: LiveLab) -> None:
         bus.subscribe(keys.GANTRY_STATE, states.append, latest=False)
         since = time.time()
         wait_for(lambda: any(s.measured_s > since and s.status == "tracking" for s in states),
-                 timeout=10, why=lambda: f"gantry: {[(s.status, s.mode, s.mode_reason) for s in states[-3:]]}")
+                 timeout=10, why=lambda: "gantry: " + str(
+                     [(s.status, s.mode, s.mode_reason) for s in states[-3:]]))
     finally:
         bus.close()
         session.close()

@@ -75,9 +75,9 @@ def test_a_burst_of_requests_is_coalesced_not_queued(service: dict) -> None:
 
     def recorded(*args: object, **kwargs: object) -> None:
         moves.append(time.monotonic())
-        absolute(*args, **kwargs)  # type: ignore[arg-type]
+        absolute(*args, **kwargs)
 
-    server.camera.head.absolute = recorded  # type: ignore[method-assign]
+    server.camera.head.absolute = recorded
     service["thread"].start()
     world, states = service["world"], service["states"]
     wait_for(lambda: states)

@@ -64,7 +64,7 @@ def test_a_disk_that_fills_up_stops_the_writing_with_one_error(
         make_bus: Callable[..., Bus], caplog: pytest.LogCaptureFixture) -> None:
     publisher, recorder_bus = make_bus(), make_bus()
     out = FillingFile(room=300_000)
-    recorder = Recorder(recorder_bus.session, "stb", ["stb/**"], out)  # type: ignore[arg-type]
+    recorder = Recorder(recorder_bus.session, "stb", ["stb/**"], out)
     wait_for(lambda: publisher.publish(keys.TRACKER_ROBOT, _robot(time.time())) or
              sum(recorder.stats.samples.values()), why=lambda: "the recorder hears the bus")
     noise = np.random.default_rng(0)
@@ -87,7 +87,7 @@ def test_a_disk_full_while_the_file_is_finished_ends_without_an_exception(
     """Another process filled the disk after the last sample: the summary cannot be written;
     close() says so in ``write_error`` (it once ended ``stb record`` in a traceback)."""
     out = FillingFile(room=10**9)
-    recorder = Recorder(make_bus().session, "stb", ["stb/**"], out)  # type: ignore[arg-type]
+    recorder = Recorder(make_bus().session, "stb", ["stb/**"], out)
     out.room = out.tell()  # full from here on
     recorder.close()
     assert recorder.write_error is not None and recorder.write_error.errno == errno.ENOSPC

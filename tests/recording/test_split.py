@@ -57,7 +57,7 @@ def test_the_parts_are_complete_recordings_that_read_as_one_run(
     t0 = time.time()
     sent = 0
     # the recorder's receive clock runs with the publisher: a camera's 25 frames a second
-    recorder = Recorder(recorder_bus.session, "stb", ["stb/**"], first,  # type: ignore[arg-type]
+    recorder = Recorder(recorder_bus.session, "stb", ["stb/**"], first,
                         scene=LabScene(video=True), raw_frames=False,
                         split=SplitRule(max_s=1.0), next_part=next_part,
                         clock=lambda: t0 + 0.04 * sent)

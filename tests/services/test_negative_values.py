@@ -24,7 +24,7 @@ def parsed_only(monkeypatch: pytest.MonkeyPatch) -> None:
 
     def parse_then_stop(self: Parser, args: Sequence[str] | None = None,
                         namespace: object = None) -> object:
-        raise _Parsed(parse(self, args, namespace))  # type: ignore[arg-type]
+        raise _Parsed(parse(self, args, namespace))
 
     monkeypatch.setattr(Parser, "parse_args", parse_then_stop)
 

@@ -9,6 +9,7 @@ import subprocess
 import threading
 import time
 from pathlib import Path
+from typing import cast
 
 import pytest
 import zenoh
@@ -17,7 +18,14 @@ from common import keys
 from common import messages as m
 from common.bus import Bus
 from common.wiredoc import EXAMPLES
-from tests.conftest import client_settings, free_port, open_when_up, stb_process, wait_for
+from tests.conftest import (
+    StbProcess,
+    client_settings,
+    free_port,
+    open_when_up,
+    stb_process,
+    wait_for,
+)
 
 
 class AliveWatcher:
@@ -55,7 +63,7 @@ def _stop(proc: subprocess.Popen, sig: int = signal.SIGTERM, timeout: float = 5.
             proc.wait()
 
 
-def _linked_router(router_endpoint: str, instance: str) -> subprocess.Popen:
+def _linked_router(router_endpoint: str, instance: str) -> StbProcess:
     """A second router process that links to the test's router (a two-router lab)."""
     return stb_process("router", "--instance", instance, "--listen",
                        f"tcp/127.0.0.1:{free_port()}", "--set",
@@ -122,7 +130,7 @@ def test_monitor_raw_prints_what_is_published(router_endpoint: str,
     proc = stb_process("monitor", "--connect", router_endpoint, "--raw", "stb/tracker/**",
                        "--duration", "20")
     try:
-        robot = EXAMPLES[m.RobotPosition]
+        robot = cast(m.RobotPosition, EXAMPLES[m.RobotPosition])
         line = ""
 
         def published_and_printed() -> bool:
@@ -209,7 +217,7 @@ def test_up_says_where_the_page_is_once_the_web_service_is_up_and_reports_health
     assert supervisor.page() == "the page: http://127.0.0.1:8080/"
     before = supervisor.state()
 
-    def health(status: str, detail: str = "") -> ServiceHealth:
+    def health(status: m.HealthStatus, detail: str = "") -> ServiceHealth:
         return ServiceHealth(measured_s=1.0, service="web", instance="main", host="h", pid=1,
                              started_s=0.0, status=status, detail=detail, keys={})
 

@@ -27,7 +27,7 @@ def test_the_stamp_is_when_the_bytes_arrived_not_when_they_were_read() -> None:
             time.sleep(0.1)  # the reader comes late, as a busy server thread would
             assert reader.readline() == line
             read = time.time()
-            arrived = reader.raw.arrived_s  # type: ignore[attr-defined]
+            arrived = reader.raw.arrived_s
             assert sent[-1] - 0.001 <= arrived <= sent[-1] + 0.02, (sent[-1], arrived)
             assert read - arrived > 0.09
     finally:

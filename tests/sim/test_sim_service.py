@@ -7,6 +7,7 @@ import signal
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import httpx
 import numpy as np
@@ -107,7 +108,7 @@ def test_sim_serves_every_device_and_publishes(sim: dict, make_bus: Callable[...
     finally:
         crane.close()
 
-    async def mocap() -> object:
+    async def mocap() -> Any:  # qtm-rt's packet (the library has no types)
         conn = await qtm_rt.connect("127.0.0.1", port=ports["mocap"], version="1.25")
         try:
             return await conn.get_current_frame(components=["3d"])

@@ -40,7 +40,7 @@ def camera(lab: Lab) -> Iterator[tuple[CameraServer, httpx.Client]]:
     server.close()
 
 
-def _with_axis(server: CameraServer, work) -> object:  # type: ignore[no-untyped-def]
+def _with_axis(server: CameraServer, work) -> object:
     async def run() -> object:
         async with httpx.AsyncClient() as session:
             device = AxisDevice(Configuration(session, "127.0.0.1", port=server.port,
@@ -186,10 +186,10 @@ def test_what_it_cannot_do_gets_the_cameras_refusal(camera: tuple, path: str, ki
                                                      payload: object, expect: str) -> None:
     _, client = camera
     if kind == "json":
-        reply = client.post(path, content=payload,  # type: ignore[arg-type]
+        reply = client.post(path, content=payload,
                             headers={"Content-Type": "application/json"})
     else:
-        reply = client.post(path, data=payload)  # type: ignore[arg-type]
+        reply = client.post(path, data=payload)
     assert expect in reply.text
 
 

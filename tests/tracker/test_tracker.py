@@ -235,6 +235,7 @@ def test_service_publishes_the_robot_body_with_its_orientation(
         assert (last.body, last.label) == ("robot", "")
         q = np.array([last.qw, last.qx, last.qy, last.qz])
         assert abs(np.linalg.norm(q) - 1) < 1e-6
+        assert last.qz is not None and last.qw is not None
         yaw = np.degrees(2 * np.arctan2(last.qz, last.qw))  # a level body turns about z only
         heading = np.degrees(np.arctan2(last.vy_mm_s, last.vx_mm_s))
         assert abs((yaw - heading + 180) % 360 - 180) < 5, (yaw, heading)
