@@ -170,6 +170,9 @@ class PtzState(Message):
                                description="the camera's own preset positions, by name")
 
 
+HandAction = Literal["hold", "move", "nudge", "preset", "follow"]
+
+
 class PtzHand(Message):
     """An operator's hand on a PTZ camera: hold it (it stops following), move it (to a pan,
     tilt and zoom, or by them from where it is: nudge), send it to one of its presets, or let
@@ -177,7 +180,7 @@ class PtzHand(Message):
     (deploy/zenoh/router.json5)."""
 
     camera: Name
-    action: Literal["hold", "move", "nudge", "preset", "follow"]
+    action: HandAction
     pan_deg: float | None = Field(None, ge=-180, le=180, description="move: where to; nudge: "
                                   "by how much")
     tilt_deg: float | None = Field(None, ge=-180, le=180, description="move (−90…90): where "

@@ -67,6 +67,8 @@ class CalibrationHold:
     max_markers: int = 8
     moved: Callable[[float | None, float | None], None] = lambda _pan, _tilt: None  # each
     # move it sends (None: to home, or left as it is), for the manual-override detector
+    monotonic: Callable[[], float] = time.monotonic  # the clock of its waits
+    wall: Callable[[], float] = time.time  # the clock of its snapshots' capture times
     request: m.CalibrationMode | None = None
     expires_at: float = 0.0
     hold: Hold | None = None  # where the camera is held; None until it stood at home
@@ -111,7 +113,7 @@ class CalibrationHold:
         if pan is not None and tilt is not None and zoom is not None:
             self.hold = (pan, tilt, zoom)
         else:
-            self.hold, self._homed_at = None, time.monotonic()
+            self.hold, self._homed_at = None, self.monotonic()
             self.moved(None, None)
             self.camera.home()
         if any(v is not None for v in _asked(msg)):
@@ -134,26 +136,26 @@ class CalibrationHold:
         if not still:
             return False
         if self.hold is None:
-            if time.monotonic() - self._homed_at >= HOME_SETTLE_S:
+            if self.monotonic() - self._homed_at >= HOME_SETTLE_S:
                 self.hold = position
                 log.info("%s: held at pan %.2f°, tilt %.2f°, zoom %d", self.camera.name,
                          *position)
             return self.hold is not None
         if self._at_hold(*position):
             return True
-        if time.monotonic() >= self._rehold_at:
+        if self.monotonic() >= self._rehold_at:
             self.rehold_count += 1
             log.warning("%s: moved away from its calibration hold (now pan %.1f°, tilt "
                         "%.1f°): sent back to pan %.1f°, tilt %.1f°", self.camera.name,
                         position[0], position[1], self.hold[0], self.hold[1])
             self.moved(self.hold[0], self.hold[1])
             self.camera.move_to(*self.hold)
-            self._rehold_at = time.monotonic() + REHOLD_S
+            self._rehold_at = self.monotonic() + REHOLD_S
         return False
 
     def _infrared(self) -> None:
         self.camera.set_ir_cut_filter("off")
-        self._infrared_asserted = time.monotonic()
+        self._infrared_asserted = self.monotonic()
 
     def leave(self) -> None:
         log.info("%s: calibration mode ends", self.camera.name)
@@ -163,11 +165,11 @@ class CalibrationHold:
     def cycle(self) -> None:
         """One snapshot: detect, publish the image and — if the camera stood still — the
         detections. Camera errors propagate (PtzError)."""
-        if time.monotonic() - self._infrared_asserted > REASSERT_INFRARED_S:
+        if self.monotonic() - self._infrared_asserted > REASSERT_INFRARED_S:
             self._infrared()
         if not self._commanded and self.request is not None:
             self._go_to_hold(self.request)
-        captured = time.time()
+        captured = self.wall()
         jpeg = self.camera.snapshot_jpeg()
         position = self.camera.position()
         now_position = (position.pan_deg, position.tilt_deg, position.zoom)

@@ -61,18 +61,19 @@ class PreviewLoop:
                  lens: Callable[[], PtzLens],
                  paused: Callable[[], bool], stop: threading.Event,
                  infrared: Callable[[float], bool] = lambda _now: False,
-                 marker_diameter_mm: float = PAPER_MARKER_MM) -> None:
+                 marker_diameter_mm: float = PAPER_MARKER_MM,
+                 clock: Callable[[], float] = time.time) -> None:
         """``publish(preview, intrinsics, infrared)``: the preview, the lens it was taken
         through (``lens()`` at its zoom), and whether the IR-cut filter was off for it (the
         markers bright). When ``infrared(now)`` says so (the pointing check's schedule:
         ``PtzControl.infrared_due``) a preview is taken with the filter off, and the filter is
         set back to auto right after. ``marker_diameter_mm``: the robot marker's, for how
-        large it should appear."""
+        large it should appear. ``clock``: the capture times' (wall time)."""
         self.camera, self.period_s, self.publish = camera, period_s, publish
         self.infrared = infrared
         self.marker_diameter_mm = marker_diameter_mm
         self.mount, self.robot, self.paused, self.stop = mount, robot, paused, stop
-        self.lens = lens
+        self.lens, self.clock = lens, clock
         self._seq = 0
         self._failing = False
         self._thread = threading.Thread(target=self._run, name="ptz-preview", daemon=True)
@@ -86,20 +87,24 @@ class PreviewLoop:
 
     def _run(self) -> None:
         while not self.stop.wait(self.period_s):
-            if self.paused():
-                continue
-            try:
-                self.publish(*self._take_maybe_in_infrared())
-                if self._failing:
-                    log.info("%s: previews again", self.camera.name)
-                self._failing = False
-            except PtzError as err:
-                if not self._failing:
-                    log.warning("%s: no preview: %s", self.camera.name, err)
-                self._failing = True
+            self.once()
+
+    def once(self) -> None:
+        """One period's preview, unless paused; a camera error is logged once per outage."""
+        if self.paused():
+            return
+        try:
+            self.publish(*self._take_maybe_in_infrared())
+            if self._failing:
+                log.info("%s: previews again", self.camera.name)
+            self._failing = False
+        except PtzError as err:
+            if not self._failing:
+                log.warning("%s: no preview: %s", self.camera.name, err)
+            self._failing = True
 
     def _take_maybe_in_infrared(self) -> tuple[m.PtzPreview, Intrinsics, bool]:
-        if not self.infrared(time.time()):
+        if not self.infrared(self.clock()):
             return *self.take(), False
         self.camera.set_ir_cut_filter("off")
         try:
@@ -109,7 +114,7 @@ class PreviewLoop:
                 self.camera.set_ir_cut_filter("auto")
 
     def take(self) -> tuple[m.PtzPreview, Intrinsics]:
-        captured = time.time()
+        captured = self.clock()
         jpeg = self.camera.snapshot_jpeg()
         position = self.camera.position()
         image = decode_jpeg(jpeg, self.camera.name)

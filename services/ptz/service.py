@@ -19,11 +19,13 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 
 import zenoh
 
 from common import codec, keys
 from common import messages as m
+from common.bus import Bus
 from common.camera import Intrinsics, PtzLimits
 from common.markers import kernel_origin, warm_up
 from common.node import Node, run_every
@@ -55,8 +57,8 @@ def run(node: Node[PtzSettings], camera: PtzCamera | None = None) -> None:
     log.info("detector ready (%.1f s, %s)", warm_up(), kernel_origin())  # previews, calibration
     # Position queries have a client of their own, like previews: a query in flight never
     # holds up a move command (that client is the injected camera's in tests).
-    loop = _Loop(node, settings, camera or make_camera(settings),
-                 queries=camera or make_camera(settings))
+    loop = PtzLoop(node, settings, camera or make_camera(settings),
+                   queries=camera or make_camera(settings))
     name = settings.instance
     # a pose put on the key is only news: the pose itself is asked of calib (pose_source.py)
     node.bus.subscribe(keys.CALIB_POSE, lambda _msg: loop.asking.heard(), latest=True,
@@ -68,18 +70,10 @@ def run(node: Node[PtzSettings], camera: PtzCamera | None = None) -> None:
     # latest wins: a burst of requests is not queued up to move the camera for seconds after
     node.bus.subscribe(keys.PTZ_CALIBRATION, loop.on_calibration, latest=True, camera=name)
     node.bus.subscribe(keys.PTZ_HAND, loop.on_hand, latest=False, camera=name)
-    recordings = node.bus.session.liveliness().declare_subscriber(
-        keys.recording_pattern(node.bus.prefix), loop.on_recording, history=True)
+    recordings = watch_recordings(node.bus, loop)
     preview = None
     if settings.preview_hz > 0:
-        preview = PreviewLoop(
-            make_camera(settings), 1 / settings.preview_hz,  # its own client: never in the way
-            loop.on_preview,
-            mount=lambda: loop.control.pose, robot=lambda: loop.control.robot,
-            lens=lambda: loop.control.lens,
-            paused=lambda: loop.calibration.active(time.time()), stop=node.stop,
-            infrared=loop.infrared_now,
-            marker_diameter_mm=settings.robot_marker_mm)
+        preview = loop.previews(make_camera(settings))  # its own client: never in the way
         preview.start()
     try:
         loop.run()
@@ -89,15 +83,24 @@ def run(node: Node[PtzSettings], camera: PtzCamera | None = None) -> None:
             preview.join(timeout=2 * settings.timeout_s)
 
 
-class _Loop:
+def watch_recordings(bus: Bus, loop: PtzLoop) -> zenoh.Subscriber:
+    """Tells ``loop`` of each recording that begins or ends (``stb record``'s liveliness
+    token), the ones running now included."""
+    return bus.session.liveliness().declare_subscriber(
+        keys.recording_pattern(bus.prefix), loop.on_recording, history=True)
+
+
+class PtzLoop:
     """Commands go out as robot samples arrive (no polling delay); camera state is queried
     and published ``state_hz`` times a second. The rules are ``PtzControl``'s
     (services/ptz/control.py); one lock serialises the commands and guards it; it is not held
-    while the state query waits for the camera."""
+    while the state query waits for the camera. ``clock``: wall time (a test's simulated
+    clock drives ``step``, ``ask_pose`` and the previews' ``once`` itself)."""
 
     def __init__(self, node: Node, settings: PtzSettings, camera: PtzCamera,
-                 queries: PtzCamera) -> None:
+                 queries: PtzCamera, clock: Callable[[], float] = time.time) -> None:
         self.node, self.settings, self.camera, self.queries = node, settings, camera, queries
+        self.clock = clock
         self.control = PtzControl(
             Follower(deadband_deg=settings.deadband_deg, latency_s=settings.latency_s,
                      min_interval_s=1 / settings.command_hz, zoom=settings.zoom,
@@ -117,18 +120,33 @@ class _Loop:
             lambda msg: node.bus.publish(keys.PTZ_DETECTIONS, msg, camera=name),
             lambda msg: node.bus.publish(keys.PTZ_SNAPSHOT, msg, camera=name),
             max_markers=settings.calibration_max_markers,
-            moved=lambda pan, tilt: self.control.own_move(time.time(), pan, tilt))
+            moved=lambda pan, tilt: self.control.own_move(clock(), pan, tilt),
+            monotonic=clock, wall=clock)
         self.state_due = 0.0
         self.presets: list[str] = []
         self.presets_due = 0.0
         self.asking = PoseAsking()
         self.recordings: set[str] = set()  # the keys of the recordings running
+        self._period = 1 / settings.state_hz
+
+    def previews(self, camera: PtzCamera) -> PreviewLoop:
+        """The preview loop beside this one, on ``camera`` (a client of its own)."""
+        settings = self.settings
+        return PreviewLoop(
+            camera, 1 / settings.preview_hz, self.on_preview,
+            mount=lambda: self.control.pose, robot=lambda: self.control.robot,
+            lens=lambda: self.control.lens,
+            paused=lambda: self.calibration.active(self.clock()), stop=self.node.stop,
+            infrared=self.infrared_now, marker_diameter_mm=settings.robot_marker_mm,
+            clock=self.clock)
 
     def on_recording(self, sample: zenoh.Sample) -> None:
         """A recording began or ended (its liveliness token, ``keys.RECORDING``)."""
+        self.recording(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
+
+    def recording(self, key: str, running: bool) -> None:
         with self.lock:
-            (self.recordings.add if sample.kind == zenoh.SampleKind.PUT
-             else self.recordings.discard)(str(sample.key_expr))
+            (self.recordings.add if running else self.recordings.discard)(key)
 
     def infrared_now(self, now: float) -> bool:
         """The preview loop's question: this preview in infrared?"""
@@ -145,7 +163,7 @@ class _Loop:
     def ask_pose(self) -> None:
         """Ask the calibration service for the camera's pose when it is due; take its answer
         (``pose_source.py``)."""
-        now = time.time()
+        now = self.clock()
         with self.lock:
             due = self.asking.due(now, doubting=self.control.pointing.problem() is not None)
         if not due:
@@ -157,7 +175,7 @@ class _Loop:
         pose, why = choose(answers, name)
         with self.lock:
             self.control.pose_problem = why if self.control.pose is None or answers else ""
-            taken = "none" if pose is None else self.control.take_pose(pose, time.time())
+            taken = "none" if pose is None else self.control.take_pose(pose, self.clock())
         if why and answers:
             log.warning("%s", why)
         if pose is None:
@@ -172,7 +190,7 @@ class _Loop:
 
     def on_calibration(self, msg: m.CalibrationMode) -> None:
         with self.lock:
-            now = time.time()
+            now = self.clock()
             try:
                 self.calibration.on_request(msg, now, self.control.limits or PtzLimits())
             except PtzError as err:
@@ -182,7 +200,7 @@ class _Loop:
 
     def on_hand(self, msg: m.PtzHand) -> None:
         """An operator's hand (the page): hold, move, a preset, or follow again."""
-        now = time.time()
+        now = self.clock()
         with self.lock:
             refused = self.control.take_hand(msg, now, self.calibration.active(now))
             if refused is not None:
@@ -206,7 +224,7 @@ class _Loop:
 
     def on_robot(self, msg: m.RobotPosition) -> None:
         with self.lock:
-            now = time.time()
+            now = self.clock()
             command = self.control.command(msg, now, self.calibration.active(now))
             if command is None:
                 return
@@ -218,28 +236,31 @@ class _Loop:
                 self._unreachable(now, err)
 
     def run(self) -> None:
+        while not self.node.stop.wait(self._period):
+            self._period = self.step(self.clock())
+
+    def step(self, now: float) -> float:
+        """A calibration snapshot when the mode is on, the camera's state when it is due;
+        the wait until the next step."""
         state_period = 1 / self.settings.state_hz
         snapshot_period = 1 / self.settings.calibration_snapshot_hz
-        period = state_period
-        while not self.node.stop.wait(period):
-            now = time.time()
+        with self.lock:
+            if not self.control.may_try(now):
+                return self._period
+        try:
             with self.lock:
-                if not self.control.may_try(now):
-                    continue
-            try:
-                with self.lock:
-                    calibrating = self._calibration_step(now)
-                if now >= self.state_due:
-                    self.state_due = now + state_period
-                    self._report(now)
-                with self.lock:
-                    self.control.answered()
-            except PtzError as err:
-                with self.lock:
-                    self._unreachable(now, err)
-                calibrating = False
-            period = snapshot_period if calibrating else min(state_period,
-                                                             max(self.state_due - now, 0.0))
+                calibrating = self._calibration_step(now)
+            if now >= self.state_due:
+                self.state_due = now + state_period
+                self._report(now)
+            with self.lock:
+                self.control.answered()
+        except PtzError as err:
+            with self.lock:
+                self._unreachable(now, err)
+            calibrating = False
+        return snapshot_period if calibrating else min(state_period,
+                                                       max(self.state_due - now, 0.0))
 
     def _calibration_step(self, now: float) -> bool:
         """A calibration snapshot if the mode is on; leaves it when the lease ran out."""

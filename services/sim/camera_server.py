@@ -173,6 +173,49 @@ def _split_commas(text: str) -> list[str]:
     return [*parts, current]
 
 
+def answer(cam: ServedCamera, path: str, args: dict[str, str], body: bytes,
+           trace: str | None, arrived: float) -> vapix.Reply:
+    """The camera's answer to an authorised request (every path but ``video.cgi``'s stream):
+    what the server sends, and what a test's in-process client gets without a socket.
+    ``trace``: the request's ``X-STB-Measured`` header; ``arrived``: when it reached the
+    camera (wall time)."""
+    if path == vapix.IMAGE_PATH:
+        size = vapix.image_size(args, cam.resolutions)
+        return size if isinstance(size, vapix.Reply) else jpeg_reply(cam, size, args)
+    if not isinstance(cam, SimCamera):  # a fixed camera: pictures only
+        return vapix.not_found()
+    now = cam.clock()
+    if path == vapix.PTZ_PATH:
+        if trace is not None:
+            with contextlib.suppress(ValueError):  # a malformed trace header: not recorded
+                cam.commands.append((arrived, float(trace)))
+        return handle_ptz(args, cam.head, cam.memory, now)
+    if path == vapix.PARAM_PATH:
+        return cam.device.param_cgi(args, now)
+    if path == vapix.BASIC_DEVICE_INFO_PATH:
+        return cam.device.basic_device_info(body)
+    if path == vapix.API_DISCOVERY_PATH:
+        return api_discovery(body)
+    if path == vapix.PWDGRP_PATH:
+        return cam.device.users(args)
+    if path == vapix.USERGROUP_PATH:
+        return cam.device.user_groups()
+    return vapix.not_found()
+
+
+def jpeg_reply(cam: ServedCamera, size: tuple[int, int], args: dict[str, str]) -> vapix.Reply:
+    """A snapshot of what the camera sees now, at its JPEG quality or the request's
+    ``compression``."""
+    image = cam.snapshot(*size)
+    quality = cam.jpeg_quality
+    if "compression" in args and args["compression"].isdigit():
+        quality = max(5, 100 - int(args["compression"]))
+    ok, jpeg = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, quality])
+    if not ok:
+        return vapix.error("image: encoding failed")
+    return vapix.Reply(200, "image/jpeg", jpeg.tobytes())
+
+
 class CameraServer:
     """Serves one camera on ``host:port`` from a background thread."""
 
@@ -263,38 +306,8 @@ class CameraServer:
         if url.path == vapix.MJPEG_PATH:
             self._stream(request, args)
             return
-        self._send(request, self._reply(url.path, args, body, request, arrived))
-
-    def _reply(self, path: str, args: dict[str, str], body: bytes,
-               request: BaseHTTPRequestHandler, arrived: float) -> vapix.Reply:
-        cam = self.camera
-        if path == vapix.IMAGE_PATH:
-            size = vapix.image_size(args, cam.resolutions)
-            return size if isinstance(size, vapix.Reply) else self._jpeg(size, args)
-        if not isinstance(cam, SimCamera):  # a fixed camera: pictures only
-            return vapix.not_found()
-        now = cam.clock()
-        if path == vapix.PTZ_PATH:
-            self._trace(cam, request, arrived)
-            return handle_ptz(args, cam.head, cam.memory, now)
-        if path == vapix.PARAM_PATH:
-            return cam.device.param_cgi(args, now)
-        if path == vapix.BASIC_DEVICE_INFO_PATH:
-            return cam.device.basic_device_info(body)
-        if path == vapix.API_DISCOVERY_PATH:
-            return api_discovery(body)
-        if path == vapix.PWDGRP_PATH:
-            return cam.device.users(args)
-        if path == vapix.USERGROUP_PATH:
-            return cam.device.user_groups()
-        return vapix.not_found()
-
-    @staticmethod
-    def _trace(cam: SimCamera, request: BaseHTTPRequestHandler, arrived: float) -> None:
-        measured = request.headers.get(TRACE_HEADER)
-        if measured is not None:
-            with contextlib.suppress(ValueError):  # a malformed trace header: not recorded
-                cam.commands.append((arrived, float(measured)))
+        self._send(request, answer(self.camera, url.path, args, body,
+                                   request.headers.get(TRACE_HEADER), arrived))
 
     def _authorized(self, request: BaseHTTPRequestHandler, method: str) -> bool:
         cam = self.camera
@@ -318,16 +331,6 @@ class CameraServer:
         request.wfile.write(body)
         return False
 
-    def _jpeg(self, size: tuple[int, int], args: dict[str, str]) -> vapix.Reply:
-        image = self.camera.snapshot(*size)
-        quality = self.camera.jpeg_quality
-        if "compression" in args and args["compression"].isdigit():
-            quality = max(5, 100 - int(args["compression"]))
-        ok, jpeg = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, quality])
-        if not ok:
-            return vapix.error("image: encoding failed")
-        return vapix.Reply(200, "image/jpeg", jpeg.tobytes())
-
     def _stream(self, request: BaseHTTPRequestHandler, args: dict[str, str]) -> None:
         """``video.cgi``: multipart JPEGs at ``fps`` (or the camera's rate) until the client
         leaves, ``duration`` seconds or ``nbrofframes`` frames are over, or the server closes."""
@@ -344,7 +347,7 @@ class CameraServer:
         started, sent = time.monotonic(), 0
         while not self._closing.is_set() and (asked.frames is None or sent < asked.frames) \
                 and time.monotonic() - started < asked.duration_s:
-            part = self._jpeg(asked.size, args)
+            part = jpeg_reply(self.camera, asked.size, args)
             try:
                 request.wfile.write(f"--{BOUNDARY}\r\nContent-Type: image/jpeg\r\n"
                                     f"Content-Length: {len(part.body)}\r\n\r\n".encode()

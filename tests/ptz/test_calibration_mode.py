@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from typing import Any
 
 import httpx
 import numpy as np
@@ -25,7 +26,7 @@ class RecordingCamera:
     name = "ptz1"
 
     def __init__(self) -> None:
-        self.moves: list[tuple] = []
+        self.moves: list[tuple | str] = []
         self.ir_cut: list[str] = []
 
     def move_to(self, pan: float | None, tilt: float | None, zoom: float | None,
@@ -70,14 +71,15 @@ def test_a_burst_of_requests_is_coalesced_not_queued(service: dict) -> None:
     the camera): the service takes the newest, and the camera stops moving at once after."""
     server = _camera_server(service["port"])
     service["servers"].append(server)
+    assert isinstance(server.camera, SimCamera)
     moves: list[float] = []  # when the camera got an absolute move over VAPIX
     absolute = server.camera.head.absolute
 
-    def recorded(*args: object, **kwargs: object) -> None:
+    def recorded(*args: Any, **kwargs: Any) -> None:
         moves.append(time.monotonic())
         absolute(*args, **kwargs)
 
-    server.camera.head.absolute = recorded
+    server.camera.head.absolute = recorded  # type: ignore[method-assign]
     service["thread"].start()
     world, states = service["world"], service["states"]
     wait_for(lambda: states)
@@ -126,7 +128,11 @@ def test_a_hold_command_lost_to_a_timeout_is_sent_again(lab: Lab) -> None:
     try:
         with pytest.raises(PtzUnreachable):
             mode.on_request(_request(6.0, -4.0), time.time(), PtzLimits())
-        wait_for(lambda: mode.cycle() or detections, timeout=5, period=0.1,  # its loop's pace
+        def cycled() -> list[m.MarkerDetections]:
+            mode.cycle()
+            return detections
+
+        wait_for(cycled, timeout=5, period=0.1,  # its loop's pace
                  why=lambda: "no detections once it stands at its hold")
         assert mode.hold == (6.0, -4.0, 1)
         assert mode._last_position == mode.hold

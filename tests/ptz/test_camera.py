@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from common.camera import Pose, PtzLimits
+from common.lab_views import CameraAuth
 from services.ptz import vapix
 from services.ptz.camera import (
     AxisPtzCamera,
@@ -33,7 +34,7 @@ def server() -> Iterator[CameraServer]:
     server.close()
 
 
-def _camera(server: CameraServer, password: str = "secret", auth: str = "digest"
+def _camera(server: CameraServer, password: str = "secret", auth: CameraAuth = "digest"
             ) -> AxisPtzCamera:
     return AxisPtzCamera(http_client(f"http://127.0.0.1:{server.port}", "root", password, auth),
                          "ptz1")

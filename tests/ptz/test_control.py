@@ -47,6 +47,7 @@ def test_the_calibration_services_answer_is_taken_whatever_its_version_but_not_f
     assert control.take_pose(_pose(measured_s=100.0, version=2), now=200.0) == "taken"
     assert control.take_pose(_pose(measured_s=100.0, version=2), now=250.0) == "same"
     assert control.take_pose(_pose(measured_s=150.0, version=1, rz_deg=160.0), 200.0) == "taken"
+    assert control.pose_msg is not None and control.pose is not None
     assert control.pose == Pose.of(control.pose_msg) and control.pose.rz_deg == 160.0
 
 
@@ -144,7 +145,7 @@ def test_an_infrared_check_is_due_with_a_pose_and_again_for_a_new_pose_or_a_lost
     assert control.infrared_due(241.0, recording=False)
 
 
-def _hand(action: str, sent_s: float, operator: str = "ada (web 10.0.0.5)") -> m.PtzHand:
+def _hand(action: m.HandAction, sent_s: float, operator: str = "ada (web 10.0.0.5)") -> m.PtzHand:
     return m.PtzHand(measured_s=sent_s, camera="ptz1", action=action,
                      operator=operator, pan_deg=10.0 if action == "move" else None)
 
@@ -168,7 +169,7 @@ def test_a_hand_sent_too_long_ago_is_not_taken() -> None:
 
 
 @pytest.mark.parametrize("action", ["move", "nudge", "preset"])
-def test_no_move_by_hand_while_the_camera_calibrates(action: str) -> None:
+def test_no_move_by_hand_while_the_camera_calibrates(action: m.HandAction) -> None:
     control = _control()
     refused = control.take_hand(_hand(action, 100.0), 100.0, calibrating=True)
     assert refused is not None and "calibration mode" in refused and control.held_by == ""

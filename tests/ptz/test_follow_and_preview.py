@@ -89,7 +89,7 @@ def test_a_preview_says_how_large_the_robot_marker_appears() -> None:
     distance = float(np.linalg.norm(ROBOT - MOUNT.position))
     fy = Intrinsics(3.8, width_px=704, height_px=576).fy_px
     radius = robot_view(MOUNT, _robot(100.0), pan, tilt, WIDE, 100.0, 19.0)[1]
-    assert radius == pytest.approx(fy * 9.5 / distance, abs=0.01)
+    assert radius is not None and radius == pytest.approx(fy * 9.5 / distance, abs=0.01)
     twice = robot_view(MOUNT, _robot(100.0), pan, tilt, WIDE.with_focal(7.6), 100.0, 19.0)[1]
     assert twice == pytest.approx(2 * radius, abs=0.02)
     assert robot_view(None, _robot(1.0), pan, tilt, WIDE, 1.0, 19.0)[1] is None
@@ -118,7 +118,8 @@ def test_a_robot_off_the_centre_of_a_long_zoom_makes_the_camera_zoom_out_and_bac
     assert out is not None and out.zoom < 9999
     assert follower.half_view_deg(out.zoom) >= 2.0 / follower.central
     follower.seen(pan + 0.5, tilt, out.zoom)  # closer, not yet re-centred at 9999's scale
-    assert follower.command(100.1, ROBOT + [0, 0, 30.0], STILL, 100.1, MOUNT).zoom == out.zoom
+    closer = follower.command(100.1, ROBOT + [0, 0, 30.0], STILL, 100.1, MOUNT)
+    assert closer is not None and closer.zoom == out.zoom
     follower.seen(pan, tilt, out.zoom)  # re-centred: back to the wanted zoom
     back = follower.command(100.2, ROBOT, STILL, 100.2, MOUNT)
     assert back is not None and back.zoom == 9999
