@@ -15,6 +15,7 @@ import msgpack
 import zenoh
 
 from common import codec
+from common.bus import linger
 from common.mcap_file import RecordingError, Sample, read_run, run_keys
 from common.node import stop_on_signals
 from common.settings import LogLevel, ServiceSettings
@@ -82,6 +83,7 @@ def replay(session: zenoh.Session, paths: Path | Sequence[Path], *, speed: float
               and not any(u.includes(zenoh.KeyExpr(k)) for u in unwanted)]
     publishers: dict[str, zenoh.Publisher] = {}
     sent: Counter = Counter()
+    last_put: float | None = None
     try:
         for sample, origin, start in pace(read_run(paths, chosen), speed, stop):
             publisher = publishers.get(sample.key)
@@ -94,8 +96,10 @@ def replay(session: zenoh.Session, paths: Path | Sequence[Path], *, speed: float
                 sample.payload, origin_s=origin, start_s=start, speed=speed,
                 sent_s=time.time())
             publisher.put(payload)
+            last_put = time.monotonic()
             sent[sample.key] += 1
     finally:
+        linger(last_put)  # the last samples leave before the caller closes the session
         for publisher in publishers.values():
             publisher.undeclare()
     return sent

@@ -22,7 +22,7 @@ from services.recording.record import Recorder
 from services.recording.replay import pace, replay, retimed
 from services.recording.typed import LabScene
 from services.sim.render import Blob, draw
-from tests.conftest import until_heard, wait_for
+from tests.conftest import stb_process, until_heard, wait_for
 from tests.recording.typed import decoded_typed
 
 ROBOT = "stb/tracker/robot"
@@ -125,6 +125,38 @@ def test_replay_puts_the_same_messages_back_in_order_and_on_time(
     measured = [r.measured_s for _, r in got]
     assert measured[0] == pytest.approx(started, abs=0.2), "retimed to the replay's clock"
     assert np.diff(measured) == pytest.approx([0.025] * 19, abs=2e-3), "offsets / speed"
+
+
+def test_a_replay_ends_only_when_its_last_samples_have_left(router_endpoint: str,
+                                                           make_bus: Callable[..., Bus],
+                                                           tmp_path: Path) -> None:
+    """A recording that ends with a burst of 32 pictures of 60 kB, replayed five times by
+    ``stb replay``: every picture arrives every time. A process that closed its session
+    right after its last put lost the burst's tail in about a third of such runs
+    (``common.bus.SEND_LINGER_S``)."""
+    from common.mcap_file import RecordWriter
+
+    path = tmp_path / "burst.mcap"
+    noise = np.random.default_rng(1).integers(0, 255, 60_000, dtype=np.uint8).tobytes()
+    with open(path, "wb") as out:
+        writer = RecordWriter(out)
+        for i in range(32):
+            frame = m.CameraFrame(measured_s=1000.0, camera="ptz1", seq=i + 1, width_px=704,
+                                  height_px=576, encoding="jpeg", data=noise)
+            writer.write("stb/video/ptz1", codec.encode(frame), encoding=codec.CONTENT_TYPE,
+                         model="CameraFrame", received_s=1000.0, measured_s=1000.0)
+        writer.finish()
+    listener = make_bus()
+    seqs: list[int] = []
+    listener.subscribe(keys.VIDEO, lambda f: seqs.append(f.seq), latest=False, camera="ptz1")
+    until_heard(listener, "stb/video/ptz1")
+    for run in range(5):
+        seqs.clear()
+        replayed = stb_process("replay", str(path), "--connect", router_endpoint)
+        assert replayed.wait(timeout=60) == 0, replayed.stderr.read()
+        wait_for(lambda: len(seqs) == 32, timeout=10,
+                 why=lambda r=run: f"run {r}: pictures {sorted(seqs)} of 1-32")
+        assert seqs == list(range(1, 33))
 
 
 def test_replay_as_recorded_sends_the_exact_bytes(make_bus: Callable[..., Bus],
