@@ -56,6 +56,12 @@ class CountingCrane(ModelCrane):
         self.setpoints += 1
         super().write_setpoint(x_mm, y_mm)
 
+    def foreign_setpoint(self, x_mm: float, y_mm: float) -> None:
+        """Another Modbus client writes a setpoint into the registers (in the crane's
+        counts, as the register map encodes them)."""
+        r = self.registers
+        self._write(r.setpoint_x, r.encode("setpoint_x", x_mm) + r.encode("setpoint_y", y_mm))
+
 
 class RenderedFrames:
     """The ``FrameSource`` Protocol: the tracking camera's frames of the robot, exposed every

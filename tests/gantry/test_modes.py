@@ -1,8 +1,9 @@
 """The operator in command, on a simulated clock (tests/gantry/sim_rig.py): the gantry starts
 disarmed, moves the crane only once armed, stops within a control period, never clears a
 latched fault by itself, stops when the crane stops on its own or disagrees with the motion
-capture, does not overshoot a robot standing still, and finds a lost robot again by the motion
-capture. The same rules over the bus and Modbus on real time: test_modes_service.py."""
+capture or another Modbus client writes setpoints, does not overshoot a robot standing still,
+and finds a lost robot again by the motion capture. The same rules over the bus and Modbus on
+real time: test_modes_service.py."""
 
 from __future__ import annotations
 
@@ -146,6 +147,25 @@ def test_a_crane_disabled_at_the_controller_stops_the_gantry() -> None:
     assert gantry.loop.modes.reason == "crane disabled at the controller"
     gantry.run(1.5)
     assert not gantry.state()[2], "the gantry does not enable it again"
+
+
+def test_another_clients_setpoints_stop_the_gantry() -> None:
+    """Modbus has no authentication: setpoints written beside the gantry's (a commissioning
+    tool left running, a second gantry) become the crane's target; the gantry sees them in
+    the setpoint registers it reads back at every poll and stops the crane, naming why."""
+    gantry = SimGantry(rig_settings(), lambda t: TARGET + [60.0 * t, 0.0])
+    _moving(gantry)
+    gantry.run(1.0)
+    assert gantry.mode == "armed", "its own setpoints are no reason to stop"
+    began = gantry.now
+    while gantry.mode != "stopped" and gantry.now - began < 3:
+        gantry.crane.foreign_setpoint(-2500.0, 2500.0)  # ten times a second
+        gantry.run(0.1, lambda: gantry.mode == "stopped")
+    print(f"stopped {gantry.now - began:.2f} s after the first foreign write")
+    assert gantry.mode == "stopped" and gantry.now - began < 0.2
+    assert "another Modbus client writes setpoints" in gantry.loop.modes.reason
+    assert gantry.run(1, lambda: not gantry.state()[2])
+    assert gantry.state()[0][0] > -2000.0, "stopped on its way, long before the foreign setpoint"
 
 
 def test_an_e_stop_stops_the_gantry_at_once_and_holds_until_released_and_reset() -> None:
