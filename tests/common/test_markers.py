@@ -16,7 +16,7 @@ def disc_frame(rng: np.random.Generator, discs: list[tuple[float, float, float]]
                noise: float = 2.5, shape: tuple[int, int] = (H, W)) -> np.ndarray:
     """Anti-aliased discs (u, v, radius) with soft (blurred) edges and sensor noise."""
     rows, cols = np.mgrid[0 : shape[0], 0 : shape[1]]
-    image = np.full(shape, background, np.float64)
+    image: np.ndarray = np.full(shape, background, np.float64)
     for u, v, r in discs:
         coverage = np.clip(r - np.hypot(cols - u, rows - v) + 0.5, 0, 1)
         image = np.maximum(image, background + coverage * (peak - background))

@@ -33,7 +33,8 @@ def test_json_per_image_with_annotations_and_a_clear_error(
     assert abs(marker["u"] - 100.3) < 0.3 and abs(marker["v"] - 200.7) < 0.3
     assert two["status"] == "too_many" and len(two["markers"]) == 2
     assert bad["error"] == "not a readable image file"
-    assert cv2.imread(one["annotated"]).shape == (576, 704, 3)
+    annotated = cv2.imread(one["annotated"])
+    assert annotated is not None and annotated.shape == (576, 704, 3)
 
 
 def test_parameters_reach_the_detector(tmp_path: Path, rng: np.random.Generator,

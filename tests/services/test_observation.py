@@ -36,7 +36,7 @@ def test_the_bird_s_eye_view_goes_on_the_bus(observation: dict,
     wait_for(lambda: len(frames) >= 4, timeout=60,
              why=lambda: f"{len(frames)} frames; health {health[-1:]}")
     image = cv2.imdecode(np.frombuffer(frames[-1].data, np.uint8), cv2.IMREAD_UNCHANGED)
-    assert image.shape == (480, 640, 3)
+    assert image is not None and image.shape == (480, 640, 3)
     assert (frames[-1].width_px, frames[-1].height_px) == (640, 480)
     assert [f.seq for f in frames] == sorted(f.seq for f in frames)
     gaps = np.diff([f.measured_s for f in frames])

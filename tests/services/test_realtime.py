@@ -12,14 +12,14 @@ import sys
 import pytest
 
 from common.bus import Bus
-from tests.conftest import free_port, stb_process, wait_for
+from tests.conftest import StbProcess, free_port, stb_process, wait_for
 from tests.services.test_processes import AliveWatcher, _stop
 
 PR_CAPBSET_DROP, CAP_SYS_NICE = 24, 23
 
 
 def _router(router_endpoint: str, instance: str, priority: int, **popen: object
-            ) -> subprocess.Popen:
+            ) -> StbProcess:
     return stb_process("router", "--instance", instance, "--listen",
                        f"tcp/127.0.0.1:{free_port()}", "--set", f'connect=["{router_endpoint}"]',
                        "--set", f"realtime_priority={priority}", **popen)
