@@ -36,10 +36,11 @@ def test_below_its_free_space_floor_stb_record_finishes_the_file_and_exits_5(
     out = tmp_path / "run.mcap"
     proc = stb_process("record", str(out), "--connect", router_endpoint, "--duration", "30",
                        "--set", "min_free_mb=1e12", "--set", "typed=false")
-    deadline = time.monotonic() + 30
-    while proc.poll() is None and time.monotonic() < deadline:
+    def ended() -> bool:  # the robot's samples, 20 a second, while the recorder runs
         bus.publish(keys.TRACKER_ROBOT, _robot(time.time()))
-        time.sleep(0.05)  # the robot's samples at a pace while the recorder runs
+        return proc.poll() is not None
+
+    wait_for(ended, timeout=30, period=0.05)
     assert proc.wait(timeout=5) == EXIT_DISK
     error = proc.stderr.read()
     assert "stopped:" in error and "min_free_mb" in error and "readable and finished" in error
