@@ -37,12 +37,12 @@ test: $(KERNEL)
 ## browser against the whole lab, several hosts):
 ## about 22 minutes on 2 cores. CI runs both.
 test-system: $(KERNEL)
-	$(BIN)/python -m pytest -q -m system
+	$(BIN)/python -m pytest -q -m system -n 2 --dist loadgroup --durations=25
 
 ## The lab under a real Docker engine (root; installs Debian's docker.io when missing):
 ## build, docker compose up with the sim, crash, router restart, down/up (docs/deployment.md §7).
 compose-test: $(KERNEL)
-	$(BIN)/python -m pytest -q -p no:cacheprovider compose_test --timeout 2400
+	$(BIN)/python -m pytest -q -p no:cacheprovider compose_test --timeout 2400 --durations=15
 
 wire-doc: $(STAMP)
 	$(BIN)/python -m common.wiredoc > docs/wire-format.md

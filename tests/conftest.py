@@ -96,6 +96,14 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(1234)
 
 
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """On two workers (``make test-system``: ``--dist loadgroup``) the operator package's tests
+    share one: its lab (``live_lab``, package-scoped) runs once, not once beside itself."""
+    for item in items:
+        if item.nodeid.startswith("tests/operator/"):
+            item.add_marker(pytest.mark.xdist_group("operator-lab"))
+
+
 @pytest.fixture(scope="session", autouse=True)
 def compiled_detector() -> None:
     """Services compile the marker detector at start (about 10 s in a fresh checkout, in

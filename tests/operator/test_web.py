@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import os
-import time
 import urllib.error
 import urllib.request
 from collections.abc import Iterator
@@ -14,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import wait_for
+from tests.conftest import poll, wait_for
 from tests.operator.conftest import LIVE_SERVICES, LiveLab
 from tests.uplab import OPERATOR, VIEWER
 from tests.webpage import basic
@@ -184,14 +183,15 @@ def test_the_gantry_buttons_stop_reset_and_arm_it(page: object, live_lab: LiveLa
 def _press_until_done(page: object, answer: object, button: str) -> None:
     """Press ``button`` again while the gantry refuses it for a fault still reported (the
     controller's next report after a reset clears it), for at most 5 s."""
-    deadline = time.monotonic() + 5
-    while time.monotonic() < deadline:
+    def done() -> bool:
         text = wait_for(lambda: answer.inner_text().startswith(f"{button}: ")  # type: ignore[attr-defined]
                         and answer.inner_text(), timeout=10)  # type: ignore[attr-defined]
         if not (text.startswith(f"{button}: refused") and "reset first" in text):
-            return
-        time.sleep(0.3)  # an operator's pace between presses
+            return True
         page.click(f"button[data-command='{button}']")  # type: ignore[attr-defined]
+        return False
+
+    poll(done, timeout=5, period=0.3)  # an operator's pace between presses
 
 
 def test_without_credentials_everything_answers_401(live_lab: LiveLab) -> None:
