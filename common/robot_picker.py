@@ -39,7 +39,7 @@ class Seen(NamedTuple):
     z_mm: float
 
     @classmethod
-    def at(cls, label: str, marker_id: int, xyz_mm: Sequence[float]) -> Seen:
+    def at(cls, label: str, marker_id: int, xyz_mm: Sequence[float] | np.ndarray) -> Seen:
         x, y, z = (float(c) for c in xyz_mm)
         return cls(label, marker_id, x, y, z)
 

@@ -83,6 +83,17 @@ EXAMPLES: dict[type[m.Message], m.Message] = {
                                                     dropped={"stale": 2})}),
 }
 
+M = typing.TypeVar("M", bound=m.Message)
+
+
+def example(model: type[M]) -> M:
+    """The wire format's example of ``model`` (``EXAMPLES``), typed as that model."""
+    found = EXAMPLES[model]
+    if not isinstance(found, model):
+        raise TypeError(f"EXAMPLES[{model.__name__}] is a {type(found).__name__}")
+    return found
+
+
 EXAMPLE_SUBSCRIBER = '''\
 """Print every STB message as a dict: needs only `pip install eclipse-zenoh==1.10.2 msgpack`."""
 import os

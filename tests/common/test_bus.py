@@ -7,6 +7,7 @@ import queue
 import threading
 import time
 from collections.abc import Callable
+from typing import Any
 
 import msgpack
 import pytest
@@ -16,7 +17,7 @@ from common import messages as m
 from common.bus import MAX_KEYS, OTHER_KEYS, Bus
 from common.node import Node
 from common.settings import ServiceSettings
-from common.wiredoc import EXAMPLES
+from common.wiredoc import example
 from tests.common.test_codec import BAD
 from tests.conftest import until_heard, wait_for
 
@@ -24,7 +25,7 @@ ROBOT_KEY = "stb/tracker/robot"
 
 
 def _robot(x_mm: float = 1.0, measured_s: float | None = None) -> m.RobotPosition:
-    return EXAMPLES[m.RobotPosition].model_copy(
+    return example(m.RobotPosition).model_copy(
         update={"x_mm": x_mm, "measured_s": measured_s or time.time()})
 
 
@@ -45,7 +46,8 @@ def test_typed_message_arrives_with_both_time_stamps(make_bus: Callable[..., Bus
 
 def test_publish_refuses_the_wrong_model(make_bus: Callable[..., Bus]) -> None:
     with pytest.raises(TypeError, match="carries RobotPosition"):
-        make_bus().publish(keys.TRACKER_ROBOT, EXAMPLES[m.CraneSetpoint])
+        wrong: Any = example(m.CraneSetpoint)
+        make_bus().publish(keys.TRACKER_ROBOT, wrong)
 
 
 @pytest.mark.parametrize("case", BAD, ids=list(BAD))
@@ -77,8 +79,11 @@ def test_stale_and_future_samples_never_reach_the_handler(make_bus: Callable[...
     now = time.time()
     for x_mm, sent_s in ((1.0, now - 1.0), (2.0, now + 1.0)):
         producer.session.put("stb/tracker/robot", codec.encode(_robot(x_mm), sent_s=sent_s))
-        wait_for(lambda n=x_mm: "stb/tracker/robot" in consumer.key_stats() and sum(
-            consumer.key_stats()["stb/tracker/robot"].dropped.values()) == n)
+        def dropped(n: float = x_mm) -> bool:
+            stats = consumer.key_stats().get("stb/tracker/robot")
+            return stats is not None and sum(stats.dropped.values()) == n
+
+        wait_for(dropped)
     producer.publish(keys.TRACKER_ROBOT, _robot(3.0))
     assert got.get(timeout=2).x_mm == 3.0
     assert consumer.key_stats()["stb/tracker/robot"].dropped == {"stale": 1, "from_future": 1}
@@ -137,7 +142,7 @@ def test_latest_value_is_kept_per_key(make_bus: Callable[..., Bus]) -> None:
 
     consumer.subscribe(keys.PTZ_STATE, handler)
     until_heard(producer, "stb/ptz/ptz1/state")
-    state = EXAMPLES[m.PtzState]
+    state = example(m.PtzState)
     for camera in ("ptz1", "ptz2", "ptz1", "ptz2"):
         producer.publish(keys.PTZ_STATE, state.model_copy(
             update={"camera": camera, "measured_s": time.time()}), camera=camera)
@@ -177,7 +182,7 @@ def test_ordered_subscription_delivers_every_sample(make_bus: Callable[..., Bus]
     consumer.subscribe(keys.GANTRY_SETPOINT, lambda s: got.append(s.seq), latest=False)
     until_heard(producer, "stb/gantry/setpoint")
     for seq in range(50):
-        producer.publish(keys.GANTRY_SETPOINT, EXAMPLES[m.CraneSetpoint].model_copy(
+        producer.publish(keys.GANTRY_SETPOINT, example(m.CraneSetpoint).model_copy(
             update={"seq": seq, "measured_s": time.time()}))
     wait_for(lambda: len(got) == 50)
     assert got == list(range(50))
@@ -185,7 +190,7 @@ def test_ordered_subscription_delivers_every_sample(make_bus: Callable[..., Bus]
 
 def test_late_joiner_gets_the_latest_pose_by_query(make_bus: Callable[..., Bus]) -> None:
     calib, ptz = make_bus(), make_bus()
-    pose = EXAMPLES[m.CameraPose]
+    pose = example(m.CameraPose)
     calib.serve_latest(keys.CALIB_POSE, lambda: pose, camera="ptz1")
     answers = wait_for(lambda: ptz.query_latest(keys.CALIB_POSE, camera="ptz1"),
                        why=lambda: "the queryable never answered")
@@ -225,8 +230,11 @@ def test_drop_counts_show_in_the_published_health(make_bus: Callable[..., Bus]) 
     until_heard(bus, "stb/health/gantry/main")
     for n, payload in enumerate((b"not msgpack at all", msgpack.packb({"camera": "x"})), 1):
         attacker.session.put("stb/gantry/camera/frame", payload)
-        wait_for(lambda n=n: "stb/gantry/camera/frame" in bus.key_stats() and sum(
-            bus.key_stats()["stb/gantry/camera/frame"].dropped.values()) == n)
+        def dropped(n: int = n) -> bool:
+            stats = bus.key_stats().get("stb/gantry/camera/frame")
+            return stats is not None and sum(stats.dropped.values()) == n
+
+        wait_for(dropped)
     node.publish_health()
     health = healths.get(timeout=2)
     assert health.service == "gantry" and health.status == "ok"

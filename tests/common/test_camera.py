@@ -40,7 +40,7 @@ def test_pose_maps_camera_to_world_and_back() -> None:
     pose = Pose(3413, 1093, 2163, 197, 27, 159)  # the paper's optimum (Table 2)
     points = np.array([[100.0, -20.0, 5.0], [4000.0, 300.0, -200.0]])
     np.testing.assert_allclose(pose.to_camera(pose.to_world(points)), points, atol=1e-9)
-    np.testing.assert_allclose(pose.to_world([[0.0, 0.0, 0.0]])[0], pose.position)
+    np.testing.assert_allclose(pose.to_world(np.zeros((1, 3)))[0], pose.position)
 
 
 def test_paper_estimate_looks_at_the_crater_centre() -> None:

@@ -11,7 +11,7 @@ from common import keys
 from common import messages as m
 from common.bus import Bus, open_session
 from common.settings import BusSettings, ZenohSettings
-from common.wiredoc import EXAMPLES
+from common.wiredoc import example
 from tests.conftest import wait_for
 from tests.ports import free_port
 
@@ -33,10 +33,14 @@ def test_robot_samples_go_straight_from_tracker_to_ptz_and_arrive_once() -> None
         assert wait_for(lambda: list(tracker.session.info.peers_zid()), timeout=10)
 
         def send(x_mm: float) -> None:
-            tracker.publish(keys.TRACKER_ROBOT, EXAMPLES[m.RobotPosition].model_copy(
+            tracker.publish(keys.TRACKER_ROBOT, example(m.RobotPosition).model_copy(
                 update={"x_mm": x_mm, "measured_s": time.time()}))
 
-        wait_for(lambda: send(0.0) or not got.empty(), timeout=5)  # the subscription is known
+        def probed() -> bool:
+            send(0.0)
+            return not got.empty()
+
+        wait_for(probed, timeout=5)  # the subscription is known
         send(-1.0)  # in order behind the probes: once it is taken, so are they
         wait_for(lambda: got.get(timeout=5).x_mm == -1.0, timeout=10, period=0.0)
         for i in range(20):

@@ -36,7 +36,7 @@ def test_a_curve_passes_its_points_rises_everywhere_and_inverts_to_the_nearest_s
     for z, f in zip(curve.zooms, curve.focals_mm, strict=True):
         assert curve.focal_mm(z) == pytest.approx(f)
     steps = np.arange(1, 10000, 7)
-    focal = np.array([curve.focal_mm(z) for z in steps])
+    focal = np.array([curve.focal_mm(float(z)) for z in steps])
     assert np.all(np.diff(focal) > 0)  # monotone: no overshoot between the points
     for z in (1, 777, 4321, 8888, 9999):
         assert curve.zoom_for_focal(curve.focal_mm(z)) == z

@@ -24,7 +24,9 @@ def test_unlabelled_robot_is_the_moving_marker(rng: np.random.Generator) -> None
     assert results[3] is None, "nothing is taken before it has been seen moving"
     assert results[10] is not None, "20 mm of motion: taken"
     assert picker.chosen == 7
-    position, velocity = results[-1]
+    last = results[-1]
+    assert last is not None
+    position, velocity = last
     assert abs(position[0] - 200.0 * 2.99) < 3
     np.testing.assert_allclose(velocity, [200.0, 0.0, 0.0], atol=25.0)
 
@@ -51,7 +53,8 @@ def test_the_robot_is_kept_when_it_stops(rng: np.random.Generator) -> None:
 def test_labelled_robot_and_bad_positions(rng: np.random.Generator) -> None:
     picker = RobotPicker(label="robot", volume=Volume(x_max_mm=3000))
     good = [Seen.at("robot", 0, np.array([10.0, 20.0, 30.0])), Seen.at("static_1", 0, np.zeros(3))]
-    assert np.allclose(picker.update(0.0, good)[0], [10, 20, 30])
+    taken = picker.update(0.0, good)
+    assert taken is not None and np.allclose(taken[0], [10, 20, 30])
     assert picker.update(0.01, [Seen.at("robot", 0, np.array([np.nan, 0, 0]))]) is None
     assert picker.update(0.02, [Seen.at("robot", 0, np.array([9000.0, 0, 0]))]) is None
     assert picker.update(0.03, [Seen.at("static_1", 0, np.zeros(3))]) is None
@@ -90,6 +93,7 @@ def test_the_sliding_slope_is_the_least_squares_fit_of_its_window(
         if len(window) < 3:
             assert found is None
         else:
+            assert found is not None
             np.testing.assert_allclose(found, _least_squares(window), rtol=1e-6, atol=1e-6)
     assert slope.REBASE_EVERY < 3500
 
@@ -105,5 +109,6 @@ def test_velocity_at_qtms_full_rate_with_an_occlusion(rng: np.random.Generator) 
         assert out is not None
         if n == 1400:  # back: bridged over the occlusion with the last three samples
             np.testing.assert_allclose(out[1], [290.0, 0.0, 0.0], atol=40.0)
+    assert out is not None
     np.testing.assert_allclose(out[1], [290.0, 0.0, 0.0], atol=25.0)
 

@@ -14,7 +14,7 @@ from common import keys
 from common import messages as m
 from common.bus import Bus, BusUnreachable, open_session, zenoh_config
 from common.settings import BusSettings, TlsSettings, ZenohSettings
-from common.wiredoc import EXAMPLES
+from common.wiredoc import example
 from tests.conftest import free_port, until_heard
 
 
@@ -27,7 +27,7 @@ def test_two_peers_talk_without_a_router() -> None:
         got: queue.Queue[m.CraneState] = queue.Queue()
         bus_b.subscribe(keys.GANTRY_STATE, got.put)
         until_heard(bus_a, "stb/gantry/state")
-        bus_a.publish(keys.GANTRY_STATE, EXAMPLES[m.CraneState].model_copy(
+        bus_a.publish(keys.GANTRY_STATE, example(m.CraneState).model_copy(
             update={"measured_s": time.time()}))
         assert got.get(timeout=3).status == "tracking"
     finally:

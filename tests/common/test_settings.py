@@ -6,7 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from common.settings import ConfigError, load_settings
+from common.errors import ConfigError
+from common.settings import load_settings
 from services.args import base_parser, overrides_from
 from services.router.settings import RouterSettings
 from services.supervisor import UpSettings
