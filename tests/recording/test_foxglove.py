@@ -12,10 +12,12 @@ import struct
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 import websockets
+from websockets.typing import Subprotocol
 
 from common import keys
 from common import messages as m
@@ -30,7 +32,7 @@ from tests.recording.typed import message_class
 from tests.services.test_processes import _stop
 
 
-def _decode(typed: Typed) -> object:
+def _decode(typed: Typed) -> Any:  # a protobuf message of its schema
     return message_class(typed.schema_name, typed.schema_data).FromString(typed.data)
 
 
@@ -61,7 +63,7 @@ def _ptz(t: float, camera: str = "ptz1") -> m.PtzState:
                       tilt_deg=-8.0, zoom=1, focal_mm=3.8, aim_error_deg=0.2)
 
 
-def _entities(out: list[Typed], topic: str = SCENE) -> dict[str, object]:
+def _entities(out: list[Typed], topic: str = SCENE) -> dict[str, Any]:
     return {e.id: e for t in out if t.topic == topic for e in _decode(t).entities}
 
 
@@ -155,8 +157,8 @@ async def _client(url: str, topics: set[str], until: Callable[[dict, dict], bool
     advertised: dict[str, dict] = {}
     got: dict[str, list[bytes]] = {}
     by_subscription: dict[int, str] = {}
-    async with websockets.connect(url, subprotocols=["foxglove.sdk.v1",
-                                                     "foxglove.websocket.v1"]) as ws:
+    async with websockets.connect(url, subprotocols=[Subprotocol("foxglove.sdk.v1"),
+                                                     Subprotocol("foxglove.websocket.v1")]) as ws:
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline and not until(advertised, got):
             try:
@@ -250,7 +252,7 @@ def test_stb_foxglove_serves_the_typed_scene_images_and_json_series(
     assert series["encoding"] == "json" and series["schemaName"] == "stb.GravityOffload"
     assert "horizontal_error_mm" in json.loads(series["schema"])["properties"]
 
-    def decoded(topic: str, payload: bytes) -> object:
+    def decoded(topic: str, payload: bytes) -> Any:
         schema = base64.b64decode(advertised[topic]["schema"])
         return message_class(advertised[topic]["schemaName"], schema).FromString(payload)
 

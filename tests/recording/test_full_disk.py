@@ -77,7 +77,7 @@ def test_a_disk_that_fills_up_stops_the_writing_with_one_error(
     wait_for(lambda: recorder.write_error is not None, timeout=10)
     wait_for(lambda: recorder.stats.lost > 0)
     recorder.close()  # no exception: nothing more is written
-    assert recorder.write_error.errno == errno.ENOSPC
+    assert recorder.write_error is not None and recorder.write_error.errno == errno.ENOSPC
     errors = [r for r in caplog.records if r.levelno >= logging.ERROR]
     assert len(errors) == 1 and "cannot write the recording" in errors[0].getMessage()
     assert len(out.getvalue()) <= 300_000

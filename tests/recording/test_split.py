@@ -70,8 +70,11 @@ def test_the_parts_are_complete_recordings_that_read_as_one_run(
         publisher.publish(keys.GANTRY_FRAME, m.CameraFrame(
             measured_s=now, camera="tracking", seq=sent + 1, width_px=160, height_px=120,
             encoding="mono8", data=draw([Blob(80, 60, 5, 5)], 160, 120, rng).tobytes()))
-        wait_for(lambda n=sent + 1: recorder.stats.samples["stb/gantry/camera/frame"] == n,
-                 timeout=10, why=lambda: "the frame is recorded before the clock moves on")
+        def recorded(n: int = sent + 1) -> bool:
+            return recorder.stats.samples["stb/gantry/camera/frame"] == n
+
+        wait_for(recorded, timeout=10,
+                 why=lambda: "the frame is recorded before the clock moves on")
         sent += 1
     wait_for(lambda: recorder.stats.samples["stb/tracker/robot"] == sent, timeout=10,
              why=lambda: f"{recorder.stats.samples['stb/tracker/robot']} of {sent}")

@@ -17,4 +17,5 @@ def decoded_typed(path: Path, topic: str) -> list[Any]:
     """Every message of a typed channel of a recording, decoded by its own schema."""
     with open(path, "rb") as f:
         return [message_class(schema.name, schema.data).FromString(msg.data)
-                for schema, _, msg in make_reader(f).iter_messages(topics=[topic])]
+                for schema, _, msg in make_reader(f).iter_messages(topics=[topic])
+                if schema is not None]
