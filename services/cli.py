@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import importlib
+import os
 import sys
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -68,5 +72,27 @@ def _config(argv: list[str]) -> int:
     return EXIT_CONFIG if errors else 0
 
 
+def run() -> None:
+    """The ``stb`` command as a process: ``main``, then the ending Python gives a process —
+    its threads joined, its exit handlers run, its output flushed — but not the interpreter's
+    finalization, after which ``os._exit``. Zenoh's runtime threads may still call into Python
+    once a tool's session has closed; a thread that does so while the interpreter finalizes is
+    ended by ``pthread_exit``, whose unwinding through Rust frames aborts the whole process
+    (signal 6, "FATAL: exception not rethrown": twice at the end of ``stb calib collect`` in
+    three CI runs, after it had printed its result)."""
+    try:
+        code = main()
+    except SystemExit as stop:  # argparse's --help and usage errors, sys.exit in a command
+        if isinstance(stop.code, str):
+            print(stop.code, file=sys.stderr)
+        code = stop.code if isinstance(stop.code, int) else 0 if stop.code is None else 1
+    threading._shutdown()  # type: ignore[attr-defined]  # as at exit: joins the threads
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(OSError):  # a reader that went away (``| head``)
+            stream.flush()
+    os._exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    run()
