@@ -78,8 +78,8 @@ def run() -> None:
     finalization, after which ``os._exit``. Zenoh's runtime threads may still call into Python
     once a tool's session has closed; a thread that does so while the interpreter finalizes is
     ended by ``pthread_exit``, whose unwinding through Rust frames aborts the whole process
-    (signal 6, "FATAL: exception not rethrown": twice at the end of ``stb calib collect`` in
-    three CI runs, after it had printed its result)."""
+    (signal 6, "FATAL: exception not rethrown": at the end of ``stb calib collect`` in a CI
+    run, after it had printed its result)."""
     try:
         code = main()
     except SystemExit as stop:  # argparse's --help and usage errors, sys.exit in a command
