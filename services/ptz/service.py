@@ -94,11 +94,13 @@ class PtzLoop:
     """Commands go out as robot samples arrive (no polling delay); camera state is queried
     and published ``state_hz`` times a second. The rules are ``PtzControl``'s
     (services/ptz/control.py); one lock serialises the commands and guards it; it is not held
-    while the state query waits for the camera. ``clock``: wall time (a test's simulated
-    clock drives ``step``, ``ask_pose`` and the previews' ``once`` itself)."""
+    while the state query waits for the camera. ``clock``: wall time; ``monotonic``: the
+    calibration hold's waits (a test's simulated clock gives both, and drives ``step``,
+    ``ask_pose`` and the previews' ``once`` itself)."""
 
     def __init__(self, node: Node, settings: PtzSettings, camera: PtzCamera,
-                 queries: PtzCamera, clock: Callable[[], float] = time.time) -> None:
+                 queries: PtzCamera, clock: Callable[[], float] = time.time,
+                 monotonic: Callable[[], float] = time.monotonic) -> None:
         self.node, self.settings, self.camera, self.queries = node, settings, camera, queries
         self.clock = clock
         self.control = PtzControl(
@@ -121,7 +123,7 @@ class PtzLoop:
             lambda msg: node.bus.publish(keys.PTZ_SNAPSHOT, msg, camera=name),
             max_markers=settings.calibration_max_markers,
             moved=lambda pan, tilt: self.control.own_move(clock(), pan, tilt),
-            monotonic=clock, wall=clock)
+            monotonic=monotonic, wall=clock)
         self.state_due = 0.0
         self.presets: list[str] = []
         self.presets_due = 0.0

@@ -112,7 +112,8 @@ class SimPtz:
         self.bus = LocalBus()
         self.node = Node("ptz", self.settings, cast(Bus, self.bus))
         driver = AxisPtzCamera(self.client(), "ptz1")
-        self.loop = PtzLoop(self.node, self.settings, driver, queries=driver, clock=self.clock)
+        self.loop = PtzLoop(self.node, self.settings, driver, queries=driver, clock=self.clock,
+                            monotonic=self.clock)
         preview = self.loop.previews(driver) if self.settings.preview_hz > 0 else None
         self._events: list[tuple[float, int, Callable[[], float | None]]] = []
         self._order = 0
