@@ -96,12 +96,26 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(1234)
 
 
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """On two workers (``make test-system``: ``--dist loadgroup``) the operator package's tests
-    share one: its lab (``live_lab``, package-scoped) runs once, not once beside itself."""
-    for item in items:
-        if item.nodeid.startswith("tests/operator/"):
-            item.add_marker(pytest.mark.xdist_group("operator-lab"))
+SHARED_LABS = ("tests/operator/",)
+"""Packages whose tests share one lab (a package-scoped fixture such as ``live_lab``)."""
+
+
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
+    """On two workers (``make test-system``: ``--dist loadgroup``) each package of
+    ``SHARED_LABS`` runs on one worker, so that its lab runs once and not beside itself; every
+    other test is a unit of its own. xdist's own grouping (the ``xdist_group`` mark) does not
+    work under pytest 9 (it renames ``item._nodeid``, which pytest 9 no longer reads): the
+    operator package ran on both workers, two labs and two browsers at once on two cores, and a
+    CI run failed on it."""
+    if config.getvalue("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class SharedLabScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return next((p for p in SHARED_LABS if nodeid.startswith(p)), nodeid)
+
+    return SharedLabScheduling(config, log)
 
 
 @pytest.fixture(scope="session", autouse=True)
