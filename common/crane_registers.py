@@ -9,6 +9,7 @@ the same). The status, fault and control bits are fixed (docs/devices.md).
 
 from __future__ import annotations
 
+import functools
 from typing import Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -80,15 +81,15 @@ class RegisterMap(BaseModel):
 
     @property
     def input_start(self) -> int:
-        return min(getattr(self, n) for n in INPUT)
+        return _layout(self)[0]
 
     @property
     def input_count(self) -> int:
-        return max(getattr(self, n) + self.width(n) for n in INPUT) - self.input_start
+        return _layout(self)[1]
 
     @property
     def holding_count(self) -> int:
-        return max(getattr(self, n) + self.width(n) for n in HOLDING)
+        return _layout(self)[2]
 
     def scale(self, name: str) -> float:
         return self.units_per_mm_s if name.startswith("velocity") else self.units_per_mm
@@ -120,6 +121,15 @@ class RegisterMap(BaseModel):
         """Value ``name`` from a block of registers read from address ``start``."""
         at = getattr(self, name) - start
         return self.decode(name, block[at:at + self.width(name)])
+
+
+@functools.lru_cache(maxsize=32)
+def _layout(registers: RegisterMap) -> tuple[int, int, int]:
+    """(input_start, input_count, holding_count) of a map, worked out once per map (the gantry
+    and the experiments read the crane 40 times a second)."""
+    start = min(getattr(registers, n) for n in INPUT)
+    count = max(getattr(registers, n) + registers.width(n) for n in INPUT) - start
+    return start, count, max(getattr(registers, n) + registers.width(n) for n in HOLDING)
 
 
 DEFAULT_MAP = RegisterMap()

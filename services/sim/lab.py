@@ -342,9 +342,14 @@ class Lab:
         frame = self.crane_frame
         crane, crane_before = self.crane_world_at(t), self.crane_world_at(t - exposure)
         targets, glints = len(self.targets), self._glint_points
-        pixels, scales = cam.project(np.vstack([self.robot(t), self.targets, glints]), crane,
-                                     frame)
-        now, before = pixels[0], cam.project(self.robot(t - exposure), crane_before, frame)[0][0]
+        # the robot as it was when the exposure began, seen from where the crane was then: the
+        # same pixel as the robot moved by the crane's travel since, seen from where it is now
+        before = self.robot(t - exposure).copy()
+        before[:2] += crane - crane_before
+        pixels, scales = cam.project(np.vstack([self.robot(t), self.targets, glints, before]),
+                                     crane, frame)
+        now, before = pixels[0], pixels[-1]
+        pixels, scales = pixels[:-1], scales[:-1]
         lit = self.settings.tracking_camera
         ms = exposure * 1000.0  # below saturation a sensor's gray level is linear in exposure
         marker = min(lit.marker_gray_per_ms * ms, 255.0)

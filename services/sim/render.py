@@ -121,7 +121,7 @@ def _on_uniform(blobs: list[Blob], width: int, height: int, background: float,
         for blob, other in zip(blobs, boxes, strict=True):
             if other is not None and other[0] < r1 and r0 < other[1] and other[2] < c1 \
                     and c0 < other[3]:
-                _draw_blob(canvas, blob, origin=(r0, c0))
+                _draw_blob(canvas, blob, origin=(r0, c0), box=other)
         canvas += field[r0:r1, c0:c1]
         image[r0:r1, c0:c1] = _to_gray(canvas)
     return image
@@ -139,14 +139,17 @@ def _box(blob: Blob, width: int, height: int) -> tuple[int, int, int, int] | Non
     return None if c0 >= c1 or r0 >= r1 else (r0, r1, c0, c1)
 
 
-def _draw_blob(image: np.ndarray, blob: Blob, origin: tuple[int, int] = (0, 0)) -> None:
-    """``blob`` onto ``image``, whose pixel [0, 0] is the picture's ``origin`` (row, column)."""
+def _draw_blob(image: np.ndarray, blob: Blob, origin: tuple[int, int] = (0, 0),
+               box: tuple[int, int, int, int] | None = None) -> None:
+    """``blob`` onto ``image``, whose pixel [0, 0] is the picture's ``origin`` (row, column);
+    ``box``: the blob's ``_box`` in the picture, if known."""
     height, width = image.shape
-    box = _box(blob, origin[1] + width, origin[0] + height)
     if box is None:
-        return
-    r0, r1 = max(box[0], origin[0]), box[1]
-    c0, c1 = max(box[2], origin[1]), box[3]
+        box = _box(blob, origin[1] + width, origin[0] + height)
+        if box is None:
+            return
+    r0, r1 = max(box[0], origin[0]), min(box[1], origin[0] + height)
+    c0, c1 = max(box[2], origin[1]), min(box[3], origin[1] + width)
     if c0 >= c1 or r0 >= r1:
         return
     cols = np.arange(c0, c1, dtype=float)[None, :]
@@ -164,16 +167,26 @@ def _draw_blob(image: np.ndarray, blob: Blob, origin: tuple[int, int] = (0, 0)) 
 
 
 def _coverage(du: np.ndarray, dv: np.ndarray, blob: Blob) -> np.ndarray:
-    """How much of each pixel the blob covers, centred at offsets (du, dv): distance to the
-    ellipse's edge in pixels (exact for a circle), a 1 px wide soft edge."""
+    """How much of each pixel the blob covers, centred at offsets (du, dv) — a row and a column
+    of offsets: distance to the ellipse's edge in pixels (exact for a circle), a 1 px wide
+    soft edge. The ellipse as its quadratic form (rho² = A du² + B du dv + C dv²), so that
+    only a few operations span the whole patch."""
     scale = min(blob.a_px, blob.b_px)
     if blob.a_px == blob.b_px:  # a disc: no need to turn it
-        rho = np.sqrt(du * du + dv * dv) / blob.a_px
+        k = 1.0 / (blob.a_px * blob.a_px)
+        rho2 = du * du * k + dv * dv * k
     else:
         cos, sin = math.cos(blob.angle_rad), math.sin(blob.angle_rad)
-        along, across = du * cos + dv * sin, -du * sin + dv * cos
-        rho = np.sqrt((along / blob.a_px) ** 2 + (across / blob.b_px) ** 2)
-    return np.clip((1.0 - rho) * scale + 0.5, 0.0, 1.0)
+        ia, ib = 1.0 / (blob.a_px * blob.a_px), 1.0 / (blob.b_px * blob.b_px)
+        a = cos * cos * ia + sin * sin * ib
+        b = 2.0 * cos * sin * (ia - ib)
+        c = sin * sin * ia + cos * cos * ib
+        rho2 = du * du * a + dv * dv * c
+        rho2 += (du * b) * dv
+    rho = np.sqrt(rho2, out=rho2)
+    rho *= -scale
+    rho += scale + 0.5
+    return np.clip(rho, 0.0, 1.0, out=rho)
 
 
 def marker_blobs(points_world: np.ndarray, pose: Pose, intr: Intrinsics, *,
