@@ -41,16 +41,14 @@ class CraneFrame(BaseModel):
         """Only the frame (of a settings model that adds more fields to it)."""
         return CraneFrame(**{name: getattr(self, name) for name in CraneFrame.model_fields})
 
-    @functools.cached_property
+    @property
     def rotation(self) -> np.ndarray:
-        a = math.radians(self.yaw_deg)
-        return np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+        return _rotation(self.yaw_deg)
 
-    @functools.cached_property
+    @property
     def linear(self) -> np.ndarray:
         """R · F: a crane-frame vector (a velocity, an offset on the carriage) in the world."""
-        return self.rotation @ np.diag([-1.0 if self.flip_x else 1.0,
-                                        -1.0 if self.flip_y else 1.0])
+        return _linear(self.yaw_deg, self.flip_x, self.flip_y)
 
     @property
     def is_identity(self) -> bool:
@@ -58,11 +56,11 @@ class CraneFrame(BaseModel):
 
     def to_world(self, xy_crane: ArrayLike) -> np.ndarray:
         """Crane coordinates (…, 2) in the world (mm)."""
-        return np.asarray(self.origin_mm) + np.asarray(xy_crane, dtype=float) @ self.linear.T
+        return _origin(self.origin_mm) + np.asarray(xy_crane, dtype=float) @ self.linear.T
 
     def to_crane(self, xy_world: ArrayLike) -> np.ndarray:
         """World coordinates (…, 2) as the crane counts them (mm)."""
-        return (np.asarray(xy_world, dtype=float) - np.asarray(self.origin_mm)) @ self.linear
+        return (np.asarray(xy_world, dtype=float) - _origin(self.origin_mm)) @ self.linear
 
     def vector_to_world(self, v_crane: ArrayLike) -> np.ndarray:
         return np.asarray(v_crane, dtype=float) @ self.linear.T
@@ -96,3 +94,27 @@ CRANE_COUNTS_IN_THE_WORLD = CraneFrame()
 class CraneConnection(RegisterMap, CraneFrame):
     """``[gantry.crane]``: the controller's register map (``common.crane_registers``) and its
     frame: how its registers map onto the world's coordinates."""
+
+
+# Worked out once per value, not kept on the model: pydantic's ``model_copy(update=…)`` copies
+# a model's cached properties with it, and a frame copied with a new yaw kept the old rotation.
+@functools.lru_cache(maxsize=64)
+def _rotation(yaw_deg: float) -> np.ndarray:
+    a = math.radians(yaw_deg)
+    rotation = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    rotation.flags.writeable = False
+    return rotation
+
+
+@functools.lru_cache(maxsize=64)
+def _linear(yaw_deg: float, flip_x: bool, flip_y: bool) -> np.ndarray:
+    linear = _rotation(yaw_deg) @ np.diag([-1.0 if flip_x else 1.0, -1.0 if flip_y else 1.0])
+    linear.flags.writeable = False
+    return linear
+
+
+@functools.lru_cache(maxsize=64)
+def _origin(origin_mm: tuple[float, float]) -> np.ndarray:
+    origin = np.array(origin_mm, dtype=float)
+    origin.flags.writeable = False
+    return origin

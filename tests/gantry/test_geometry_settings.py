@@ -51,3 +51,16 @@ def test_a_frame_maps_both_ways_and_has_one_canonical_form(rng: np.random.Genera
         assert abs(frame.canonical().yaw_deg) <= 90
         again = CraneFrame.from_linear(np.array(frame.origin_mm), frame.linear)
         np.testing.assert_allclose(again.to_world(points), frame.to_world(points), atol=1e-9)
+
+
+def test_a_frame_copied_with_new_values_maps_with_them(rng: np.random.Generator) -> None:
+    """Commissioning copies the lab's crane settings with the frame it measured
+    (``model_copy(update=…)``); the copy maps with the measured frame even when the old one
+    had been used before (a cached rotation once travelled with the copy)."""
+    points = rng.uniform(-3000, 3000, (5, 2))
+    old = CraneFrame()
+    old.to_world(points)
+    measured = CraneFrame(origin_mm=(-3600.0, 3300.0), yaw_deg=91.0, flip_y=True)
+    copied = old.model_copy(update=measured.model_dump())
+    np.testing.assert_allclose(copied.to_world(points), measured.to_world(points), atol=1e-9)
+    np.testing.assert_allclose(copied.to_crane(points), measured.to_crane(points), atol=1e-9)
