@@ -67,6 +67,7 @@ class CycleSync:
     _brackets: deque[tuple[float, float]] = field(init=False)
     _last_poll: tuple[float, tuple[float, float]] | None = None
     _next_tick_s: float | None = None
+    _phase_s: float | None = None  # report_phase_s, worked out when the brackets change
     last_report_s: float | None = None
     """When the report last changed (between the two polls that saw it)."""
 
@@ -83,6 +84,7 @@ class CycleSync:
             assert self._last_poll is not None
             if now_s - self._last_poll[0] < self.period_s:  # a longer gap says nothing
                 self._brackets.append((self._last_poll[0], now_s))
+                self._phase_s = self._phase_of_brackets()
             phase = self.report_phase_s
             self.last_report_s = 0.5 * (self._last_poll[0] + now_s) if phase is None else \
                 self._in_cycle_of(phase, 0.5 * (self._last_poll[0] + now_s))
@@ -107,6 +109,9 @@ class CycleSync:
         """When in the period the controller reports (None until the crane has moved): the
         middle of the overlap of the newest brackets, newest first, as far back as they
         overlap (an older one that does not — a late read, the two clocks' drift — ends it)."""
+        return self._phase_s
+
+    def _phase_of_brackets(self) -> float | None:
         if not self._brackets:
             return None
         low, high = self._brackets[-1]

@@ -195,7 +195,7 @@ class TargetCheck:
                 "client writes setpoints")
 
     def _ours(self, x: float, y: float) -> bool:
-        return any(np.hypot(x - wx, y - wy) <= self.tolerance_mm for wx, wy in self._written)
+        return any(math.hypot(x - wx, y - wy) <= self.tolerance_mm for wx, wy in self._written)
 
     def observe(self, reading: CraneReading) -> str | None:
         taken, self._taken = self._taken, reading.setpoints_taken

@@ -152,15 +152,16 @@ def input_registers(model: CraneModel, registers: RegisterMap = DEFAULT_MAP) -> 
     target = model.position if model.target is None else model.target
     reported, velocity = model.reported, model.reported_velocity
     block = [0] * registers.input_count
-    values = {"actual_x": reported[0], "actual_y": reported[1], "velocity_x": velocity[0],
-              "velocity_y": velocity[1], "target_x": target[0], "target_y": target[1]}
-    words = {"status": model.status(), "faults": model.faults,
-             "heartbeat_echo": model.heartbeat & 0xFFFF,
-             "setpoints_taken": model.setpoints_taken & 0xFFFF}
-    start = registers.input_start
-    for name, v in values.items():
-        at = getattr(registers, name) - start
-        block[at:at + registers.width(name)] = registers.encode(name, v)
-    for name, w in words.items():
-        block[getattr(registers, name) - start] = w
+    start, r = registers.input_start, registers
+    for at, name, v in ((r.actual_x, "actual_x", reported[0]),
+                        (r.actual_y, "actual_y", reported[1]),
+                        (r.velocity_x, "velocity_x", velocity[0]),
+                        (r.velocity_y, "velocity_y", velocity[1]),
+                        (r.target_x, "target_x", target[0]), (r.target_y, "target_y", target[1])):
+        words = r.encode(name, v)
+        block[at - start:at - start + len(words)] = words
+    block[r.status - start] = model.status()
+    block[r.faults - start] = model.faults
+    block[r.heartbeat_echo - start] = model.heartbeat & 0xFFFF
+    block[r.setpoints_taken - start] = model.setpoints_taken & 0xFFFF
     return block
