@@ -42,7 +42,7 @@ def poll(predicate: Callable[[], T | None], timeout: float = 5.0,
     return None
 
 
-async def poll_async(step: Callable[[], Awaitable[T]], timeout: float = 5.0,
+async def poll_async(step: Callable[[], Awaitable[T | None]], timeout: float = 5.0,
                      period: float = 0.02) -> T | None:
     """``poll`` on an event loop: await ``step()`` until it gives something truthy, and
     return that; None on timeout."""

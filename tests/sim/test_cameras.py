@@ -149,7 +149,9 @@ def test_info_lists_the_ir_cut_filter(servers: dict) -> None:
 def _snapshot(client: httpx.Client, **params: str) -> np.ndarray:
     reply = client.get(IMAGE, params=params)
     assert reply.status_code == 200 and reply.headers["Content-Type"] == "image/jpeg"
-    return cv2.imdecode(np.frombuffer(reply.content, np.uint8), cv2.IMREAD_GRAYSCALE)
+    image = cv2.imdecode(np.frombuffer(reply.content, np.uint8), cv2.IMREAD_GRAYSCALE)
+    assert image is not None, "not a JPEG"
+    return image
 
 
 def _bright_spots(image: np.ndarray, threshold: int = 128) -> list[tuple[float, float, float]]:

@@ -6,6 +6,7 @@ import asyncio
 import struct
 import time
 from collections.abc import Awaitable, Callable
+from typing import Any, TypeVar
 
 import numpy as np
 import pytest
@@ -16,16 +17,18 @@ from services.sim.mocap_server import MocapServer, MocapSource
 from tests.conftest import poll_async
 from tests.simlab import sim_settings
 
+T = TypeVar("T")
 
-def _run(lab: Lab, client: Callable[[int], Awaitable[object]], *, capturing: bool = True,
-         rate_hz: float | None = None, start_s: float = 0.0) -> object:
+
+def _run(lab: Lab, client: Callable[[int], Awaitable[T]], *, capturing: bool = True,
+         rate_hz: float | None = None, start_s: float = 0.0) -> T:
     """Serve ``lab`` (its capture at ``start_s`` now) to ``client(port)``."""
     rate = rate_hz or lab.settings.mocap.rate_hz
     t0 = time.monotonic() - start_s
     source = MocapSource(lab.labels, rate, lab.mocap_frame, lambda: time.monotonic() - t0,
                          lab.body_points)
 
-    async def main() -> object:
+    async def main() -> T:
         server = MocapServer(source, "127.0.0.1", 0, capturing=capturing)
         await server.start()
         try:
@@ -46,7 +49,7 @@ async def _packets_until(packets: list, count: int, timeout: float) -> None:
 
 
 async def _stream(port: int, components: list[str], frames: str = "allframes", *,
-                  count: int | None = None, seconds: float | None = None) -> list:
+                  count: int | None = None, seconds: float | None = None) -> list[Any]:
     """The packets streamed until ``count`` came (at most 30 s), or over ``seconds``: a
     window for a test about the rate, or about nothing coming."""
     conn = await qtm_rt.connect("127.0.0.1", port=port, version="1.25")
@@ -64,8 +67,9 @@ async def _stream(port: int, components: list[str], frames: str = "allframes", *
 
 
 def test_handshake_labels_and_state(lab: Lab) -> None:
-    async def client(port: int) -> tuple:
+    async def client(port: int) -> tuple[Any, ...]:
         conn = await qtm_rt.connect("127.0.0.1", port=port, version="1.25")
+        assert conn is not None
         try:
             return (await conn.qtm_version(), await conn.byte_order(),
                     await conn.get_parameters(["3d"]), await conn.get_state())
@@ -83,7 +87,8 @@ def test_streamed_markers_equal_the_truth_within_the_noise(lab: Lab) -> None:
     packets = _run(lab, lambda port: _stream(port, ["3d", "3dnolabels"], count=150))
     numbers = [p.framenumber for p in packets]
     assert numbers == sorted(numbers) and len(set(numbers)) == len(numbers)
-    errors, missing = [], 0
+    errors: list[float] = []
+    missing = 0
     for p in packets:
         _, markers = p.get_3d_markers()
         assert len(markers) == len(lab.labels)
@@ -98,11 +103,11 @@ def test_streamed_markers_equal_the_truth_within_the_noise(lab: Lab) -> None:
             elif np.isnan(xyz).any():
                 missing += 1
             else:
-                errors.append(np.linalg.norm(xyz - true))
+                errors.append(float(np.linalg.norm(xyz - true)))
         assert abs(p.timestamp - p.framenumber * 10_000) <= 1
-    errors = np.array(errors)
-    assert np.sqrt(np.mean(errors**2)) < 1.5, "about 0.5 mm per axis"
-    assert errors.max() < 5.0
+    error = np.array(errors)
+    assert np.sqrt(np.mean(error**2)) < 1.5, "about 0.5 mm per axis"
+    assert error.max() < 5.0
     assert missing < 0.05 * len(packets) * len(lab.labels)
 
 

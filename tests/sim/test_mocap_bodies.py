@@ -4,6 +4,7 @@ wand as bodies (6d and 6deuler), their markers in 3d, parameters QTM does not ha
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from typing import Any
 
 import numpy as np
 import pytest
@@ -15,7 +16,7 @@ from services.sim.lab import Lab
 from tests.sim.test_mocap import _run, _stream
 
 
-def _matrix(rotation: tuple) -> np.ndarray:
+def _matrix(rotation: Any) -> np.ndarray:
     return np.array(rotation.matrix).reshape(3, 3).T  # QTM sends it column by column
 
 
@@ -23,7 +24,9 @@ def test_the_robot_body_follows_the_robot_and_faces_where_it_goes(lab: Lab) -> N
     packets = _run(lab, lambda port: _stream(port, ["3d", "6d", "6deuler"], count=150),
                    start_s=4.0)
     robot_index = [b.name for b in lab.bodies].index("robot")
-    errors, turned, lost = [], [], 0
+    errors: list[float] = []
+    turned: list[float] = []
+    lost = 0
     for packet in packets:
         info, bodies = packet.get_6d()
         _, euler = packet.get_6d_euler()
@@ -35,7 +38,7 @@ def test_the_robot_body_follows_the_robot_and_faces_where_it_goes(lab: Lab) -> N
             lost += 1
             assert np.isnan(_matrix(rotation)).all(), "a lost body is NaN, never zero"
             continue
-        errors.append(np.linalg.norm(xyz - lab.robot(t)))
+        errors.append(float(np.linalg.norm(xyz - lab.robot(t))))
         r = _matrix(rotation)
         np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-5)
         velocity = lab.robot_velocity(t)
@@ -91,7 +94,7 @@ def test_body_parameters_name_the_bodies_and_their_points(lab: Lab) -> None:
     assert [b.text for b in root.findall("*/Body/Name")] == ["robot", "wand"]
     points = root.findall("The_6D/Body")[0].findall("Points/Point")
     assert [p.get("Name") for p in points] == ["robot", "robot - 2", "robot - 3", "robot - 4"]
-    model = np.array([[float(p.get(a)) for a in "XYZ"] for p in points])
+    model = np.array([[float(p.get(a, "nan")) for a in "XYZ"] for p in points])
     np.testing.assert_allclose(model, ROBOT_POINTS_MM)
 
 

@@ -82,9 +82,10 @@ def test_it_serves_colour_pictures_and_video_and_nothing_of_a_ptz_camera(
     reply = served.get("/axis-cgi/jpg/image.cgi")
     assert reply.status_code == 200 and reply.headers["content-type"] == "image/jpeg"
     image = cv2.imdecode(np.frombuffer(reply.content, np.uint8), cv2.IMREAD_UNCHANGED)
-    assert image.shape == (480, 640, 3)
+    assert image is not None and image.shape == (480, 640, 3)
     small = served.get("/axis-cgi/jpg/image.cgi", params={"resolution": "320x240"})
-    assert cv2.imdecode(np.frombuffer(small.content, np.uint8), 1).shape == (240, 320, 3)
+    picture = cv2.imdecode(np.frombuffer(small.content, np.uint8), 1)
+    assert picture is not None and picture.shape == (240, 320, 3)
     bad = served.get("/axis-cgi/jpg/image.cgi", params={"resolution": "704x576"})
     assert "resolution" in bad.text
     assert served.get("/axis-cgi/com/ptz.cgi", params={"pan": "10"}).status_code == 404

@@ -54,7 +54,7 @@ def test_paper_equations_5_to_8_invert_the_ideal_rendering(lab: Lab) -> None:
     cam = lab.tracking
     robot = np.array([1234.0, -567.0, 210.0])
     crane_x, crane_y = 1000.0, -400.0
-    (u, v), = cam.project(robot, (crane_x, crane_y), lab.crane_frame)[0]
+    (u, v), = cam.project(robot, np.array([crane_x, crane_y]), lab.crane_frame)[0]
     z = cam.height_mm - robot[2]
     b = thin_lens_image_distance_mm(cam.focal_mm, z)
     ref_u, ref_v = cam.width_px / 2, cam.height_px / 2

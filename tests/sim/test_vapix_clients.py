@@ -6,8 +6,9 @@ from __future__ import annotations
 import ast
 import asyncio
 import time
-from collections.abc import Iterator
+from collections.abc import Awaitable, Callable, Iterator
 from pathlib import Path
+from typing import TypeVar
 
 import cv2
 import httpx
@@ -16,6 +17,7 @@ import pytest
 from axis.device import AxisDevice
 from axis.interfaces.ptz import PtzControl
 from axis.models.configuration import Configuration
+from axis.models.ptz_cgi import PtzQuery
 from axis.models.pwdgrp_cgi import SecondaryGroup
 
 from services.sim.camera_server import CameraServer, SimCamera
@@ -40,8 +42,11 @@ def camera(lab: Lab) -> Iterator[tuple[CameraServer, httpx.Client]]:
     server.close()
 
 
-def _with_axis(server: CameraServer, work) -> object:
-    async def run() -> object:
+T = TypeVar("T")
+
+
+def _with_axis(server: CameraServer, work: Callable[[AxisDevice], Awaitable[T]]) -> T:
+    async def run() -> T:
         async with httpx.AsyncClient() as session:
             device = AxisDevice(Configuration(session, "127.0.0.1", port=server.port,
                                               username=server.camera.user,
@@ -63,7 +68,7 @@ def test_the_axis_library_identifies_the_camera(camera: tuple, lab: Lab) -> None
         await device.vapix.load_user_groups()
         return device
 
-    vapix = _with_axis(server, identify).vapix  # type: ignore[attr-defined]
+    vapix = _with_axis(server, identify).vapix
     assert vapix.product_number == "215 PTZ"
     assert vapix.product_type == "PTZ Network Camera"
     assert vapix.serial_number == serial_of(server.camera.name) != ""
@@ -89,12 +94,12 @@ def test_the_axis_library_moves_the_camera_and_reads_it_back(camera: tuple) -> N
     async def reaching(ptz: PtzControl, pan: float, tilt: float, zoom: int) -> bytes:
         """The position once it is the one asked for (or what it is after 10 s)."""
         async def there() -> bytes | None:
-            now = await ptz.query("position")
+            now = await ptz.query(PtzQuery.POSITION)
             at = _pairs(now)
             return now if (float(at["pan"]), float(at["tilt"]), int(at["zoom"])) == \
                 (pan, tilt, zoom) else None
 
-        return await poll_async(there, 10, 0.05) or await ptz.query("position")
+        return await poll_async(there, 10, 0.05) or await ptz.query(PtzQuery.POSITION)
 
     async def move(device: AxisDevice) -> tuple[bytes, bytes, bytes]:
         ptz = device.vapix.ptz
@@ -102,9 +107,9 @@ def test_the_axis_library_moves_the_camera_and_reads_it_back(camera: tuple) -> N
         moved = await reaching(ptz, 30.0, -10.0, 2000)
         await ptz.control(go_to_server_preset_name="Home")
         home = await reaching(ptz, 0.0, 0.0, 1)
-        return moved, home, await ptz.query("limits")
+        return moved, home, await ptz.query(PtzQuery.LIMITS)
 
-    moved, home, limits = _with_axis(server, move)  # type: ignore[misc]
+    moved, home, limits = _with_axis(server, move)
     at = _pairs(moved)
     assert (float(at["pan"]), float(at["tilt"]), int(at["zoom"])) == (30.0, -10.0, 2000)
     back = _pairs(home)
