@@ -148,6 +148,7 @@ def test_each_cameras_video_is_in_the_recording_on_the_buss_clock(recording: Pat
         assert [f.seq for f in frames] == list(range(1, len(frames) + 1))
         assert {(f.width_px, f.height_px, f.encoding) for f in frames} == {(704, 576, "jpeg")}
         picture = cv2.imdecode(np.frombuffer(frames[-1].data, np.uint8), cv2.IMREAD_COLOR)
+        assert picture is not None, "not a JPEG"
         assert picture.shape == (576, 704, 3) and picture.std() > 5, "a picture, not a field"
         times = [f.measured_s for f in frames]
         assert robot[0] - 1.0 <= times[0] and times[-1] <= robot[-1] + 1.0, "the same clock"
@@ -165,10 +166,15 @@ def test_replaying_the_recording_gives_the_same_messages(recording: Path) -> Non
         session = open_when_up(settings.zenoh)
         bus = Bus(session, settings)
         got: dict[str, list[m.Message]] = defaultdict(list)
+
+        def heard(item: tuple[str, m.Message | dict]) -> None:
+            if isinstance(item[1], m.Message):  # a key the project does not know: not counted
+                got[item[0]].append(item[1])
+
         chosen = ["stb/tracker/robot", "stb/gantry/state", "stb/ptz/ptz1/state",
                   "stb/video/ptz1"]
         for key in chosen:
-            bus.subscribe_any(key, lambda item: got[item[0]].append(item[1]))
+            bus.subscribe_any(key, heard)
         probe = open_when_up(settings.zenoh)
         try:  # the subscriptions have reached the router before the replay starts
             prober = Bus(probe, settings)
@@ -179,7 +185,9 @@ def test_replaying_the_recording_gives_the_same_messages(recording: Path) -> Non
         replay = stb_process("replay", str(recording), "--speed", "4", "--connect", endpoint,
                              *[a for key in chosen for a in ("--keys", key)])
         assert replay.wait(timeout=RECORD_S + 20) == 0, replay.stderr.read()
-        expected = {k: [codec.decode(keys.topic_for("stb", k).model, s.payload)
+        topics = {k: keys.topic_for("stb", k) for k in chosen}
+        assert None not in topics.values()
+        expected = {k: [codec.decode(topics[k].model, s.payload)  # type: ignore[union-attr]
                         for s in read_samples(recording, [k])] for k in chosen}
         try:
             wait_for(lambda: all(len(got[k]) == len(expected[k]) for k in chosen), timeout=5)

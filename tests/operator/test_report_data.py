@@ -29,6 +29,7 @@ def _pose_msg(pose: Pose, camera: str = "ptz1") -> m.CameraPose:
 
 def _calibration_run(pose_msg: m.CameraPose, rng: np.random.Generator) -> Recording:
     points, track = moving_marker(PAPER_POSE, rng, count=60, offset_s=0.0, noise_px=1.0)
+    assert points.times_s is not None
     rec = Recording(path=None)  # type: ignore[arg-type]
     rec.frames = [m.MarkerFrame(measured_s=float(t), frame=i, markers=[m.Marker(
         label="wand", x_mm=float(x), y_mm=float(y), z_mm=float(z))])
@@ -64,8 +65,8 @@ def test_crane_error_compares_the_enabled_crane_with_the_robot_at_the_same_time(
     rec.crane.add(10.5, 40.0, 0.0, 1.0)  # 10 mm behind
     rec.crane.add(10.6, 0.0, 0.0, 0.0)   # disabled: not counted
     rec.crane.add(30.0, 0.0, 0.0, 1.0)   # no robot sample near: not counted
-    t, error = crane_error(rec)
-    assert t.tolist() == [10.2, 10.5]
+    times, error = crane_error(rec)
+    assert times.tolist() == [10.2, 10.5]
     assert error == pytest.approx(np.array([[-20.0, 5.0], [-10.0, 0.0]]))
     rec.first_s, rec.last_s = 10.0, 11.0
     figures = summary(rec)

@@ -107,7 +107,7 @@ def test_stb_report_shows_stills_and_exports_the_bird_s_eye_mp4(recording: Path,
     assert (tmp_path / "still-2-observation-video.jpg").exists()
     with av.open(str(tmp_path / "birdseye.mp4")) as mp4:
         stream = mp4.streams.video[0]
-        frames = [(float(f.pts * f.time_base), f.to_ndarray(format="bgr24"))
+        frames = [(float(f.pts * f.time_base), f.to_ndarray(format="bgr24"))  # type: ignore[operator]
                   for f in mp4.decode(stream)]
     assert len(frames) == pytest.approx(10 * FPS, abs=2), "ten seconds at the camera's rate"
     assert (frames[0][1].shape[1], frames[0][1].shape[0]) == (320, 240)

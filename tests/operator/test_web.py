@@ -10,6 +10,7 @@ import urllib.request
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -120,7 +121,11 @@ def test_camera_previews_the_plot_and_offload_figures_are_shown(page: object,
                                                                  tmp_path: Path) -> None:
     for camera in ("ptz1", "ptz2"):
         preview = page.locator(f"#camera-{camera} canvas")  # type: ignore[attr-defined]
-        wait_for(lambda p=preview: p.get_attribute("data-seq"), timeout=10)
+
+        def shown(p: Any = preview) -> str | None:
+            return p.get_attribute("data-seq")
+
+        wait_for(shown, timeout=10)
         caption = page.locator(f"#camera-{camera} .caption").inner_text()  # type: ignore[attr-defined]
         assert "tracking" in caption, caption
     # The robot's IR marker is found in the previews (the sim renders the crater, the robot
@@ -163,8 +168,14 @@ def test_the_gantry_buttons_stop_reset_and_arm_it(page: object, live_lab: LiveLa
             page.click(f"button[data-command='{button}']")  # type: ignore[attr-defined]
         if button == "arm":  # after a tripped watchdog, until the controller reports it reset
             _press_until_done(page, answer, button)
-        wait_for(lambda b=button: answer.inner_text().startswith(f"{b}: done"), timeout=10)
-        wait_for(lambda e=expected: mode.inner_text().startswith(e), timeout=5)
+        def done(b: str = button) -> bool:
+            return bool(answer.inner_text().startswith(f"{b}: done"))
+
+        def in_mode(e: str = expected) -> bool:
+            return bool(mode.inner_text().startswith(e))
+
+        wait_for(done, timeout=10)
+        wait_for(in_mode, timeout=5)
     assert "(olga (web 127.0.0.1))" in mode.inner_text(), "who armed it, by name"
     history = page.locator("#commands tr[data-by='olga (web 127.0.0.1)']")  # type: ignore[attr-defined]
     wait_for(lambda: history.count() >= 3, timeout=10)

@@ -9,6 +9,7 @@ import queue
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TypeVar
 
 import pytest
 
@@ -27,6 +28,8 @@ from tests.conftest import client_settings, wait_for
 from tests.uplab import OPERATOR, VIEWER, write_users
 from tests.webpage import PageClient
 
+M = TypeVar("M", bound=m.Message)
+
 
 @pytest.fixture
 def console_page(tmp_path: Path, make_bus: Callable[..., Bus], router_endpoint: str
@@ -44,15 +47,15 @@ def console_page(tmp_path: Path, make_bus: Callable[..., Bus], router_endpoint: 
         web.close()
 
 
-def _subscribed(bus: Bus, got: queue.Queue, topic: keys.Topic, probe: m.Message,
-                **params: str) -> None:
+def _subscribed(bus: Bus, got: queue.Queue[M], topic: keys.Topic[M], probe: M,
+                camera: str) -> None:
     """Until a probe sent on the key comes back: the subscription has reached the router
     (probes may still be on their way after: ``_next`` passes over them)."""
-    wait_for(lambda: bus.publish(topic, probe, **params) or not got.empty(), timeout=10,
+    wait_for(lambda: bus.publish(topic, probe, camera=camera) or not got.empty(), timeout=10,
              period=0.1)
 
 
-def _next(got: queue.Queue, probe: m.Message) -> m.Message:
+def _next(got: queue.Queue[M], probe: M) -> M:
     while True:
         msg = got.get(timeout=5)
         if msg.model_dump(exclude={"measured_s", "sent_s"}) != probe.model_dump(

@@ -98,7 +98,10 @@ def test_hold_a_camera_steer_it_by_hand_and_let_it_follow(console_lab: dict,
     answer = tab.locator("#camera-ptz2 .answer")  # type: ignore[attr-defined]
     for _ in range(3):  # three presses of ◀, each 5° from wherever the camera is
         _click(tab, "ptz2", "ptz-left")
-        wait_for(lambda p=last: abs(states["ptz2"].pan_deg - (p - 5.0)) < 0.3, timeout=10,
+        def stepped(p: float = last) -> bool:
+            return abs(states["ptz2"].pan_deg - (p - 5.0)) < 0.3
+
+        wait_for(stepped, timeout=10,
                  why=lambda: f"{answer.inner_text()!r}, pan {states['ptz2'].pan_deg:.1f}")
         last = states["ptz2"].pan_deg
     assert before - last == pytest.approx(15.0, abs=2.0), "three steps of 5° to the left"

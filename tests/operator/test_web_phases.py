@@ -101,6 +101,12 @@ def _text(page: object, selector: str) -> str:
     return page.locator(selector).inner_text()  # type: ignore[attr-defined]
 
 
+def _showing(page: object, selector: str, needle: str) -> str | None:
+    """The element's text once it shows ``needle`` (None before)."""
+    text = _text(page, selector)
+    return text if needle in text else None
+
+
 def _colours(page: object, selector: str) -> int:
     """How many different colours a canvas shows (a blank one: 1)."""
     return page.evaluate(  # type: ignore[attr-defined]
@@ -199,8 +205,7 @@ def test_2_calibration_progress_per_camera(tab: object, quiet: Quiet) -> None:
         height_px=576, markers=[m.DetectedMarker(
             u_px=300.0, v_px=200.0, radius_long_px=6.0, radius_short_px=6.0, angle_deg=0.0,
             roundness=1.0, area_px=113)]), camera="ptz1")
-    text = wait_for(lambda: "12 of 40" in _text(tab, "#camera-ptz1") and _text(
-        tab, "#camera-ptz1"), timeout=5)
+    text = wait_for(lambda: _showing(tab, "#camera-ptz1", "12 of 40"), timeout=5)
     wait_for(lambda: canvas.get_attribute("data-markers") == "1", timeout=5)
     assert canvas.get_attribute("data-kind") == "calibration snapshot"
     assert "calibrating: 12 of 40 passpoints" in text and "passed over: no marker 24" in text
@@ -222,8 +227,7 @@ def test_3_following_with_alarms_in_the_banner_and_the_plot(tab: object, quiet: 
         _crane(quiet, 100.0 * i - 40 - 10 * i)
         _offload(quiet, 40.0 + 10 * i)
         time.sleep(0.2)  # the subject: samples a fifth of a second apart, as the gantry sends
-    banner = wait_for(lambda: "sideways pull" in _text(tab, "#alarms") and _text(
-        tab, "#alarms"), timeout=5)
+    banner = wait_for(lambda: _showing(tab, "#alarms", "sideways pull"), timeout=5)
     causes = tab.eval_on_selector_all(  # type: ignore[attr-defined]
         "#alarms .alarm", "els => els.map(e => e.dataset.cause)")
     assert {"sideways pull", "calibration failed", "service down"} <= set(causes), causes
