@@ -161,6 +161,7 @@ def test_collector_interpolates_the_wand_and_ignores_what_stays_put() -> None:
     accepted = [r for r in reasons if r is None]
     assert len(accepted) >= len(reasons) - 10
     points = collector.passpoints()
+    assert points.times_s is not None
     for t, xyz in zip(points.times_s, points.world_mm, strict=True):
         assert np.allclose(xyz, wand_at(t), atol=1e-6), "interpolated at the capture time"
     assert collector.on_detections(_detections(7.9, [STATIC_PX])) == "no marker"

@@ -7,6 +7,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 import zenoh
@@ -20,8 +21,9 @@ from services.calib.settings import CalibSettings
 from services.calib.store import PoseStore
 from tests.conftest import wait_for
 
-SOLVED = dict(camera="ptz1", x_mm=3550.0, y_mm=1090.0, z_mm=2190.0, rx_deg=180.0, ry_deg=30.0,
-              rz_deg=165.0, focal_mm=3.8, mean_error_px=1.2, passpoints=100)
+SOLVED: dict[str, Any] = dict(
+    camera="ptz1", x_mm=3550.0, y_mm=1090.0, z_mm=2190.0, rx_deg=180.0, ry_deg=30.0,
+    rz_deg=165.0, focal_mm=3.8, mean_error_px=1.2, passpoints=100)
 
 
 def _service(make_bus: Callable[..., Bus], data_dir: Path) -> tuple[Calib, Node]:
@@ -73,7 +75,8 @@ def test_its_solves_count_from_its_own_version(make_bus: Callable[..., Bus],
     wait_for(lambda: heard)
     calib.solved(m.CameraPose(measured_s=time.time(), **SOLVED), {"method": "test"})
     wait_for(lambda: len(heard) == 2)
-    assert heard[-1].version == 1 and PoseStore(tmp_path).load("ptz1").version == 1
+    stored = PoseStore(tmp_path).load("ptz1")
+    assert heard[-1].version == 1 and stored is not None and stored.version == 1
     calib.solved(m.CameraPose(measured_s=time.time(), **SOLVED), {"method": "test"})
     wait_for(lambda: len(heard) == 3)
     assert heard[-1].version == 2

@@ -9,6 +9,7 @@ import subprocess
 import sys
 import textwrap
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -30,8 +31,9 @@ def test_the_solvers_never_load_in_the_service_and_the_fit_comes_back(tmp_path: 
     rng = np.random.default_rng(3)
     truth = drawn_lens(rng)
     sets = zoom_passpoints(PAPER_POSE, truth, ZOOMS, rng, count=60)
-    np.savez(tmp_path / "points.npz", **{f"world{s.zoom}": s.world_mm for s in sets},
-             **{f"pixels{s.zoom}": s.pixels for s in sets})
+    arrays: dict[str, Any] = {f"world{s.zoom}": s.world_mm for s in sets}
+    arrays.update({f"pixels{s.zoom}": s.pixels for s in sets})
+    np.savez(tmp_path / "points.npz", **arrays)
     script = textwrap.dedent(f"""
         import sys, threading
         from pathlib import Path

@@ -85,15 +85,16 @@ def follow(bus: Bus, seconds: float) -> list[tuple[m.PtzTruth, m.RobotTruth]]:
     """ptz1's true pan, tilt and zoom beside the robot's true marker, 20 a second, for
     ``seconds`` of following once the locomotive has moved for 5 s (the camera turned onto it
     and zoomed in)."""
-    seen: dict[float, m.Message] = {}  # the sim sends both with one time stamp
+    seen: dict[float, m.PtzTruth | m.RobotTruth] = {}  # the sim sends both with one stamp
     truths: list[tuple[m.PtzTruth, m.RobotTruth]] = []
 
-    def paired(msg: m.Message) -> None:
+    def paired(msg: m.PtzTruth | m.RobotTruth) -> None:
         other = seen.pop(msg.measured_s, None)
         if other is None:
             seen[msg.measured_s] = msg
             return
         camera, robot = (msg, other) if isinstance(msg, m.PtzTruth) else (other, msg)
+        assert isinstance(camera, m.PtzTruth) and isinstance(robot, m.RobotTruth)
         if np.hypot(robot.vx_mm_s, robot.vy_mm_s) > 0:  # the locomotive has started
             truths.append((camera, robot))
 
