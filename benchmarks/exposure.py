@@ -20,11 +20,13 @@ import json
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+from unittest import mock
 
 import numpy as np
 
 import services.gantry.control as control
 from common.lab_paths import SIM_CRATER_FILE
+from common.markers import detect
 from services.args import Parser
 from services.experiment import gantry as experiment
 from services.gantry.settings import GantrySettings
@@ -38,7 +40,7 @@ def one(scenario: str, seed: int, exposure_ms: float, crater: Path) -> dict[str,
     truth: list[np.ndarray] = []  # the marker's true pixel in the picture drawn last
     seen: list[tuple[bool, int, float]] = []  # (found, other spots, distance px)
     lab_ref: list[Lab] = []
-    render, find = Lab.tracking_frame, control.detect
+    render = Lab.tracking_frame
 
     def drawn(self: Lab, t: float, rng: np.random.Generator) -> np.ndarray:
         lab_ref[:] = [self]
@@ -48,7 +50,7 @@ def one(scenario: str, seed: int, exposure_ms: float, crater: Path) -> dict[str,
         return render(self, t, rng)
 
     def found(image: np.ndarray, **kwargs: Any) -> Any:
-        result = find(image, **kwargs)
+        result = detect(image, **kwargs)
         if truth:
             u, v = truth[-1]
             distances = sorted(float(np.hypot(s.u - u, s.v - v)) for s in result.markers)
@@ -62,11 +64,9 @@ def one(scenario: str, seed: int, exposure_ms: float, crater: Path) -> dict[str,
         update={"exposure_s": exposure_ms / 1000.0})})
     settings = experiment.gantry_for(GantrySettings(), "default", seed=seed,
                                      marker_height_mm=MARKER_HEIGHT_MM[scenario])
-    Lab.tracking_frame, control.detect = drawn, found  # type: ignore[method-assign]
-    try:
+    with mock.patch.object(Lab, "tracking_frame", drawn), \
+            mock.patch.object(control, "detect", found):
         run = experiment.run(experiment.make_lab(scenario, seed, crater, sim), settings)
-    finally:
-        Lab.tracking_frame, control.detect = render, find  # type: ignore[method-assign]
     hits = np.array([h for h, _, _ in seen])
     others = np.array([n for _, n, _ in seen])
     off = np.array([d for h, _, d in seen if h])

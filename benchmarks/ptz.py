@@ -30,6 +30,7 @@ Two phases of ``--seconds`` each:
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import multiprocessing as mp
 import os
@@ -39,6 +40,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TypeVar
 
 import httpx
 import numpy as np
@@ -61,6 +63,8 @@ from services.sim.settings import (
 )
 from tests.ports import free_port
 
+T = TypeVar("T")
+
 CENTRE = np.array([352.0, 288.0])
 LAB_SERVICES = ("calib", "gantry", "web")
 """The lab's services besides the chain (router, tracker, PTZ), run beside it by default."""
@@ -76,6 +80,7 @@ def _sim_process(settings_json: str, part: str, t0: float,
     the cameras' command logs and when each mocap frame was written. ``idle``: the process
     runs at ``SCHED_IDLE`` (no privilege needed to lower oneself) — it gets the CPU only when
     no process of the lab wants it, as hardware of its own would never take it from them."""
+    from services.sim.camera_server import SimCamera
     from services.sim.clock import Clock
     from services.sim.service import DeviceLoop, start_cameras
 
@@ -88,17 +93,18 @@ def _sim_process(settings_json: str, part: str, t0: float,
     devices = DeviceLoop(lab, settings, clock) if part == "devices" else None
     if devices is not None:
         devices.start()
-    for server in cameras:
-        server.camera.head.ir_cut_filter = "off"
+    sims = [server.camera for server in cameras if isinstance(server.camera, SimCamera)]
+    for camera in sims:
+        camera.head.ir_cut_filter = "off"
     conn.send(clock.wall(0.0))
     while conn.recv() == "start":  # a measuring phase: clear the logs, then send them
-        for server in cameras:
-            server.camera.commands.clear()
-        if devices is not None:
+        for camera in sims:
+            camera.commands.clear()
+        if devices is not None and devices.mocap is not None:
             devices.mocap.sent.clear()
         conn.recv()  # "stop"
-        log = {s.camera.name: list(s.camera.commands) for s in cameras}
-        if devices is not None:
+        log = {camera.name: list(camera.commands) for camera in sims}
+        if devices is not None and devices.mocap is not None:
             log["mocap_sent"] = list(devices.mocap.sent)
         conn.send(log)
     if devices is not None:
@@ -146,12 +152,12 @@ def run_scenario(scenario: str, seconds: float, workdir: Path, realtime_priority
     try:
         for cam in settings.cameras:
             pose = _true_pose(cam)
-            bus.serve_latest(keys.CALIB_POSE, lambda p=pose: p, camera=cam.name)
+            bus.serve_latest(keys.CALIB_POSE, functools.partial(_same, pose), camera=cam.name)
         procs += [_stb("tracker", lab=lab_file)]
         procs += [_stb("ptz", "--instance", cam.name, lab=lab_file) for cam in settings.cameras]
         procs += [_stb(service, lab=lab_file) for service in services]
         time.sleep(max(0.0, t0 - time.monotonic()) + 3.0)  # start-up and first aim
-        ended = [p.args[3] for p in procs if p.poll() is not None]
+        ended = [str(p.args[3]) for p in procs if p.poll() is not None]  # type: ignore[index]
         if ended:
             raise RuntimeError(f"stb {', '.join(ended)} ended at start-up (lab file {lab_file})")
         realtime = [os.sched_getscheduler(p.pid) == os.SCHED_FIFO for p in procs[:chain]]
@@ -245,7 +251,10 @@ def _marker_near(image: np.ndarray, predicted: np.ndarray) -> tuple[float, float
 def _decode(jpeg: bytes) -> np.ndarray:
     import cv2
 
-    return cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_GRAYSCALE)
+    image = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_GRAYSCALE)
+    if image is None:
+        raise ValueError("not a JPEG")
+    return image
 
 
 def frame_latencies_ms(commands: list[tuple[float, float]], sent: dict[int, float],
@@ -311,6 +320,11 @@ def _lab_file(path: Path, endpoint: str, settings: SimSettings, realtime_priorit
                       'listen = ["tcp/127.0.0.1:0"]']
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+def _same(value: T) -> T:
+    """What a queryable answers: always ``value``."""
+    return value
 
 
 def _stb(*args: str, lab: Path) -> subprocess.Popen:

@@ -136,6 +136,7 @@ def run(seconds: float, rate_hz: float, markers: int, workdir: Path,
         if not monitor.flowing.wait(60):
             raise RuntimeError("no marker frame from the tracker within 60 s")
         time.sleep(2.0)  # streaming, past the start-up
+        assert sim.pid is not None, "the sim's process has started"
         pids = {_in_place(floor): procs[1].pid, "sim (QTM)": sim.pid, "router": procs[0].pid,
                 "monitor": os.getpid()}
         parent.send("start")  # the sim logs what it writes from now
