@@ -26,12 +26,14 @@ _ANCILLARY_BYTES = socket.CMSG_SPACE(_TIMESPEC.size)
 
 class StampedReader(io.RawIOBase):
     """Raw reads from a connected socket that remember the receive time of the latest read
-    (``arrived_s``, wall clock; the time of the read itself where the kernel gives none)."""
+    (``arrived_s``, wall clock; the time of the read itself where the kernel gives none:
+    ``stamped`` says which)."""
 
     def __init__(self, sock: socket.socket) -> None:
         super().__init__()
         self._sock = sock
         self.arrived_s = 0.0
+        self.stamped = False
         with contextlib.suppress(OSError):  # no kernel stamps: reads are timed when they return
             sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
 
@@ -40,9 +42,9 @@ class StampedReader(io.RawIOBase):
 
     def readinto(self, buffer: WriteableBuffer) -> int:
         n, ancillary, _, _ = self._sock.recvmsg_into([buffer], _ANCILLARY_BYTES)
-        self.arrived_s = time.time()
+        self.arrived_s, self.stamped = time.time(), False
         for level, kind, data in ancillary:
             if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(data) >= 16:
                 seconds, nanoseconds = _TIMESPEC.unpack(data[:_TIMESPEC.size])
-                self.arrived_s = seconds + nanoseconds * 1e-9
+                self.arrived_s, self.stamped = seconds + nanoseconds * 1e-9, True
         return n

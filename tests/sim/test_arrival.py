@@ -7,6 +7,7 @@ import socket
 import time
 
 from services.sim.arrival import StampedReader
+from tests.conftest import wait_for
 
 
 def test_the_stamp_is_when_the_bytes_arrived_not_when_they_were_read() -> None:
@@ -16,10 +17,13 @@ def test_the_stamp_is_when_the_bytes_arrived_not_when_they_were_read() -> None:
     try:
         reader = io.BufferedReader(StampedReader(conn))
         # The kernel turns receive stamping on shortly after the first socket asks for it
-        # (a deferred switch), so the very first segment may come unstamped.
-        client.sendall(b"warm-up\r\n")
-        assert reader.readline() == b"warm-up\r\n"
-        time.sleep(0.05)  # gives that deferred switch its time (no event tells it)
+        # (a deferred switch), so the first segments may come unstamped: until one is.
+        def warmed_up() -> bool:
+            client.sendall(b"warm-up\r\n")
+            assert reader.readline() == b"warm-up\r\n"
+            return bool(reader.raw.stamped)
+
+        wait_for(warmed_up, timeout=5, period=0.01)
         sent = []
         for line in (b"GET /a HTTP/1.1\r\n", b"GET /b HTTP/1.1\r\n", b"GET /c HTTP/1.1\r\n"):
             sent.append(time.time())
