@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import struct
 import threading
 import time
 
@@ -246,8 +247,14 @@ def test_the_sim_stopping_with_a_gantry_connected_logs_no_error(
 
     async def main() -> None:
         asyncio.create_task(server.serve())  # noqa: RUF006 - asyncio.run cancels it at the end
-        await _connected(port)
-        await asyncio.sleep(0.2)  # the server's task for this connection waits for a request
+        reader, writer = await _connected(port)
+        # one read of an input register (Modbus/TCP: its header, function 4): once answered,
+        # the server's task for this connection waits for the next request
+        writer.write(struct.pack(">HHHBBHH", 1, 0, 6, MAP.unit_id, 4, MAP.input_start, 1))
+        await writer.drain()
+        transaction, _, length = struct.unpack(">HHH", await asyncio.wait_for(
+            reader.readexactly(6), 10))
+        assert transaction == 1 and len(await reader.readexactly(length)) == length
         # returning now, the connection open: asyncio.run cancels the server and its task
 
     with caplog.at_level("ERROR"):
