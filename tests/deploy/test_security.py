@@ -141,7 +141,16 @@ def test_liveliness_and_queries_work_under_default_deny(lab: dict) -> None:
                                     lambda q: q.reply("stb/calib/ptz1/pose", b"pose"))
     _fake = ptz1.declare_queryable("stb/calib/ptz2/pose",
                                    lambda q: q.reply("stb/calib/ptz2/pose", b"fake pose"))
-    time.sleep(0.5)  # both queryables reach the router (the denied one cannot be probed)
-    answers = [r.ok.payload.to_bytes() for r in monitor.get("stb/calib/*/pose", timeout=2)
-               if r.ok]
+    # The denied queryable cannot be probed: a round trip on ptz1's own session after it
+    # says the router has taken in (or refused) its declaration (one link, in order).
+    started = time.monotonic()
+    list(ptz1.liveliness().get("stb/alive/**", timeout=5))
+    assert time.monotonic() - started < 4, "the router answered ptz1's round trip"
+
+    def pose_answers() -> list[bytes] | None:  # calib's queryable, once it has reached it
+        answers = [r.ok.payload.to_bytes() for r in monitor.get("stb/calib/*/pose", timeout=2)
+                   if r.ok]
+        return answers if b"pose" in answers else None
+
+    answers = wait_for(pose_answers, timeout=10, period=0.1)
     assert answers == [b"pose"], "only calib answers pose queries"
