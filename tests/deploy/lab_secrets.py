@@ -98,15 +98,27 @@ def only_allowed_arrive(session: Callable[[str], zenoh.Session],
     # it for the accounts the router denies: theirs never match): an allowed put, repeated
     # until the reader has it, says it has
     probe = next(((a, k, p) for a, k, p in puts if p in allowed), None)
-    if probe is not None:
-        wait_for(lambda: sessions[probe[0]].put(probe[1], probe[2])
-                 or any(p == probe[2] for _, p in got), timeout=10, period=0.05)
+    assert probe is not None, "an allowed put tells when the reader is subscribed, and when done"
+
+    def heard_probe() -> int:
+        return sum(p == probe[2] for _, p in got)
+
+    wait_for(lambda: sessions[probe[0]].put(probe[1], probe[2]) or heard_probe(), timeout=10,
+             period=0.05)
     for _ in range(3):
         for account, key, payload in puts:
             sessions[account].put(key, payload)
         time.sleep(0.05)  # paces the three rounds of puts
     wait_for(lambda: {p for _, p in got} >= allowed)
-    time.sleep(0.5)  # what is denied would have arrived by now
+    # Nothing denied may arrive, so no arrival can say the router is done with it: a round
+    # trip on each sender's own link says the router has routed or dropped its puts (one link,
+    # in order); then one more allowed put, once the reader has it, came after anything the
+    # router passed on to the reader before (one link to the reader, in order).
+    for sender in sessions.values():
+        list(sender.liveliness().get("stb/alive/**", timeout=5))
+    before = heard_probe()
+    wait_for(lambda: sessions[probe[0]].put(probe[1], probe[2]) or heard_probe() > before,
+             timeout=10, period=0.05)
     payloads = {p for _, p in got}
     for _, _, denied in puts:
         assert denied in allowed or denied not in payloads, denied
