@@ -135,6 +135,13 @@ class CraneModel:
     def reported_velocity(self) -> np.ndarray:
         return np.array(self._reported[2:])
 
+    def report(self) -> tuple[tuple[float, float, float, float], tuple[float, float]]:
+        """What the controller reports, as plain numbers (the register server asks 40 times a
+        second): (x, y, vx, vy) as ``reported`` and ``reported_velocity``, and the target
+        (where it stands when it has none)."""
+        target = self._target if self._target is not None else self._p
+        return self._reported, (target[0], target[1])
+
     def place(self, x_mm: float, y_mm: float) -> None:
         """Start at rest at (x, y), clamped to the travel, and report it from the start
         (not (0, 0) until the first cycle)."""

@@ -149,14 +149,11 @@ def write_holding(model: CraneModel, now: float, touched: range, holding: list[i
 def input_registers(model: CraneModel, registers: RegisterMap = DEFAULT_MAP) -> list[int]:
     """The input registers (from ``registers.input_start``) as the controller reports the
     model's state now."""
-    target = model.position if model.target is None else model.target
-    reported, velocity = model.reported, model.reported_velocity
+    (x, y, vx, vy), target = model.report()
     block = [0] * registers.input_count
     start, r = registers.input_start, registers
-    for at, name, v in ((r.actual_x, "actual_x", reported[0]),
-                        (r.actual_y, "actual_y", reported[1]),
-                        (r.velocity_x, "velocity_x", velocity[0]),
-                        (r.velocity_y, "velocity_y", velocity[1]),
+    for at, name, v in ((r.actual_x, "actual_x", x), (r.actual_y, "actual_y", y),
+                        (r.velocity_x, "velocity_x", vx), (r.velocity_y, "velocity_y", vy),
                         (r.target_x, "target_x", target[0]), (r.target_y, "target_y", target[1])):
         words = r.encode(name, v)
         block[at - start:at - start + len(words)] = words
