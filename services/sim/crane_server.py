@@ -152,11 +152,10 @@ def input_registers(model: CraneModel, registers: RegisterMap = DEFAULT_MAP) -> 
     (x, y, vx, vy), target = model.report()
     block = [0] * registers.input_count
     start, r = registers.input_start, registers
-    for at, name, v in ((r.actual_x, "actual_x", x), (r.actual_y, "actual_y", y),
-                        (r.velocity_x, "velocity_x", vx), (r.velocity_y, "velocity_y", vy),
-                        (r.target_x, "target_x", target[0]), (r.target_y, "target_y", target[1])):
-        words = r.encode(name, v)
-        block[at - start:at - start + len(words)] = words
+    for name, v in (("actual_x", x), ("actual_y", y), ("velocity_x", vx), ("velocity_y", vy),
+                    ("target_x", target[0]), ("target_y", target[1])):
+        at, words = getattr(r, name) - start, r.encode(name, v)
+        block[at:at + len(words)] = words
     block[r.status - start] = model.status()
     block[r.faults - start] = model.faults
     block[r.heartbeat_echo - start] = model.heartbeat & 0xFFFF

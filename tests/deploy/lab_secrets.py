@@ -88,6 +88,14 @@ def _collect(session: zenoh.Session, key_expr: str) -> tuple[list, object]:
     return got, sub
 
 
+def round_trip(session: zenoh.Session, timeout_s: float = 5.0) -> float:
+    """A query to the router on ``session``'s own link, answered: the router has taken in (or
+    refused) everything the session sent before it (one link, in order). Its seconds."""
+    started = time.monotonic()
+    list(session.liveliness().get("stb/alive/**", timeout=timeout_s))
+    return time.monotonic() - started
+
+
 def only_allowed_arrive(session: Callable[[str], zenoh.Session],
                         puts: list[tuple[str, str, bytes]], allowed: set[bytes]) -> None:
     """Each (account, key, payload) put three times; what arrives at a reader is exactly the
@@ -115,7 +123,7 @@ def only_allowed_arrive(session: Callable[[str], zenoh.Session],
     # in order); then one more allowed put, once the reader has it, came after anything the
     # router passed on to the reader before (one link to the reader, in order).
     for sender in sessions.values():
-        list(sender.liveliness().get("stb/alive/**", timeout=5))
+        round_trip(sender)
     before = heard_probe()
     wait_for(lambda: sessions[probe[0]].put(probe[1], probe[2]) or heard_probe() > before,
              timeout=10, period=0.05)
