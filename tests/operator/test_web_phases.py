@@ -9,6 +9,8 @@ buttons to the real gantry included, is ``test_web.py``.)"""
 from __future__ import annotations
 
 import contextlib
+import functools
+import json
 import os
 import signal
 import time
@@ -140,25 +142,51 @@ def _progress(quiet: Quiet, camera: str, state: str, passpoints: int, message: s
         skipped={"no marker": 2 * passpoints}, message=message), camera=camera)
 
 
-def _crane(quiet: Quiet, x: float, mode: str = "armed", status: str = "tracking") -> None:
+def _crane(quiet: Quiet, x: float, mode: str = "armed", status: str = "tracking",
+           at: float | None = None) -> None:
     quiet.bus.publish(keys.GANTRY_STATE, m.CraneState(
-        measured_s=time.time(), status=status, x_mm=x, y_mm=0.0, target_x_mm=x,  # type: ignore[arg-type]
-        target_y_mm=0.0, enabled=True, moving=True, fault_bits=0, mode=mode,  # type: ignore[arg-type]
+        measured_s=at or time.time(), status=status, x_mm=x, y_mm=0.0,  # type: ignore[arg-type]
+        target_x_mm=x, target_y_mm=0.0, enabled=True, moving=True, fault_bits=0, mode=mode,  # type: ignore[arg-type]
         mode_by="operator", mode_reason="run 3"))
 
 
-def _offload(quiet: Quiet, error_mm: float) -> None:
+def _offload(quiet: Quiet, error_mm: float, at: float | None = None) -> None:
     share = 100 * error_mm / 2000
     quiet.bus.publish(keys.GANTRY_OFFLOAD, m.GravityOffload(
-        measured_s=time.time(), horizontal_error_mm=error_mm, cable_length_mm=2000.0,
+        measured_s=at or time.time(), horizontal_error_mm=error_mm, cable_length_mm=2000.0,
         vertical_loss_pct=0.1, horizontal_share_pct=share, warning=share > 5.0,
         warn_above_pct=5.0))
 
 
-def _robot(quiet: Quiet, x: float) -> None:
+def _robot(quiet: Quiet, x: float, at: float | None = None) -> None:
     quiet.bus.publish(keys.TRACKER_ROBOT, m.RobotPosition(
-        measured_s=time.time(), x_mm=x, y_mm=0.0, z_mm=0.0, vx_mm_s=100.0, vy_mm_s=0.0,
+        measured_s=at or time.time(), x_mm=x, y_mm=0.0, z_mm=0.0, vx_mm_s=100.0, vy_mm_s=0.0,
         vz_mm_s=0.0))
+
+
+def _state(quiet: Quiet) -> dict:
+    with urllib.request.urlopen(f"{quiet.url}/state.json", timeout=2) as answer:
+        return json.load(answer)
+
+
+def _page_has(quiet: Quiet, sample: tuple[float, float, float]) -> bool:
+    """Whether the page's latest (robot x, crane x, crane's error) is ``sample``."""
+    state = _state(quiet)
+    return ((state["robot"] or {}).get("x_mm"), (state["crane"] or {}).get("x_mm"),
+            (state["offload"] or {}).get("horizontal_error_mm")) == sample
+
+
+def _gantry_samples(quiet: Quiet, samples: list[tuple[float, float, float]]) -> None:
+    """The gantry's cycles as (robot x, crane x, crane's error) a fifth of a second apart (as
+    the gantry sends them), the last stamped now; each published once the page has the one
+    before (the page keeps the latest of each key: a burst would reach it as its last)."""
+    now = time.time()
+    for i, sample in enumerate(samples):
+        at = now - 0.2 * (len(samples) - 1 - i)
+        _robot(quiet, sample[0], at=at)
+        _crane(quiet, sample[1], at=at)
+        _offload(quiet, sample[2], at=at)
+        wait_for(functools.partial(_page_has, quiet, sample), timeout=5)
 
 
 def test_1_before_any_data_every_panel_says_what_it_waits_for(
@@ -222,11 +250,9 @@ def test_3_following_with_alarms_in_the_banner_and_the_plot(tab: object, quiet: 
     _progress(quiet, "ptz2", "failed", 0, message="no passpoint for 60 s: no marker in 40 "
               "of 40 snapshots")
     _health(quiet, "tracker", "degraded", "QTM answers slowly")  # no such service alive
-    for i in range(16):  # 3 s of a crane falling behind: 40 → 190 mm off
-        _robot(quiet, 100.0 * i)
-        _crane(quiet, 100.0 * i - 40 - 10 * i)
-        _offload(quiet, 40.0 + 10 * i)
-        time.sleep(0.2)  # the subject: samples a fifth of a second apart, as the gantry sends
+    # 3 s of a crane falling behind: 40 → 190 mm off
+    _gantry_samples(quiet, [(100.0 * i, 100.0 * i - 40 - 10 * i, 40.0 + 10 * i)
+                            for i in range(16)])
     banner = wait_for(lambda: _showing(tab, "#alarms", "sideways pull"), timeout=5)
     causes = tab.eval_on_selector_all(  # type: ignore[attr-defined]
         "#alarms .alarm", "els => els.map(e => e.dataset.cause)")
@@ -246,15 +272,11 @@ def test_3_following_with_alarms_in_the_banner_and_the_plot(tab: object, quiet: 
 
 def test_4_an_alarm_that_clears_leaves_the_banner_and_is_listed(tab: object,
                                                                  quiet: Quiet) -> None:
-    for i in range(5):  # the crane 200 mm behind: the sideways-pull alarm
-        _robot(quiet, 100.0 * i)
-        _crane(quiet, 100.0 * i - 200)
-        _offload(quiet, 200.0)
-        time.sleep(0.2)  # the alarm's samples a fifth of a second apart, as the gantry sends
+    # the crane 200 mm behind: the sideways-pull alarm
+    _gantry_samples(quiet, [(100.0 * i, 100.0 * i - 200, 200.0) for i in range(5)])
     wait_for(lambda: "sideways pull" in _text(tab, "#alarms"), timeout=5)
-    for _ in range(5):
-        _offload(quiet, 30.0)
-        time.sleep(0.2)  # a second of the crane back on the robot
+    # a second of the crane back on the robot
+    _gantry_samples(quiet, [(500.0 + 100.0 * i, 500.0 + 100.0 * i - 30, 30.0) for i in range(5)])
     wait_for(lambda: "sideways pull" not in _text(tab, "#alarms"), timeout=5)
     assert "sideways pull" in _text(tab, "#ended")
     _crane(quiet, 0.0, mode="stopped", status="stopped")

@@ -60,7 +60,12 @@ class FakeCalib:
     def __init__(self, bus: Bus) -> None:
         self.bus = bus
         self.pose: m.CameraPose | None = None
-        bus.serve_latest(keys.CALIB_POSE, lambda: self.pose, camera="ptz1")
+        self.asked: list[float] = []  # when the PTZ service asked for the pose
+        bus.serve_latest(keys.CALIB_POSE, self._answer, camera="ptz1")
+
+    def _answer(self) -> m.CameraPose | None:
+        self.asked.append(time.time())
+        return self.pose
 
     def solve(self, **changes: float) -> m.CameraPose:
         self.pose = true_pose(time.time()).model_copy(update=changes)
@@ -173,12 +178,20 @@ def test_a_pose_put_on_the_key_is_never_taken_whatever_its_version(service: dict
              period=0.05)
     spoof = service["calib"].pose.model_copy(update={
         "version": version, "rz_deg": MOUNT.rz_deg + 30.0, "measured_s": time.time()})
+    spoofed_at = time.time()
     for _ in range(20):
         world.publish(keys.CALIB_POSE, spoof, camera="ptz1")
-    quiet_until = time.monotonic() + 1.0  # the PTZ service asks calib within 0.6 s
-    while time.monotonic() < quiet_until:
-        assert _aim_error(service) < 0.5, "the spoof did not move the camera"
-        time.sleep(0.05)  # the subject: a second in which nothing moves
+    # the news makes the PTZ service ask calib (within 0.6 s); half a second of states after
+    # its answer, the robot coming all the while (the camera moves as it follows the robot)
+    asked = wait_for(lambda: [t for t in service["calib"].asked if t > spoofed_at], timeout=5)
+
+    def followed_after_the_answer() -> bool:
+        _publish_robot(world, TARGET)
+        return sum(s.measured_s > asked[0] for s in states) >= 5
+    wait_for(followed_after_the_answer, timeout=5)
+    since = [s for s in list(states) if s.measured_s > spoofed_at]
+    worst = max(aim_error_deg(TARGET, MOUNT, s.pan_deg, s.tilt_deg) for s in since)
+    assert worst < 0.5, f"the spoof moved the camera: {worst:.1f}° off in one of {len(since)}"
     service["calib"].solve(rz_deg=MOUNT.rz_deg + 0.5, version=1)  # a later solve, lower version
     wait_for(lambda: abs(_aim_error(service) - 0.5) < 0.3, timeout=5, period=0.05)
 
