@@ -8,6 +8,7 @@ import time
 import cv2
 import numpy as np
 
+from benchmarks.faults.base import CampaignBase
 from benchmarks.faults.lab import ALIVE, private_mb, wait_until
 from benchmarks.faults.payloads import fuzz_payloads, jpeg_declaring, valid
 from benchmarks.faults.rows import GOAL_MEMORY_MB, GOAL_POSE_REPORTED_S, Row, duration_text
@@ -29,7 +30,7 @@ FOLLOWING_DEG = 5.0  # a camera following the robot is aimed this well (else the
 # nothing: a camera held elsewhere is not aimed with any pose)
 
 
-class BusFaults:
+class BusFaults(CampaignBase):
     """The bus's faults, as a part of ``Campaign``."""
 
     def fuzz(self, per_key: int, again: bool = False) -> None:
@@ -164,16 +165,18 @@ class BusFaults:
         def reported() -> float | None:
             with self.meters.lock:
                 entry = self.meters.health.get("calib/main")
-            ok = entry and entry[0] > spoofed_at and "did not send" in entry[1].detail
-            return entry[0] - spoofed_at if ok else None
+            if entry is None or entry[0] <= spoofed_at or "did not send" not in entry[1].detail:
+                return None
+            return entry[0] - spoofed_at
 
         wait_until(lambda: reported() is not None, timeout=8)
         r = reported()  # the first health that says so (a later one replaces it)
         time.sleep(max(0.0, spoofed_at + 5 - time.monotonic()))  # the PTZ service asked again
-        after = self._stored_pose(camera)
+        stored_after = self._stored_pose(camera)
         aim_before = self._worst_aim_deg(camera, start, spoofed_at)
         aim_after = self._worst_aim_deg(camera, spoofed_at)
-        kept = before is not None and after is not None and _same_solve(before, after)
+        kept = before is not None and stored_after is not None and \
+            _same_solve(before, stored_after)
         bound = aim_before + 2.0
         misses = ([] if aim_before <= FOLLOWING_DEG else ["ptz1 did not follow the robot before"])
         misses += [] if aim_after <= bound else ["aimed with"]

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.faults.base import CampaignBase
 from benchmarks.faults.lab import ROOT
 from benchmarks.faults.rows import Row
 from common.heightmap import HeightMap
@@ -21,7 +22,7 @@ from tests.smalldisk import NO_TMPFS, record_on_small_disk, summary_messages
 GOAL_CELL_MM = 20.0  # a cell of an imported scan this far off its ground counts as wrong
 
 
-class FileFaults:
+class FileFaults(CampaignBase):
     """As a part of ``Campaign`` (``self.lab``: the lab file)."""
 
     def disk_filled(self) -> None:

@@ -17,79 +17,24 @@ from pathlib import Path
 import numpy as np
 import websockets
 
+from benchmarks.faults.base import CampaignBase
 from benchmarks.faults.lab import ALIVE, ROOT, interrupt, wait_until
-from benchmarks.faults.rows import GOAL_AIM_BACK_S, GOAL_AIM_DEG, Row, duration_text
+from benchmarks.faults.rows import Row, duration_text
 from common import keys
 from common import messages as m
 from common.heightmap import HeightMap
-from services.ptz.aim import aim_error_deg
 from services.recording.origin_gate import SUBPROTOCOLS
 from tests.calib.test_demo_calibration import MOUNTS
 from tests.conftest import free_port
 from tests.uplab import VIEWER
 from tests.webpage import PageClient
 
-GOAL_CRANE_BACK_S = 5.0
-SETTLED_S = 1.0  # "back" once every sample of this long is within the goal
 DRIFT_PX_S = 15.0  # the spoofed spot's drift: slow enough to pass a gate frame by frame
 FLOOD = 3000
 
 
-class TrustFaults:
+class TrustFaults(CampaignBase):
     """As a part of ``Campaign``."""
-
-    # --- after a fault: back to the robot? ----------------------------------------------
-
-    def recovery(self, end: float, crane_bound_mm: float) -> tuple[float | None, float | None]:
-        """Seconds after ``end`` (monotonic) until every camera's true aim error and the
-        crane's gap to the robot stayed within their goals for ``SETTLED_S``; None: not
-        within ``GOAL_AIM_BACK_S`` / ``GOAL_CRANE_BACK_S``."""
-        def measured() -> tuple[float | None, float | None]:
-            aim_back = [self._settled(end, self._aim(camera, end), GOAL_AIM_DEG,
-                                      GOAL_AIM_BACK_S) for camera in MOUNTS]
-            crane = [(t, gap) for t, _, _, gap in self.meters.crane_window(end)]
-            known = [a for a in aim_back if a is not None]
-            return ((max(known) if len(known) == len(aim_back) else None),
-                    self._settled(end, crane, crane_bound_mm, GOAL_CRANE_BACK_S))
-
-        wait_until(lambda: None not in measured(),
-                   max(0.0, end + GOAL_AIM_BACK_S + SETTLED_S + 0.5 - time.monotonic()), 0.5)
-        return measured()
-
-    def _aim(self, camera: str, start: float) -> list[tuple[float, float]]:
-        with self.meters.lock:
-            seen = [(t, head, robot) for t, head, robot in self.meters.ptz
-                    if t >= start and head.camera == camera]
-        return [(t, aim_error_deg(np.array([r.x_mm, r.y_mm, r.z_mm]), MOUNTS[camera],
-                                  head.pan_deg, head.tilt_deg)) for t, head, r in seen]
-
-    @staticmethod
-    def _settled(end: float, samples: list[tuple[float, float]], bound: float,
-                 within_s: float) -> float | None:
-        for i, (t, _) in enumerate(samples):
-            if t - end > within_s:
-                return None
-            window = [v for u, v in samples[i:] if u <= t + SETTLED_S]
-            if samples[-1][0] >= t + SETTLED_S and all(v <= bound for v in window):
-                return t - end
-        return None
-
-    def crane_held(self, start: float, end: float, baseline: dict
-                   ) -> tuple[float, float | None, float | None, str, list[str]]:
-        """Spoofed frames from ``start`` to ``end``: the crane's largest gap to the robot
-        meanwhile (goal: ≤ 2× the baseline's, or + 100 mm), and the recovery after them."""
-        crane = self.meters.crane_window(start, end)
-        worst = float(crane[:, 3].max()) if len(crane) else float("nan")
-        bound = max(2 * baseline["max_mm"], baseline["max_mm"] + 100)
-        aim, back = self.recovery(end, baseline["max_mm"])
-        after, misses = self._back_text(aim, back)
-        return worst, aim, back, after, ([] if worst <= bound else ["dragged"]) + misses
-
-    def _back_text(self, aim: float | None, crane: float | None) -> tuple[str, list[str]]:
-        misses = ([] if aim is not None else ["aim not back"]) + \
-            ([] if crane is not None else ["crane not back"])
-        return (f"; after: every camera's true aim ≤ {GOAL_AIM_DEG:g}° after "
-                f"{duration_text(aim)}, crane with the robot after {duration_text(crane)}"), misses
 
     # --- the faults ---------------------------------------------------------------------
 
@@ -175,8 +120,11 @@ class TrustFaults:
             return [r for r in self.meters.replies if r.id.startswith("flood-")]
 
         counts: list[int] = []  # every reply is in once their count stops growing
-        wait_until(lambda: counts.append(len(answered())) or counts[-5:] == [counts[-1]] * 5,
-                   10, 0.2)
+
+        def stopped_growing() -> bool:
+            counts.append(len(answered()))
+            return counts[-5:] == [counts[-1]] * 5
+        wait_until(stopped_growing, 10, 0.2)
         answers = answered()
         obeyed = [r for r in answers if "too many" not in r.detail]
         bound = self.gantry.command_burst + self.gantry.command_per_s * (seconds + 1.0)
@@ -218,9 +166,9 @@ class TrustFaults:
                        0.3)
             statuses = {origin: _handshake(port, origin) for origin in
                         ("https://evil.example", "http://localhost:3000", None)}
-            ports: list[int] = []  # the inner server listens soon after the gate
-            wait_until(lambda: ports.extend(p for p in _listening_ports(proc.pid)
-                                            if p != port and p not in ports) or ports, 10, 0.2)
+            # the inner server listens soon after the gate
+            wait_until(lambda: [p for p in _listening_ports(proc.pid) if p != port], 10, 0.2)
+            ports = [p for p in _listening_ports(proc.pid) if p != port]
             inner = {p: _handshake(p, "https://evil.example") for p in ports}
         finally:
             interrupt(proc, 10)

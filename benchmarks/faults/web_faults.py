@@ -13,6 +13,7 @@ import threading
 import time
 from pathlib import Path
 
+from benchmarks.faults.base import CampaignBase
 from benchmarks.faults.lab import resident_mb, wait_until
 from benchmarks.faults.rows import Row
 from common import keys
@@ -31,7 +32,7 @@ VIEWER_SIGN_INS = 2000
 operator stays signed in."""
 
 
-class WebFaults:
+class WebFaults(CampaignBase):
     """The page's faults, as a part of ``Campaign`` (``self.web_url``: the page)."""
 
     def event_streams(self, count: int = STREAMS) -> None:
