@@ -107,7 +107,7 @@ class WandCarrier:
         if views:
             view = View(*views[self._turn % len(views)])
             self._turn += 1
-            if view.wanted:  # the progress line names where: ten tries there first
+            if view.wanted:  # the progress line names where: half the tries there
                 target = self.in_view(view.pose, view.intr, tries=10, wanted=view.wanted)
             if target is None:
                 target = self.in_view(view.pose, view.intr)
