@@ -276,19 +276,6 @@ CollectState = Literal["collecting", "solving", "review", "done", "failed", "can
                        "discarded"]
 
 
-class PictureArea(BaseModel):
-    """A part of a camera's picture, in shares of its width and height from its top left."""
-
-    model_config = Message.model_config
-
-    name: Text = Field(description="as the progress line names it: \"bottom right corner\", "
-                       "\"middle column 2\"")
-    left: float = Field(ge=0, le=1)
-    top: float = Field(ge=0, le=1)
-    right: float = Field(ge=0, le=1)
-    bottom: float = Field(ge=0, le=1)
-
-
 class CollectProgress(Message):
     """How a passpoint collection goes; the last one of a run is done, failed, cancelled or
     discarded (``review``: solved, waiting for an operator's accept or discard)."""
@@ -306,10 +293,6 @@ class CollectProgress(Message):
                              "at, in a collection at several")
     zooms_done: int = Field(0, ge=0, description="zoom steps with all their passpoints")
     zooms: int = Field(0, ge=0, description="zoom steps to collect at (0: one, the hold's)")
-    missing: list[PictureArea] = Field(
-        default_factory=list, max_length=32, description="while collecting: the parts of the "
-        "picture still short of passpoints (the widest step of a collection at several zooms "
-        "asks for all of it, corners included), where the person with the wand goes next")
 
 
 class PtzPreview(Message):

@@ -32,8 +32,6 @@ STATIC_SHARE = 0.4  # of the last STATIC_WINDOW_S's snapshots: a flickering refl
 STATIC_PX = 3.0
 MARKER_MOVED_MM = 150.0
 MAX_GAP_S = 0.1
-Area = tuple[float, float, float, float]
-"""A part of the picture: (left, top, right, bottom) in shares of its width and height."""
 
 
 @dataclass
@@ -72,18 +70,11 @@ class Collector:
     def uncovered(self) -> list[str]:
         """The grid cells and the corners still short of passpoints, by name ("top left",
         "row 2, column 3", "bottom left corner")."""
-        return [name for name, _ in self.uncovered_areas()]
-
-    def uncovered_areas(self) -> list[tuple[str, Area]]:
-        """The same with where each is: (left, top, right, bottom) in shares of the picture's
-        width and height."""
         columns, rows, need = self.coverage
-        cells = [] if need == 0 else [
-            (_cell_name(c, r, columns, rows),
-             (c / columns, r / rows, (c + 1) / columns, (r + 1) / rows))
-            for r in range(rows) for c in range(columns) if self.cells[(c, r)] < need]
-        share, per_corner = self.corners
-        return cells + [(f"{name} corner", _corner_area(name, share)) for name in CORNER_NAMES
+        cells = [] if need == 0 else [_cell_name(c, r, columns, rows) for r in range(rows)
+                                      for c in range(columns) if self.cells[(c, r)] < need]
+        _, per_corner = self.corners
+        return cells + [f"{name} corner" for name in CORNER_NAMES
                         if per_corner and self.in_corners[name] < per_corner]
 
     def on_frame(self, frame: m.MarkerFrame) -> None:
@@ -182,14 +173,6 @@ def corner_of(u: float, v: float, width_px: int, height_px: int, share: float) -
     near_u = "left" if u < share * width_px else "right" if u > (1 - share) * width_px else ""
     near_v = "top" if v < share * height_px else "bottom" if v > (1 - share) * height_px else ""
     return f"{near_v} {near_u}" if near_u and near_v else None
-
-
-def _corner_area(name: str, share: float) -> Area:
-    """A corner (``CORNER_NAMES``) as (left, top, right, bottom) shares of the picture."""
-    vertical, horizontal = name.split()
-    left = 0.0 if horizontal == "left" else 1 - share
-    top = 0.0 if vertical == "top" else 1 - share
-    return left, top, left + share, top + share
 
 
 def _cell_name(column: int, row: int, columns: int, rows: int) -> str:

@@ -26,9 +26,7 @@ log = logging.getLogger(__name__)
 PROGRESS_S = 0.5
 MOCAP_WAIT_S = 1.0
 WIDE_COVERAGE = (4, 3, 3)  # at the widest of several zooms: every cell of a 4×3 grid, 3 each
-WIDE_CORNERS = (0.15, 6)  # and each corner (15 % of width and height from the edges), 6 each
-# (synthetic collections, docs/benchmarks.md: the distortion's largest error 0.93 px with 6 a
-# corner, 1.61 px with 3)
+WIDE_CORNERS = (0.15, 3)  # and each corner (15 % of width and height from the edges), 3 each
 STALL_HINTS = {  # why snapshots gave no passpoint → what to check
     "no marker": "the wand is not in the camera's view (or the IR cut filter is on)",
     "too many": "more bright spots than the wand (reflections, markers)",
@@ -166,10 +164,7 @@ class Collection:
             skipped=dict(c.skipped),
             message=m.text(message or (self._coverage_text() if state == "collecting" else "")),
             mean_error_px=mean_error_px, zoom=self.zoom,
-            zooms_done=sum(k.done for k in self.collectors), zooms=len(self.zooms),
-            missing=[m.PictureArea(name=name, left=left, top=top, right=right, bottom=bottom)
-                     for name, (left, top, right, bottom) in
-                     (self.collector.uncovered_areas() if state == "collecting" else [])])
+            zooms_done=sum(k.done for k in self.collectors), zooms=len(self.zooms))
 
     # --- the clock ---------------------------------------------------------------------------
 

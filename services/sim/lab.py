@@ -15,10 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from common import messages as m
 from common.camera import Pose, rot_z
 from common.crane_frame import CraneFrame
-from common.passpoint_collector import Area
 from common.tracking_camera import TrackingCameraModel
 from services.sim.bodies import (
     ROBOT_POINTS_MM,
@@ -77,16 +75,13 @@ def load_or_make_crater(settings: SimSettings) -> CraterMap:
     return crater
 
 
-def calibration_views(heads: dict[str, PtzHead], t: float,
-                      asked: dict[str, tuple[Area, ...]]) -> list[View]:
+def calibration_views(heads: dict[str, PtzHead], t: float) -> list[View]:
     """The cameras a person carrying the wand waves it for at ``t``: those in calibration mode
-    (IR-cut filter off, standing still), each seen through its own lens at its zoom, with the
-    parts of its picture its collection asks for (``asked``, by camera)."""
+    (IR-cut filter off, standing still), each seen through its own lens at its zoom."""
     views = []
-    for name, head in heads.items():
+    for head in heads.values():
         if head.ir_cut_filter == "off" and not head.state(t)[3]:
-            views.append(View(head.pose(t), head.intrinsics(t, *PICTURE_PX),
-                              asked.get(name, ())))
+            views.append((head.pose(t), head.intrinsics(t, *PICTURE_PX)))
     return views
 
 
@@ -106,9 +101,6 @@ class Lab:
     tracking: TrackingCameraModel
     wand: WandCarrier
     noise: NoiseBank
-    wand_asked: dict[str, tuple[Area, ...]]
-    """Per camera being calibrated: where in its picture its collection asks for the wand
-    (``on_collect_progress``; the person carrying it reads the progress line)."""
     robot_start_s: float | None = 0.0
     """Sim time the robot's scenario starts; None: the robot waits at its start while the
     calibration wand is carried through the cameras' view."""
@@ -131,9 +123,8 @@ class Lab:
                                    tilt_speed_deg_s=cam.tilt_speed_deg_s)
                  for cam in settings.cameras}
         wand_rng = np.random.default_rng((settings.seed, 11))
-        asked: dict[str, tuple[Area, ...]] = {}
         wand = WandCarrier(wand_rng, lambda r: wand_point(crater, r),
-                           lambda t: calibration_views(heads, t, asked),
+                           lambda t: calibration_views(heads, t),
                            lambda x, y: float(crater.height_at(x, y)),
                            start_mm=wand_point(crater, wand_rng),
                            speed_mm_s=settings.wand_speed_mm_s, dwell_s=settings.wand_dwell_s)
@@ -155,18 +146,9 @@ class Lab:
             heads=heads,
             crane=crane, crane_lock=threading.Lock(),
             tracking=t.lens(),
-            wand=wand, wand_asked=asked, noise=NoiseBank(t.noise, t.width_px, t.height_px,
+            wand=wand, noise=NoiseBank(t.noise, t.width_px, t.height_px,
                                        np.random.default_rng((settings.seed, 17))),
             robot_start_s=None if waiting else 0.0)
-
-    def on_collect_progress(self, progress: m.CollectProgress) -> None:
-        """A collection's progress line: while it collects, the parts of the picture it names
-        are where the wand goes next."""
-        if progress.state == "collecting" and progress.missing:
-            self.wand_asked[progress.camera] = tuple(
-                (a.left, a.top, a.right, a.bottom) for a in progress.missing)
-        else:
-            self.wand_asked.pop(progress.camera, None)
 
     # --- the robot ---------------------------------------------------------------------------
 

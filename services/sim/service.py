@@ -56,8 +56,6 @@ def run(node: Node[SimSettings]) -> None:
     devices = DeviceLoop(lab, settings, clock, serve_mocap=False)
     try:
         devices.start()
-        # the person carrying the wand reads the collections' progress lines: where to go next
-        node.bus.subscribe(keys.CALIB_PROGRESS, lab.on_collect_progress, latest=False)
         log.info("sim running scenario %s (seed %d)", settings.scenario, settings.seed)
         if settings.calibrate_first and settings.scenario != "calibration":
             _start_robot_once_calibrated(

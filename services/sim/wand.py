@@ -8,10 +8,7 @@ in the picture of a camera that is being calibrated — the IR-cut filter off an
 standing still, what calibration mode does to a camera — at that camera's present zoom, holds
 it still for ``dwell_s``, and on to the next; taking turns when several are. With no camera
 in calibration mode it walks to points over the crater (``wander``), as before. A share of the
-points is in the picture's corners, as lens calibration guides ask of a person. While the
-collection's progress line names parts of the picture still short of passpoints ("carry the
-wand to the picture's bottom right corner", ``CollectProgress.missing``), the person reads it
-and carries the wand there, to any of them (the rest of the picture if none can be reached).
+points is in the picture's corners, as lens calibration guides ask of a person.
 
 The picture is the camera's own (its true lens, ``views``): the carrier uses the sim's truth
 only as a person uses what they see. Points are spread over the whole picture, corners
@@ -22,14 +19,12 @@ from __future__ import annotations
 
 import threading
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import NamedTuple
 
 import numpy as np
 
 from common.camera import Intrinsics, Pose, undistort_pixels
-from common.passpoint_collector import Area
 
 EDGE_MARGIN = 0.015  # of the picture's width and height kept clear of the border (≈ 10 px)
 CORNERS = 0.4  # of the points: in a corner of the picture
@@ -39,14 +34,7 @@ ABOVE_GROUND_MM = 150.0  # a point on the wand's pole stays this high over the f
 FARTHEST_MM = 9000.0
 SEGMENTS_KEPT = 64  # enough for any look back (exposure smear, a late mocap frame)
 
-
-class View(NamedTuple):
-    """A camera in calibration mode: where it looks from, through which lens, and the parts
-    of its picture its collection's progress line asks the wand in (none: anywhere)."""
-
-    pose: Pose
-    intr: Intrinsics
-    wanted: Sequence[Area] = ()
+View = tuple[Pose, Intrinsics]
 
 
 @dataclass(frozen=True)
@@ -105,26 +93,18 @@ class WandCarrier:
         views = self.views(now)
         target = None
         if views:
-            view = View(*views[self._turn % len(views)])
+            target = self.in_view(*views[self._turn % len(views)])
             self._turn += 1
-            if view.wanted:  # the progress line names where: half the tries there
-                target = self.in_view(view.pose, view.intr, tries=10, wanted=view.wanted)
-            if target is None:
-                target = self.in_view(view.pose, view.intr)
         if target is None:
             target = np.asarray(self.wander(self.rng), dtype=float)
         travel = float(np.linalg.norm(target - last.end)) / self.speed_mm_s
         return _Segment(last.end, target, now, now + travel, now + travel + self.dwell_s)
 
-    def in_view(self, pose: Pose, intr: Intrinsics, tries: int = 20,
-                wanted: Sequence[Area] = ()) -> np.ndarray | None:
-        """A point the camera sees at a random place in its picture (in one of the ``wanted``
-        parts, if any), between ``NEAREST_MM`` and the floor; None when none was found (a
-        camera looking at the sky)."""
+    def in_view(self, pose: Pose, intr: Intrinsics, tries: int = 20) -> np.ndarray | None:
+        """A point the camera sees at a random place in its picture, between ``NEAREST_MM``
+        and the floor; None when none was found (a camera looking at the sky)."""
         for _ in range(tries):
-            spot = self._spot_in(wanted[int(self.rng.integers(len(wanted)))]) if wanted \
-                else self._spot()
-            u, v = spot * (intr.width_px, intr.height_px)
+            u, v = self._spot() * (intr.width_px, intr.height_px)
             straight = undistort_pixels(np.array([[u, v]]), intr)[0]
             ray = pose.rotation @ np.array([1.0, (straight[0] - intr.cy_px) / intr.fy_px,
                                             (straight[1] - intr.cz_px) / intr.fz_px])
@@ -141,12 +121,6 @@ class WandCarrier:
             return self.rng.uniform(EDGE_MARGIN, 1 - EDGE_MARGIN, 2)
         near = self.rng.uniform(EDGE_MARGIN, CORNER_SIZE, 2)
         return np.where(self.rng.random(2) < 0.5, near, 1 - near)
-
-    def _spot_in(self, area: Area) -> np.ndarray:
-        """Anywhere in a part of the picture, but its border (``EDGE_MARGIN``)."""
-        left, top, right, bottom = area
-        return self.rng.uniform([max(left, EDGE_MARGIN), max(top, EDGE_MARGIN)],
-                                [min(right, 1 - EDGE_MARGIN), min(bottom, 1 - EDGE_MARGIN)])
 
     def _reach(self, origin: np.ndarray, ray: np.ndarray) -> float:
         """How far along the ray the wand may go before it comes too near the floor."""

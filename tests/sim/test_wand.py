@@ -5,11 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from common import messages as m
 from common.camera import Pose, project
 from common.ptz_lens import PtzLens, ZoomCurve
-from services.sim.lab import Lab
-from services.sim.wand import View, WandCarrier
+from services.sim.wand import WandCarrier
 
 MOUNT = Pose(3550.0, 1090.0, 2190.0, 180.0, 30.0, 165.0)
 LENS = PtzLens(ZoomCurve((1, 6000, 9999), (3.8, 9.0, 46.0)), (3.8, 46.0),
@@ -74,49 +72,3 @@ def test_the_path_is_continuous_and_can_be_looked_back_on() -> None:
     assert steady.mean() > 0.9 and np.any(velocity[:-1][steady])
     np.testing.assert_allclose(path[:-1][steady] + velocity[:-1][steady] * 0.01,
                                path[1:][steady], atol=1e-6)
-
-
-def test_where_the_progress_line_asks_for_the_wand_it_goes() -> None:
-    """A person reading "carry the wand to the picture's bottom right corner" carries it
-    there: every point held still is in the corner asked for, as the camera shows it."""
-    intr = LENS.intrinsics(1)
-    corner = (0.85, 0.85, 1.0, 1.0)
-    uv = project(np.array(_dwells(_carrier([View(MOUNT, intr, (corner,))]), 60.0))[1:],
-                 MOUNT, intr)
-    assert len(uv) >= 10
-    assert np.all(uv[:, 0] >= 0.85 * 704) and np.all(uv[:, 1] >= 0.85 * 576)
-    assert np.all(uv[:, 0] < 704) and np.all(uv[:, 1] < 576)
-
-
-def test_a_part_of_the_picture_it_cannot_reach_leaves_it_the_rest() -> None:
-    """Asked for the middle of a picture that looks straight down from 1 m (the floor nearer
-    there than a wand is held from the camera), the wand goes to the rest of the picture, which
-    it can reach (the floor farther along the slanted rays), instead of wandering off."""
-    intr = LENS.intrinsics(1)
-    down = Pose(0.0, 0.0, 1000.0, 180.0, -89.0, 0.0)
-    uv = project(np.array(_dwells(_carrier([View(down, intr, ((0.4, 0.4, 0.6, 0.6),))]),
-                                  60.0))[1:], down, intr)
-    inside = (uv[:, 0] >= 0) & (uv[:, 0] < 704) & (uv[:, 1] >= 0) & (uv[:, 1] < 576)
-    middle = (np.abs(uv[:, 0] - 352) < 0.1 * 704) & (np.abs(uv[:, 1] - 288) < 0.1 * 576)
-    assert len(uv) >= 5 and inside.all() and not middle.any()
-
-
-def test_the_lab_hands_the_collections_asks_to_the_carrier_while_it_collects(lab: Lab) -> None:
-    """The sim's lab keeps each collection's latest progress line for the wand: its missing
-    parts go with that camera's view while it collects, and are dropped once it solves."""
-    head = lab.heads["ptz1"]
-    head.ir_cut_filter = "off"  # calibration mode: the wand is carried into its picture
-    corner = m.PictureArea(name="bottom right corner", left=0.85, top=0.85, right=1.0,
-                           bottom=1.0)
-
-    def progress(state: str, missing: list[m.PictureArea]) -> m.CollectProgress:
-        return m.CollectProgress(measured_s=0.0, camera="ptz1", state=state,  # type: ignore[arg-type]
-                                 passpoints=0, target=90, snapshots=0, skipped={},
-                                 missing=missing)
-
-    lab.on_collect_progress(progress("collecting", [corner]))
-    (view,) = lab.wand.views(100.0)
-    assert view.wanted == ((0.85, 0.85, 1.0, 1.0),)
-    lab.on_collect_progress(progress("solving", []))
-    (view,) = lab.wand.views(100.0)
-    assert view.wanted == ()
