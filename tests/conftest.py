@@ -100,20 +100,6 @@ SHARED_LABS = ("tests/operator/",)
 """Packages whose tests share one lab (a package-scoped fixture such as ``live_lab``)."""
 
 
-LONGEST_FIRST = ("tests/calib/test_zoom_collect_e2e.py", "tests/gantry/test_commission.py",
-                 "tests/reliability/test_fault_campaign.py")
-"""The longest system tests (CI's ``--durations``: 8, 4 and 2.5 minutes), queued first: on two
-workers the longest jobs first leave the short ones to even out the end (in the collection's
-own order the campaign came last)."""
-
-
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    def rank(item: pytest.Item) -> int:
-        return next((i for i, path in enumerate(LONGEST_FIRST) if item.nodeid.startswith(path)),
-                    len(LONGEST_FIRST))
-    items.sort(key=rank)  # stable: the rest keep their order
-
-
 def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
     """On two workers (``make test-system``: ``--dist loadgroup``) each package of
     ``SHARED_LABS`` runs on one worker, so that its lab runs once and not beside itself; every
