@@ -166,9 +166,10 @@ class TrustFaults(CampaignBase):
                        0.3)
             statuses = {origin: _handshake(port, origin) for origin in
                         ("https://evil.example", "http://localhost:3000", None)}
-            # the inner server listens soon after the gate
-            wait_until(lambda: [p for p in _listening_ports(proc.pid) if p != port], 10, 0.2)
-            ports = [p for p in _listening_ports(proc.pid) if p != port]
+            def inner_ports() -> list[int]:
+                return [p for p in _listening_ports(proc.pid) if p != port]
+            wait_until(inner_ports, 10, 0.2)  # the inner server listens soon after the gate
+            ports = inner_ports()
             inner = {p: _handshake(p, "https://evil.example") for p in ports}
         finally:
             interrupt(proc, 10)
