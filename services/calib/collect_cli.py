@@ -76,15 +76,16 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _collect(bus: Bus, request: m.CollectRequest, stop: threading.Event) -> int:
     from common import keys
 
+    updates: queue.Queue[m.CollectProgress] = queue.Queue()
+    bus.subscribe(keys.CALIB_PROGRESS, updates.put, latest=False, camera=request.camera)
+    # the query's answer comes back over the same link as the subscription went out, after
+    # it: the router holds the subscription before the request goes out
     alive = list(bus.session.liveliness().get(
         keys.alive_key(bus.prefix, "calib", "*"), timeout=2.0))
     if not any(r.ok is not None for r in alive):
         print("stb calib collect: no calib service is running (start it: stb calib, or stb up)",
               file=sys.stderr)
         return EXIT_NO_SERVICE
-    updates: queue.Queue[m.CollectProgress] = queue.Queue()
-    bus.subscribe(keys.CALIB_PROGRESS, updates.put, latest=False, camera=request.camera)
-    time.sleep(0.2)  # let the subscription reach the router before the request goes out
     bus.publish(keys.CALIB_COLLECT, request, camera=request.camera)
     interactive = sys.stdout.isatty()
     last = None
