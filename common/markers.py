@@ -250,11 +250,13 @@ def annotate(frame: np.ndarray, result: Detection) -> np.ndarray:
 
 
 def to_message(result: Detection, camera: str, measured_s: float, width_px: int,
-               height_px: int) -> MarkerDetections:
-    """The bus message of a detection (``measured_s`` = when the image was captured)."""
+               height_px: int, answered_after_s: float = 0.0) -> MarkerDetections:
+    """The bus message of a detection (``measured_s`` = when the image was captured, or when
+    it was asked for and ``answered_after_s`` later it came)."""
     return MarkerDetections(
         measured_s=measured_s, camera=camera, status=result.status, threshold=result.threshold,
         width_px=width_px, height_px=height_px,
+        answered_after_s=min(max(answered_after_s, 0.0), 60.0),
         markers=[DetectedMarker(u_px=mk.u, v_px=mk.v, radius_long_px=mk.radius_long,
                                 radius_short_px=mk.radius_short,
                                 angle_deg=min(max(mk.angle_deg, -180.0), 180.0),

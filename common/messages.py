@@ -139,6 +139,9 @@ class MarkerDetections(Message):
     width_px: int = Field(gt=0)
     height_px: int = Field(gt=0)
     markers: list[DetectedMarker] = Field(max_length=256)
+    answered_after_s: float = Field(0.0, ge=0, le=60, description="how long the camera took "
+                                    "to answer the snapshot request sent at ``measured_s``: "
+                                    "the picture was taken within it (0: not known)")
 
 
 # --- PTZ ----------------------------------------------------------------------------------------

@@ -13,6 +13,12 @@ the picture or at the threshold, seen at its place in only some of the snapshots
 marker's position is interpolated from the track at the snapshot's capture time — not "the
 next frame", the paper's source of error — and the track itself goes to the solver, which
 fits what clock offset remains.
+
+A snapshot is asked for and comes some time later; the camera took it in between. The solver
+fits the usual delay (the clock offset); a snapshot answered later than the camera's usual
+(a busy machine or network) may have been taken later too, and while the marker moves that is
+a passpoint in the wrong place: skipped ("late snapshot") when the marker may have moved more
+than ``LATE_MM`` in the extra time.
 """
 
 from __future__ import annotations
@@ -32,6 +38,9 @@ STATIC_SHARE = 0.4  # of the last STATIC_WINDOW_S's snapshots: a flickering refl
 STATIC_PX = 3.0
 MARKER_MOVED_MM = 150.0
 MAX_GAP_S = 0.1
+LATE_MM = 3.0  # about half a pixel at the widest zoom 4 m away (the AXIS 215's 3.8 mm lens)
+USUAL_ANSWERS = 20  # the camera's usual answer: the median of this many snapshots before
+SPEED_WINDOW_S = 0.1  # the marker's speed: over this long before the snapshot was asked for
 
 
 @dataclass
@@ -59,6 +68,7 @@ class Collector:
     skipped: Counter[str] = field(default_factory=Counter)
     snapshots: int = 0
     _spots: deque[tuple[float, list[tuple[float, float]]]] = field(default_factory=deque)
+    _answers: deque[float] = field(default_factory=lambda: deque(maxlen=USUAL_ANSWERS))
 
     def __post_init__(self) -> None:
         self.picker = RobotPicker(self.marker_label)
@@ -93,7 +103,8 @@ class Collector:
         self._spots.append((t, spots))
         while self._spots and t - self._spots[0][0] > STATIC_WINDOW_S:
             self._spots.popleft()
-        reason = self._reason(msg, spots)
+        late_s = self._later_than_usual_s(msg.answered_after_s)
+        reason = self._reason(msg, spots, late_s)
         if reason is not None:
             self.skipped[reason] += 1
             return reason
@@ -110,7 +121,24 @@ class Collector:
     def track(self) -> Track:
         return Track(np.array(self.track_t), np.array(self.track_xyz).reshape(-1, 3))
 
-    def _reason(self, msg: m.MarkerDetections, spots: list[tuple[float, float]]) -> str | None:
+    def _later_than_usual_s(self, answered_after_s: float) -> float:
+        """How much later than the camera's usual this snapshot was answered (0: not later,
+        not known, or too few snapshots yet to know the usual)."""
+        if answered_after_s <= 0:
+            return 0.0
+        usual = float(np.median(self._answers)) if len(self._answers) >= 5 else answered_after_s
+        self._answers.append(answered_after_s)
+        return max(answered_after_s - usual, 0.0)
+
+    def _moved_mm(self, t: float, late_s: float, xyz: np.ndarray) -> float:
+        """How far the marker, at its speed just before ``t``, goes in ``late_s``."""
+        before = self._marker_at(t - SPEED_WINDOW_S)
+        if before is None:
+            return 0.0
+        return float(np.linalg.norm(xyz - before)) / SPEED_WINDOW_S * late_s
+
+    def _reason(self, msg: m.MarkerDetections, spots: list[tuple[float, float]],
+                late_s: float = 0.0) -> str | None:
         if msg.status == "too_many":
             return "too many"
         xyz = self._marker_at(msg.measured_s)
@@ -121,6 +149,8 @@ class Collector:
             return "no marker"
         if len(moving) > 1:
             return "too many"
+        if late_s > 0 and self._moved_mm(msg.measured_s, late_s, xyz) > LATE_MM:
+            return "late snapshot"
         if self.world and np.linalg.norm(xyz - self.world[-1]) < self.min_spacing_mm:
             return "not moved"
         if self.pixels and self.min_spacing_px > 0 and np.min(np.hypot(

@@ -33,6 +33,8 @@ STALL_HINTS = {  # why snapshots gave no passpoint → what to check
     "not moved": "the wand does not move",
     "seen there": "the wand stays where passpoints were taken: carry it to the rest of the "
                   "picture (edges and corners)",
+    "late snapshot": "the camera answered late (a busy machine or network) while the wand "
+                     "moved: carry it more slowly, or hold it still a moment at each spot",
     "marker not in mocap": "the motion capture does not see the wand (is the tracker "
                            "streaming? is the marker label right?)",
 }

@@ -171,6 +171,7 @@ class CalibrationHold:
             self._go_to_hold(self.request)
         captured = self.wall()
         jpeg = self.camera.snapshot_jpeg()
+        answered_after = self.wall() - captured
         position = self.camera.position()
         now_position = (position.pan_deg, position.tilt_deg, position.zoom)
         still = self._last_position is not None and (
@@ -188,4 +189,4 @@ class CalibrationHold:
         if still:
             result = detect(image, max_markers=self.max_markers)
             self.publish_detections(to_message(result, self.camera.name, captured, width,
-                                               height))
+                                               height, answered_after))

@@ -194,6 +194,41 @@ def test_a_reflection_that_flickers_is_left_out_as_one_that_stays() -> None:
     assert reasons.count("too many") <= 4
 
 
+def test_a_snapshot_answered_later_than_usual_is_skipped_only_while_the_wand_moves() -> None:
+    """The camera answers in about 40 ms; now and then a busy machine makes it 60 ms later:
+    taken at 500 mm/s that is 30 mm of doubt (skipped, "late snapshot"); held still, none."""
+    intr = Intrinsics(3.8)
+    collector = Collector(target=1000, marker_label="wand", min_spacing_mm=1.0)
+    rng = np.random.default_rng(3)
+
+    def wand_at(t: float) -> np.ndarray:  # moves for 4 s at 500 mm/s, then stands 4 s
+        moving = min(t, 4.0)
+        return np.array([-1000.0 + 300 * moving, -800.0 + 400 * moving, 300.0])
+
+    verdicts: list[tuple[float, bool, str | None]] = []
+    for i in range(800):
+        t = i / 100
+        collector.on_frame(_frame(t, wand_at(t)))
+        if i % 10 == 0 and i > 10:
+            shot = t - 0.063
+            late = i % 50 == 0
+            answered = (0.1 if late else 0.04) + rng.uniform(-0.002, 0.002)
+            wand_px = project(wand_at(shot)[None, :], PAPER_POSE, intr)[0]
+            spots = [(float(wand_px[0]) + (i % 30) * 4.0, float(wand_px[1]))]  # not seen there
+            msg = _detections(shot, spots).model_copy(update={"answered_after_s": answered})
+            verdicts.append((shot, late, collector.on_detections(msg)))
+    # judged once the camera's usual answer is known (five snapshots)
+    moving = [(late, why) for shot, late, why in verdicts if 0.8 < shot < 3.9]
+    still = [(late, why) for shot, late, why in verdicts if shot > 4.2]
+    late_ones = [why for late, why in moving if late]
+    assert len(late_ones) >= 5 and late_ones == ["late snapshot"] * len(late_ones)
+    assert all(why is None for late, why in moving if not late)
+    # standing, a late answer is no doubt (the rest are "not moved": the wand stands)
+    assert any(late for late, _ in still) and "late snapshot" not in [why for _, why in still]
+    assert collector.skipped["late snapshot"] == [why for *_, why in verdicts].count(
+        "late snapshot")  # the progress line's count
+
+
 def test_collector_skips_a_marker_that_has_not_moved() -> None:
     collector = Collector(target=10, marker_label="wand", min_spacing_mm=50.0)
     for i in range(300):
