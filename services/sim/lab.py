@@ -120,7 +120,9 @@ class Lab:
                                      walk=settings.walker.walk())
         heads = {cam.name: PtzHead(Pose.of(cam), lens=cam.lens(), latency_s=cam.latency_s,
                                    pan_speed_deg_s=cam.pan_speed_deg_s,
-                                   tilt_speed_deg_s=cam.tilt_speed_deg_s)
+                                   tilt_speed_deg_s=cam.tilt_speed_deg_s,
+                                   tilt_axis_mm=cam.tilt_axis_mm,
+                                   optical_centre_mm=cam.optical_centre_mm)
                  for cam in settings.cameras}
         wand_rng = np.random.default_rng((settings.seed, 11))
         wand = WandCarrier(wand_rng, lambda r: wand_point(crater, r),

@@ -3,6 +3,13 @@
 Commands take effect ``latency_s`` after they arrive; pan and tilt then move at finite speed
 (scaled by the VAPIX ``speed`` 1…100) towards their target, or at a rate in continuous mode,
 and stop at the limits. Zoom moves in steps per second.
+
+The head's own geometry (the sim's truth, never read by a service): the pan axis is the
+mount's z axis through the mount's position; the tilt axis is parallel to the panned head's
+y axis through ``tilt_axis_mm`` (in the panned head's frame); the lens's optical centre is at
+``optical_centre_mm`` from that point in the camera's frame (x along the view). A real head's
+axes need not meet, nor the optical centre sit on them; with both zero they do, which is
+what the PTZ service's model assumes (``common.camera.head_pose``).
 """
 
 from __future__ import annotations
@@ -11,8 +18,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from common.camera import Intrinsics, Pose, PtzLimits, head_pose
+from common.camera import Intrinsics, Pose, PtzLimits
 from common.ptz_lens import PtzLens
+
+
+def _about(axis: int, degrees: float) -> np.ndarray:
+    """The rotation by ``degrees`` about coordinate axis 1 (y) or 2 (z), right-handed."""
+    c, s = np.cos(np.radians(degrees)), np.sin(np.radians(degrees))
+    if axis == 2:
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
 @dataclass
@@ -45,6 +60,8 @@ class PtzHead:
     latency_s: float = 0.12
     ir_cut_filter: str = "auto"
     ir_cut_moves: int = 0  # how often the filter moved in or out (a mechanical switch)
+    tilt_axis_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    optical_centre_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
     _time: float = 0.0
     _pan: _Axis = field(default_factory=lambda: _Axis(0.0, 0.0))
     _tilt: _Axis = field(default_factory=lambda: _Axis(0.0, 0.0))
@@ -87,9 +104,19 @@ class PtzHead:
         return self._pan.position, self._tilt.position, int(round(self._zoom.position)), moving
 
     def pose(self, now: float) -> Pose:
-        """Where the camera looks at ``now`` (see ``head_pose``)."""
+        """Where the camera is and looks at ``now``."""
         pan, tilt, _, _ = self.state(now)
-        return head_pose(self.mount, pan, tilt)
+        return self.pose_at(pan, tilt)
+
+    def pose_at(self, pan_deg: float, tilt_deg: float) -> Pose:
+        """The camera's pose at this pan and tilt: turned about the pan axis (the mount's z,
+        positive turns right), then about the tilt axis (the panned y, positive turns up),
+        with the tilt axis and the optical centre where this head has them."""
+        panned = self.mount.rotation @ _about(2, pan_deg)
+        camera = panned @ _about(1, tilt_deg)
+        centre = (self.mount.position + panned @ np.asarray(self.tilt_axis_mm, float)
+                  + camera @ np.asarray(self.optical_centre_mm, float))
+        return Pose.from_matrix(camera, centre)
 
     def focal_mm(self, now: float) -> float:
         return self.lens.focal_mm(self.state(now)[2])

@@ -72,6 +72,21 @@ class PtzCameraSettings(PoseFields, _Section):
         None, description="… at the longest focal length (linear in focal length between "
         "them); none: the same as at the shortest")
 
+    tilt_axis_mm: tuple[float, float, float] = Field(
+        (0.0, 0.0, 0.0), description="the head's truth: where its tilt axis passes, from the "
+        "mount's point on the pan axis, in the panned head's frame (x along the view at tilt "
+        "0, y right, z down); 0: the axes meet")
+    optical_centre_mm: tuple[float, float, float] = Field(
+        (0.0, 0.0, 0.0), description="… and the lens's optical centre from that point on the "
+        "tilt axis, in the camera's frame (x along the view); 0: on both axes")
+
+    @field_validator("tilt_axis_mm", "optical_centre_mm")
+    @classmethod
+    def _within_a_head(cls, offset: tuple[float, float, float]) -> tuple[float, float, float]:
+        if max(abs(v) for v in offset) > 500.0:
+            raise ValueError(f"{list(offset)}: a PTZ head's offsets are within 500 mm")
+        return offset
+
     @field_validator("zoom_focal_mm")
     @classmethod
     def _a_zoom_curve(cls, points: list[tuple[float, float]]) -> list[tuple[float, float]]:
