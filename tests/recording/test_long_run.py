@@ -14,7 +14,7 @@ import pytest
 from common import keys
 from common import messages as m
 from common.bus import Bus
-from tests.conftest import ROOT
+from tests.conftest import ROOT, wait_for
 from tests.recording.long_run import GANTRY_HZ, write_long_run
 
 MINUTES, PARTS, MEMORY_MB = 30, 3, 500
@@ -67,4 +67,9 @@ def test_a_thirty_minute_run_in_three_parts_is_replayed_in_bounded_memory(
                                "--speed", "500", "--exclude", "stb/tracker/**")
     assert code == 0, err
     assert peak <= MEMORY_MB, f"stb replay peaked at {peak:.0f} MB"
-    assert len(states) == MINUTES * 60 * GANTRY_HZ, "every crane state of the three parts"
+    # the replay has put them all; this process's subscriber may still be decoding its queue
+    # on a busy machine (36,462 of 45,000 at the replay's end beside the zoom collection)
+    expected = MINUTES * 60 * GANTRY_HZ
+    wait_for(lambda: len(states) >= expected, timeout=60,
+             why=lambda: f"{len(states)} of {expected} crane states")
+    assert len(states) == expected, "every crane state of the three parts, once"
