@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 
+from benchmarks.gantry_table import seeds_of
 from common.camera import Intrinsics, Pose, mount_pose, project
 from common.passpoints import Passpoints
 from services.calib.options import Options
@@ -38,12 +39,16 @@ WIDE, LONG = Intrinsics(3.8), Intrinsics(46.0)
 OFFSET_MM = 60.0
 
 
-def drawn_head(rng: np.random.Generator) -> PtzHead:
+def drawn(seed: int) -> tuple[np.ndarray, PtzHead]:
+    """Seed ``seed``'s robot positions (400, over the crater) and its head."""
+    rng = np.random.default_rng(seed)
+    robots = np.column_stack([rng.uniform(-2000, 2000, (400, 2)), np.full(400, 300.0)])
     tilt_axis = rng.uniform(-OFFSET_MM, OFFSET_MM, 3)
     centre = rng.uniform(-OFFSET_MM, OFFSET_MM, 3)
-    return PtzHead(MOUNT, tilt_axis_mm=(float(tilt_axis[0]), float(tilt_axis[1]),
-                                        float(tilt_axis[2])),
-                   optical_centre_mm=(float(centre[0]), float(centre[1]), float(centre[2])))
+    return robots, PtzHead(MOUNT, tilt_axis_mm=(float(tilt_axis[0]), float(tilt_axis[1]),
+                                                float(tilt_axis[2])),
+                           optical_centre_mm=(float(centre[0]), float(centre[1]),
+                                              float(centre[2])))
 
 
 def calibrated_mount(head: PtzHead, rng: np.random.Generator, count: int) -> Pose:
@@ -72,9 +77,7 @@ def aims(head: PtzHead, mount: Pose, robots: np.ndarray) -> tuple[np.ndarray, np
 def run(seeds: list[int], count: int) -> list[dict]:
     rows = []
     for seed in seeds:
-        rng = np.random.default_rng(seed)
-        robots = np.column_stack([rng.uniform(-2000, 2000, (400, 2)), np.full(400, 300.0)])
-        offset = drawn_head(rng)
+        robots, offset = drawn(seed)
         row: dict = {"seed": seed, "tilt_axis_mm": [round(v, 1) for v in offset.tilt_axis_mm],
                      "optical_centre_mm": [round(v, 1) for v in offset.optical_centre_mm]}
         for name, head in (("axes meet", PtzHead(MOUNT)), ("offsets", offset)):
@@ -89,14 +92,9 @@ def run(seeds: list[int], count: int) -> list[dict]:
     return rows
 
 
-def _seeds(text: str) -> list[int]:
-    first, _, last = text.partition("-")
-    return list(range(int(first), int(last or first) + 1))
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seeds", type=_seeds, default=_seeds("1-20"))
+    parser.add_argument("--seeds", type=seeds_of, default=seeds_of("1-20"))
     parser.add_argument("--passpoints", type=int, default=150)
     args = parser.parse_args()
     rows = run(args.seeds, args.passpoints)

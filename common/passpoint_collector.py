@@ -138,7 +138,7 @@ class Collector:
         return float(np.linalg.norm(xyz - before)) / SPEED_WINDOW_S * late_s
 
     def _reason(self, msg: m.MarkerDetections, spots: list[tuple[float, float]],
-                late_s: float = 0.0) -> str | None:
+                late_s: float) -> str | None:
         if msg.status == "too_many":
             return "too many"
         xyz = self._marker_at(msg.measured_s)

@@ -18,16 +18,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from common.camera import Intrinsics, Pose, PtzLimits
+from common.camera import Intrinsics, Pose, PtzLimits, rot_y, rot_z
 from common.ptz_lens import PtzLens
-
-
-def _about(axis: int, degrees: float) -> np.ndarray:
-    """The rotation by ``degrees`` about coordinate axis 1 (y) or 2 (z), right-handed."""
-    c, s = np.cos(np.radians(degrees)), np.sin(np.radians(degrees))
-    if axis == 2:
-        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
 @dataclass
@@ -112,8 +104,8 @@ class PtzHead:
         """The camera's pose at this pan and tilt: turned about the pan axis (the mount's z,
         positive turns right), then about the tilt axis (the panned y, positive turns up),
         with the tilt axis and the optical centre where this head has them."""
-        panned = self.mount.rotation @ _about(2, pan_deg)
-        camera = panned @ _about(1, tilt_deg)
+        panned = self.mount.rotation @ rot_z(np.radians(pan_deg))
+        camera = panned @ rot_y(np.radians(tilt_deg))
         centre = (self.mount.position + panned @ np.asarray(self.tilt_axis_mm, float)
                   + camera @ np.asarray(self.optical_centre_mm, float))
         return Pose.from_matrix(camera, centre)
