@@ -85,7 +85,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seed", type=int, default=11)
     parser.add_argument("--seconds", type=float, default=60.0)
-    parser.add_argument("--count", type=int, default=90, help="passpoints (per zoom)")
+    parser.add_argument("--count", type=int, default=90, help="passpoints (at the widest "
+                        "zoom; calib.step_count at the others)")
     args = parser.parse_args()
     truth = drawn_lens(np.random.default_rng(args.seed))
     for model in ("measured", "straight"):

@@ -257,12 +257,17 @@ class CollectRequest(Message):
 
     camera: Name
     action: Literal["start", "cancel", "accept", "discard"] = "start"
-    count: int = Field(100, ge=6, le=10_000, description="passpoints to collect")
+    count: int = Field(100, ge=6, le=10_000, description="passpoints to collect (with "
+                       "``zooms``: at the widest step)")
+    step_count: int | None = Field(None, ge=6, le=10_000, description="with ``zooms``: "
+                                   "passpoints at each step but the widest, at most ``count``; "
+                                   "None: the calib service's ``step_count``")
     timeout_s: float = Field(600.0, gt=0, description="give up after this long")
     review: bool = Field(False, description="hold the solved pose (state review) until an "
                          "operator accepts or discards it; else it is taken at once")
     zooms: list[int] = Field(default_factory=list, max_length=16, description="zoom steps to "
-                             "collect at, ``count`` passpoints each, for one fit of the pose "
+                             "collect at (``count`` passpoints at the widest, ``step_count`` at "
+                             "the others), for one fit of the pose "
                              "and the lens across the zoom range; empty: one zoom (the hold's)")
 
     @model_validator(mode="after")

@@ -1,8 +1,9 @@
 """``stb calib collect --camera ptz1 [--count 100] [--zooms 1,3000,6000,8000,9999]``: collect
 passpoints for a camera, solve and publish its pose — done by the calib service; this command
-starts it and shows progress. With ``--zooms``, ``--count`` passpoints at each zoom step (wave
-the wand through the view at each) and one fit of the pose and the lens: the zoom → focal
-length curve and the distortion (docs/calibration.md, "The lens across the zoom range").
+starts it and shows progress. With ``--zooms``, ``--count`` passpoints at the widest zoom step
+and ``--step-count`` at each other (wave the wand through the view at each) and one fit of
+the pose and the lens: the zoom → focal length curve and the distortion (docs/calibration.md,
+"The lens across the zoom range").
 
 Ctrl-C cancels the collection. Exit status: 0 solved, 2 bad arguments, 3 no calib service or
 no router (at the start, or silent for 30 s on the way), 4 the collection failed or was
@@ -35,7 +36,10 @@ FINAL = ("done", "failed", "cancelled")
 def main(argv: Sequence[str] | None = None) -> int:
     parser = base_parser("stb calib collect", __doc__ or "")
     parser.add_argument("--camera", required=True)
-    parser.add_argument("--count", type=int, help="passpoints (default: calib.count)")
+    parser.add_argument("--count", type=int, help="passpoints (default: calib.count; with "
+                        "--zooms: at the widest step)")
+    parser.add_argument("--step-count", type=int, help="with --zooms: passpoints at each "
+                        "other step, at most --count (default: calib.step_count)")
     parser.add_argument("--timeout", type=float, help="seconds (default: calib.timeout_s; "
                         "with --zooms, that many times the number of zooms)")
     parser.add_argument("--zooms", type=_zoom_list, default=[],
@@ -51,6 +55,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         settings = load_settings(CalibSettings, args.lab, overrides_from(args))
         request = m.CollectRequest(measured_s=time.time(), camera=args.camera,
                                    count=args.count or settings.count,
+                                   step_count=args.step_count or settings.step_count,
                                    timeout_s=args.timeout or settings.timeout_s
                                    * max(len(args.zooms), 1), zooms=args.zooms)
     except (ConfigError, ValueError) as err:

@@ -1,8 +1,10 @@
 """The rules of one passpoint collection, on a clock it is given: no bus, no thread, no sleep.
 
-At several zoom steps (``zooms``), the camera is held at each in turn and ``count`` passpoints
-are taken at each; a zoom's passpoints count only from the camera's first state at that zoom
-(the zoom has arrived). Detections wait until the mocap stream has passed their capture time
+At several zoom steps (``zooms``), the camera is held at each in turn: ``count`` passpoints
+at the widest (and its picture covered, corners included: the distortion is measured there),
+``step_count`` at each of the others (a focal length; fewer do: docs/calibration.md); a
+zoom's passpoints count only from the camera's first state at that zoom (the zoom has
+arrived). Detections wait until the mocap stream has passed their capture time
 (at most ``MOCAP_WAIT_S``), so that the marker's position is interpolated, never extrapolated.
 
 The session (``session.py``) feeds it what the bus brings and calls ``step(now)`` every tick;
@@ -91,17 +93,21 @@ class Collection:
     ``step`` is given and detections and states are stamped with."""
 
     def __init__(self, settings: CalibSettings, camera: str, count: int, timeout_s: float,
-                 zooms: list[int] | None, started_s: float) -> None:
+                 zooms: list[int] | None, started_s: float, step_count: int | None = None
+                 ) -> None:
         self.settings, self.camera = settings, camera
         self.timeout_s, self.started_s = timeout_s, started_s
         self.zooms = list(zooms or [])
         track_t: list[float] = []  # one mocap track for every zoom's collector
         track_xyz: list[np.ndarray] = []
         each: list[int | None] = list(self.zooms) if self.zooms else [None]  # None: as it is
-        self.collectors = [Collector(count, settings.marker_label, settings.min_spacing_mm,
+        widest = min(self.zooms) if self.zooms else None
+        at_step = min(count, step_count or count)
+        self.collectors = [Collector(count if zoom == widest else at_step,
+                                     settings.marker_label, settings.min_spacing_mm,
                                      settings.min_spacing_px, track_t=track_t,
                                      track_xyz=track_xyz)
-                           for _ in each]
+                           for zoom in each]
         if self.zooms:  # the lens's distortion is measured at the widest step
             wide = self.collectors[self.zooms.index(min(self.zooms))]
             wide.coverage, wide.corners = WIDE_COVERAGE, WIDE_CORNERS

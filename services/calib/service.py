@@ -94,7 +94,8 @@ class Calib:
             log.info("%s: a collection is already running", msg.camera)
             session.publish_progress()
             return
-        self._start(msg.camera, msg.count, msg.timeout_s, msg.review, msg.zooms)
+        self._start(msg.camera, msg.count, msg.timeout_s, msg.review, msg.zooms,
+                    msg.step_count)
 
     def solved(self, pose: m.CameraPose, report: dict) -> None:
         with self.lock:
@@ -121,9 +122,10 @@ class Calib:
         self._report_status()
 
     def _start(self, camera: str, count: int, timeout_s: float, review: bool = False,
-               zooms: list[int] | None = None) -> None:
+               zooms: list[int] | None = None, step_count: int | None = None) -> None:
         session = Session(self.node, self.settings, self.store, camera, count, timeout_s,
-                          on_pose=self.solved, review=review, zooms=zooms or [])
+                          on_pose=self.solved, review=review, zooms=zooms or [],
+                          step_count=step_count)
         with self.lock:
             self.sessions[camera] = session
         threading.Thread(target=session.run, name=f"collect-{camera}", daemon=True).start()

@@ -48,11 +48,12 @@ class Session:
     def __init__(self, node: Node, settings: CalibSettings, store: PoseStore, camera: str,
                  count: int, timeout_s: float,
                  on_pose: Callable[[m.CameraPose, dict], None], review: bool = False,
-                 zooms: list[int] | None = None) -> None:
+                 zooms: list[int] | None = None, step_count: int | None = None) -> None:
         self.node, self.settings, self.store, self.camera = node, settings, store, camera
         self.on_pose, self.review = on_pose, review
         self.collection = Collection(settings, camera, count, timeout_s, zooms,
-                                     started_s=time.time())
+                                     started_s=time.time(),
+                                     step_count=step_count or settings.step_count)
         self._decided = threading.Event()
         self._accepted = False
         self.lock = threading.Lock()

@@ -29,7 +29,11 @@ class CalibSettings(ServiceSettings):
                                   "without a stored pose (the demo does)")
     marker_label: str = Field("wand", description='mocap label of the calibration marker; "" = '
                               "the unlabelled marker that moves")
-    count: int = Field(100, ge=6, le=10_000, description="passpoints per collection")
+    count: int = Field(100, ge=6, le=10_000, description="passpoints per collection (with "
+                       "several zoom steps: at the widest)")
+    step_count: int = Field(30, ge=6, le=10_000, description="with several zoom steps: "
+                            "passpoints at each step but the widest, at most ``count`` (the "
+                            "focal length there; the distortion is measured at the widest)")
     timeout_s: float = Field(600.0, gt=0, description="a collection gives up after this long")
     stall_s: float = Field(60.0, gt=0, description="a collection that gains no passpoint for "
                            "this long (from when the camera is held) fails, saying what the "

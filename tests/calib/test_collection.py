@@ -119,6 +119,19 @@ def test_a_collection_at_two_zooms_holds_each_and_ends_collected() -> None:
     assert collection.step(lab.now + 1) == [], "nothing more once collected"
 
 
+def test_the_steps_but_the_widest_take_step_count_passpoints() -> None:
+    """The widest step (listed in the middle here) takes ``count`` and covers the picture;
+    every other step ``step_count``; a ``step_count`` above ``count`` is held to ``count``."""
+    collection = Collection(_settings(), "ptz1", 12, 600.0, [5, 2, 4], T0, step_count=6)
+    assert isinstance(_Lab(collection).run(300)[-1][1], Collected)
+    five, wide, four = collection.collectors
+    assert [len(five.times), len(four.times)] == [6, 6]
+    assert len(wide.times) >= 12 and wide.uncovered() == []
+    assert collection.progress(T0, "collecting", "", None).target == 24
+    held = Collection(_settings(), "ptz1", 8, 600.0, [1, 2], T0, step_count=20)
+    assert [c.target for c in held.collectors] == [8, 8]
+
+
 def test_detections_wait_for_the_mocap_to_pass_them_at_most_a_second() -> None:
     """With the mocap stream 0.3 s behind, detections are held until it has passed their time
     (interpolated, never extrapolated), and still taken."""
