@@ -73,7 +73,7 @@ def collection(pose: Pose, lens: PtzLens, rng: np.random.Generator, per_corner: 
     for zoom in ZOOMS:
         intr = lens.intrinsics(zoom)
         draw = rng if zoom == ZOOMS[0] or steps_rng is None else steps_rng
-        seen = (_wide_pixels(rng, per_corner) if zoom == ZOOMS[0] else
+        seen = (_wide_pixels(draw, per_corner) if zoom == ZOOMS[0] else
                 draw.uniform([1, 1], [WIDTH_PX - 1, HEIGHT_PX - 1], (per_step, 2)))
         at = seen_at(pose, intr, seen, draw, NOISE_PX)
         by_zoom[zoom] = Passpoints(at.world_mm, at.pixels)

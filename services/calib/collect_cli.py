@@ -55,7 +55,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         settings = load_settings(CalibSettings, args.lab, overrides_from(args))
         request = m.CollectRequest(measured_s=time.time(), camera=args.camera,
                                    count=args.count or settings.count,
-                                   step_count=args.step_count or settings.step_count,
+                                   step_count=args.step_count,  # None: the service's
                                    timeout_s=args.timeout or settings.timeout_s
                                    * max(len(args.zooms), 1), zooms=args.zooms)
     except (ConfigError, ValueError) as err:

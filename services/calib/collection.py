@@ -109,7 +109,7 @@ class Collection:
                                      track_xyz=track_xyz)
                            for zoom in each]
         if self.zooms:  # the lens's distortion is measured at the widest step
-            wide = self.collectors[self.zooms.index(min(self.zooms))]
+            wide = self.collectors[each.index(widest)]
             wide.coverage, wide.corners = WIDE_COVERAGE, WIDE_CORNERS
         self.collector = self.collectors[0]
         self._zoom_index = 0
