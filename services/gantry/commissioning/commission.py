@@ -33,8 +33,9 @@ FRAMES = 3  # tracking frames per stop, their spots' median
 GATE_PX = 70.0  # a spot this far from where a target should appear is not it
 GRID = (5, 4)  # camera stops per target across the image (columns, rows)
 SPAN = 0.45  # of the image's width and height, each way from its middle
+PROBE_GRID, PROBE_SPAN = (2, 2), 0.08  # the first stops per target: near the image's middle
 CENTRAL = 0.6  # the first camera fit takes targets within this share of the image's middle
-REPLAN = 0.05  # a first fit's focal length this far off the lab file's: the stops planned again
+REPLAN = 0.05  # a probe's focal length this far off the lab file's: a note says to mend it
 
 
 @dataclass
@@ -136,19 +137,20 @@ def frame_pattern(start_raw: np.ndarray, half_mm: float) -> list[np.ndarray]:
             for dx in (-half_mm, 0.0, half_mm)]
 
 
-def camera_pattern(targets_xyz: np.ndarray, nominal: TrackingCameraModel) -> list[np.ndarray]:
+def camera_pattern(targets_xyz: np.ndarray, nominal: TrackingCameraModel,
+                   grid: tuple[int, int] = GRID, span: float = SPAN) -> list[np.ndarray]:
     """Where the crane's reported point goes (world) so that each target in turn crosses the
-    whole image, its corners too (where the lens bends most): for each, a grid of ``GRID``
-    positions that puts it within ``SPAN`` of the image's half-size each way (at its own depth,
+    whole image, its corners too (where the lens bends most): for each, a grid of ``grid``
+    positions that puts it within ``span`` of the image's half-size each way (at its own depth,
     so its own footprint), row by row in a snake."""
     stops = []
-    cols, rows = GRID
+    cols, rows = grid
     for target in np.atleast_2d(targets_xyz):
         depth = nominal.height_mm - target[2]
         footprint = np.array([nominal.width_px, nominal.height_px]) * (
             depth * nominal.pixel_mm / nominal.focal_mm)
-        for r, fy in enumerate(np.linspace(-SPAN, SPAN, rows)):
-            xs = np.linspace(-SPAN, SPAN, cols)
+        for r, fy in enumerate(np.linspace(-span, span, rows)):
+            xs = np.linspace(-span, span, cols)
             for fx in (xs if r % 2 == 0 else xs[::-1]):
                 stops.append(target[:2] - np.array([fx, fy]) * footprint)
     return stops
@@ -181,21 +183,21 @@ def survey_camera(visit: Callable[[list[np.ndarray]], Stands], targets: dict[str
                   nominal: TrackingCameraModel, frame: CraneFrame, height_mm: float, *,
                   max_residual_px: float = 1.0, notes: list[str] | None = None) -> CameraFit:
     """The camera's lens and mount from the stops ``visit`` takes the crane to (it returns
-    what each saw). The stops are planned with ``nominal``'s focal length so that each target
-    crosses the image's corners; when the first fit's focal length is more than ``REPLAN`` off
-    it (a 12 mm lens where the lab file says 8 sees two thirds of the ground the stops were
-    planned for, and no corner), the stops are planned again with the focal length measured
-    and taken once more, and the camera is fitted from those (a note says so)."""
-    stands = visit(camera_pattern(np.array(list(targets.values())), nominal))
-    first = _first_fit(stands, targets, nominal, frame, height_mm)
-    ratio = first.camera.focal_mm / nominal.focal_mm
-    if abs(ratio - 1.0) > REPLAN:
-        if notes is not None:
-            notes.append(f"camera: the lens measured {first.camera.focal_mm:.2f} mm where the "
-                         f"lab file says {nominal.focal_mm:g} mm; the stops planned again")
-        nominal = nominal.model_copy(update={"focal_mm": first.camera.focal_mm})
-        stands = visit(camera_pattern(np.array(list(targets.values())), nominal))
-    return camera_from_stands(stands, targets, nominal, frame, height_mm,
+    what each saw). A probe first (``PROBE_GRID`` stops per target, each target near the
+    image's middle, where any lens of 6–12 mm shows it when the lab file says 8): its focal
+    length plans the survey's stops, so that each target crosses the image's corners whatever
+    the lens (a 12 mm lens where the lab file says 8 sees two thirds of the ground planned for
+    8 mm, and no corner). The camera is fitted from the probe's and the survey's stops; a
+    probe more than ``REPLAN`` off the lab file's focal length is noted."""
+    middles = np.array(list(targets.values()))
+    probe = visit(camera_pattern(middles, nominal, PROBE_GRID, PROBE_SPAN))
+    first = _first_fit(probe, targets, nominal, frame, height_mm)
+    if notes is not None and abs(first.camera.focal_mm / nominal.focal_mm - 1.0) > REPLAN:
+        notes.append(f"camera: the lens measured {first.camera.focal_mm:.2f} mm where the lab "
+                     f"file says {nominal.focal_mm:g} mm; the stops planned for the lens measured")
+    planned = nominal.model_copy(update={"focal_mm": first.camera.focal_mm})
+    stands = probe + visit(camera_pattern(middles, planned))
+    return camera_from_stands(stands, targets, planned, frame, height_mm,
                               max_residual_px=max_residual_px)
 
 
