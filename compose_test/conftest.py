@@ -23,7 +23,7 @@ from compose_test.engine import (
     install_when_missing,
     why_no_engine,
 )
-from compose_test.lab import EVERY_PROFILE, Client, FollowMeter, lab_folder, up
+from compose_test.lab import EVERY_PROFILE, PROJECT, Client, FollowMeter, lab_folder, up
 from tests.conftest import stb_process
 from tests.ports import free_port
 from tests.sim.test_sim_service import write_lab
@@ -33,6 +33,16 @@ OUT = ROOT / "run" / "compose-test"
 ENGINE_HOME = Path(os.environ.get("STB_ENGINE_HOME", "/var/tmp/stb-compose-engine"))
 FIGURES: dict[str, object] = {}
 FOLLOW_WINDOW_S = 30.0  # more than one lap of the locomotive's railway (about 24 s)
+MEASURED_POSES = "stb-compose-test-measured-poses"
+"""A volume with what the one-host lab's calib measured (its poses, passpoints and pictures),
+kept when that lab goes down: the three-host lab (test_hosts.py), the same sim lab file and so
+the same camera mounts, starts its calib with it instead of calibrating the cameras again."""
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The one-host lab's tests first: the three-host lab starts with the poses they measured
+    (``MEASURED_POSES``; without them it calibrates at its first start)."""
+    items.sort(key=lambda item: item.path.name != "test_lab.py")
 
 
 def figure(name: str, value: object) -> None:
@@ -91,9 +101,10 @@ def images(engine: Engine) -> dict[str, object]:
     return {"base": base, "offline_router": offline_router}
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def lab(engine: Engine, images: dict, reference_follow_mm: float) -> Iterator[dict]:
-    """The lab under compose (after the reference, which must not share the cores with it)."""
+    """The lab under compose (after the reference, which must not share the cores with it);
+    down after its module, its calib's data kept in ``MEASURED_POSES``."""
     with lab_folder(offline_router=bool(images["offline_router"])) as (folder, files, client):
         try:
             started = up(engine, folder, files)
@@ -103,8 +114,18 @@ def lab(engine: Engine, images: dict, reference_follow_mm: float) -> Iterator[di
             logs = engine.compose(folder, files, "--profile", "sim", "logs", "--no-color",
                                   check=False, timeout=60)
             (OUT / "containers.log").write_text(logs.stdout + logs.stderr)
+            keep_calib_data(engine, f"{PROJECT}_calib-data")
             engine.compose(folder, files, *EVERY_PROFILE, "down", "-v", "--remove-orphans",
                            "-t", "5", check=False, timeout=180)
+
+
+def keep_calib_data(engine: Engine, volume: str) -> None:
+    """``volume``'s files copied into ``MEASURED_POSES`` (made afresh), owners kept."""
+    engine.docker("volume", "rm", "-f", MEASURED_POSES, check=False)
+    engine.docker("volume", "create", MEASURED_POSES)
+    engine.docker("run", "--rm", "--user", "root", "--entrypoint", "cp",
+                  "-v", f"{volume}:/from:ro", "-v", f"{MEASURED_POSES}:/to", IMAGE,
+                  "-a", "/from/.", "/to/", check=False)
 
 
 @pytest.fixture(scope="session")

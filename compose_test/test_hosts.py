@@ -1,7 +1,9 @@
 """The lab split over three "hosts" as a lab would run it: one compose project per host (the
 router PC with the sim, the tracker, calib and the page; a camera host with both PTZ services;
 the gantry PC), all from the same docker-compose.yml, joined only by one network — the lab's
-LAN — and the containerised, secured router."""
+LAN — and the containerised, secured router. Its calib starts with what the one-host lab's
+calibration measured (``MEASURED_POSES``, when test_lab.py ran before: the same sim lab file,
+the same camera mounts); the cameras' calibration itself is test_lab.py's."""
 
 from __future__ import annotations
 
@@ -11,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from compose_test.conftest import FOLLOW_WINDOW_S, figure
+from compose_test.conftest import FOLLOW_WINDOW_S, MEASURED_POSES, figure
 from compose_test.engine import Engine
 from compose_test.lab import (
     EVERY_PROFILE,
@@ -53,10 +55,16 @@ networks:
 volumes:
   sim-data:
     name: {CRATER_VOLUME}
+  calib-data:
+    name: {MEASURED_POSES}
+    external: true
 """)
         files.append("compose.lan.yml")
         _take_down(engine, folder, files)  # what a run killed before its teardown left behind
         engine.docker("network", "create", LAN)
+        measured = engine.docker("volume", "inspect", MEASURED_POSES, check=False).returncode == 0
+        figure("3 hosts: calib starts with the one-host lab's poses", measured)
+        engine.docker("volume", "create", MEASURED_POSES)  # empty: calibrated at the first start
         try:
             started = time.monotonic()
             for host, services in HOSTS.items():  # the others name the router PC's router
@@ -66,6 +74,7 @@ volumes:
                    "up_at": started, "reference_mm": reference_follow_mm}
         finally:
             _take_down(engine, folder, files)
+            engine.docker("volume", "rm", "-f", MEASURED_POSES, check=False)
 
 
 def _take_down(engine: Engine, folder: Path, files: list[str]) -> None:
