@@ -196,11 +196,12 @@ def test_1_before_any_data_every_panel_says_what_it_waits_for(
 
 
 def _before_any_data(tab: object, quiet: Quiet) -> None:
-    wait_for(lambda: tab.locator("#map").get_attribute("data-waiting"),  # type: ignore[attr-defined]
-             timeout=5)
-    assert "waiting for the robot" in tab.locator("#map").get_attribute("data-waiting")  # type: ignore[attr-defined]
-    assert "waiting for the gantry's offload" in tab.locator("#plot").get_attribute(  # type: ignore[attr-defined]
-        "data-waiting")
+    def waiting(panel: str) -> str:  # "connecting to the web service…" until its first state
+        return tab.locator(panel).get_attribute("data-waiting") or ""  # type: ignore[attr-defined]
+    wait_for(lambda: "waiting for the robot" in waiting("#map"), timeout=10,
+             why=lambda: f"the map says {waiting('#map')!r}")
+    wait_for(lambda: "waiting for the gantry's offload" in waiting("#plot"), timeout=5,
+             why=lambda: f"the plot says {waiting('#plot')!r}")
     assert "waiting for the PTZ cameras" in _text(tab, "#cameras")
     assert _text(tab, "#alarms").startswith("no alarm") or "service" in _text(tab, "#alarms")
     # The crater is drawn with its axes and colour scale before any robot: never a blank map.
