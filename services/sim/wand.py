@@ -9,11 +9,7 @@ standing still, what calibration mode does to a camera — at that camera's pres
 it still for ``dwell_s``, and on to the next; taking turns when several are. With no camera
 in calibration mode it walks to points over the crater (``wander``), as before. A share of the
 points is in the picture's corners, as lens calibration guides ask of a person, who goes round
-them in turn (not by dice: a corner left out for minutes held a collection up). Most of the
-time the person stays about as far from the camera as they stand (``KEEP_DISTANCE``, within
-``DISTANCE_SPREAD``), the rest of the time anywhere from arm's length to the floor, so the
-depths still span the view (until 2026-12-06 every point's depth was drawn afresh: metres of
-walking between points).
+them in turn (not by dice: a corner left out for minutes held a collection up).
 
 The picture is the camera's own (its true lens, ``views``): the carrier uses the sim's truth
 only as a person uses what they see. Points are spread over the whole picture, corners
@@ -38,8 +34,6 @@ NEAREST_MM = 800.0  # no nearer to the camera than this (a person holds it at ar
 ABOVE_GROUND_MM = 150.0  # a point on the wand's pole stays this high over the floor
 FARTHEST_MM = 9000.0
 SEGMENTS_KEPT = 64  # enough for any look back (exposure smear, a late mocap frame)
-KEEP_DISTANCE = 0.7  # of the points: about as far from the camera as the wand is now
-DISTANCE_SPREAD = 0.3  # "about": within this share of that distance, nearer or farther
 
 View = tuple[Pose, Intrinsics]
 
@@ -101,18 +95,16 @@ class WandCarrier:
         views = self.views(now)
         target = None
         if views:
-            target = self.in_view(*views[self._turn % len(views)], near=last.end)
+            target = self.in_view(*views[self._turn % len(views)])
             self._turn += 1
         if target is None:
             target = np.asarray(self.wander(self.rng), dtype=float)
         travel = float(np.linalg.norm(target - last.end)) / self.speed_mm_s
         return _Segment(last.end, target, now, now + travel, now + travel + self.dwell_s)
 
-    def in_view(self, pose: Pose, intr: Intrinsics, tries: int = 20,
-                near: np.ndarray | None = None) -> np.ndarray | None:
+    def in_view(self, pose: Pose, intr: Intrinsics, tries: int = 20) -> np.ndarray | None:
         """A point the camera sees at a random place in its picture, between ``NEAREST_MM``
-        and the floor (mostly about as far from the camera as ``near``, where the wand is);
-        None when none was found (a camera looking at the sky)."""
+        and the floor; None when none was found (a camera looking at the sky)."""
         corner = self.rng.random() < CORNERS
         for _ in range(tries):
             u, v = self._spot(corner) * (intr.width_px, intr.height_px)
@@ -123,19 +115,8 @@ class WandCarrier:
             reach = self._reach(pose.position, ray)
             if reach > NEAREST_MM:
                 self._corner += corner  # that corner done: the next one next time
-                return pose.position + ray * self._depth(reach, pose.position, near)
+                return pose.position + ray * self.rng.uniform(NEAREST_MM, reach)
         return None
-
-    def _depth(self, reach: float, camera: np.ndarray, near: np.ndarray | None) -> float:
-        """How far from the camera along the ray: mostly about where the wand is now."""
-        depth = self.rng.uniform(NEAREST_MM, reach)
-        if near is not None and self.rng.random() < KEEP_DISTANCE:
-            now = float(np.linalg.norm(near - camera))
-            low = max(NEAREST_MM, now * (1 - DISTANCE_SPREAD))
-            high = min(reach, now * (1 + DISTANCE_SPREAD))
-            if low < high:
-                depth = self.rng.uniform(low, high)
-        return depth
 
     def _spot(self, corner: bool) -> np.ndarray:
         """Where in the picture (fractions of its width and height): anywhere, or — as lens

@@ -12,6 +12,7 @@ import pytest
 
 from common.bus import Bus
 from services.gantry.commissioning.identify_cli import main
+from services.gantry.commissioning.identify_run import cycle_tick
 from services.sim.crane import CraneParams, ramp_following_s
 from tests.gantry.rig import MARKER_MM, CraneRig, feeding
 
@@ -74,3 +75,17 @@ def test_it_will_not_move_an_enabled_crane_nor_without_a_marker(
         assert "the crane is enabled" in capsys.readouterr().err
     finally:
         crane.close()
+
+
+def test_the_controllers_tick_is_the_earliest_sighting_not_the_last() -> None:
+    """Each sighting of the setpoint counter going up is late — by part of a poll, and on a busy
+    machine by whatever held the poller up — never early: the tick is the earliest phase."""
+    rng = np.random.default_rng(3)
+    period, tick = 0.25, 100.013
+    ticks = tick + period * np.arange(20)
+    late = rng.uniform(0.0, 0.005, 20)
+    late[[5, 12, 19]] = [0.04, 0.06, 0.05]  # the poller held up, the last sighting among them
+    seen = ticks + late
+    found = cycle_tick(seen, period)
+    assert abs((found - tick + period / 2) % period - period / 2) <= 0.005
+    assert abs((seen[-1] - tick + period / 2) % period - period / 2) > 0.04  # what it used

@@ -7,7 +7,7 @@ import numpy as np
 
 from common.camera import Pose, project
 from common.ptz_lens import PtzLens, ZoomCurve
-from services.sim.wand import DISTANCE_SPREAD, KEEP_DISTANCE, WandCarrier
+from services.sim.wand import WandCarrier
 
 MOUNT = Pose(3550.0, 1090.0, 2190.0, 180.0, 30.0, 165.0)
 LENS = PtzLens(ZoomCurve((1, 6000, 9999), (3.8, 9.0, 46.0)), (3.8, 46.0),
@@ -54,9 +54,9 @@ def test_at_the_widest_zoom_the_points_reach_the_pictures_corners() -> None:
     assert sum(corners) >= 3
 
 
-def test_the_corners_are_taken_in_turn_and_the_distance_mostly_kept() -> None:
+def test_the_corners_are_taken_in_turn() -> None:
     """A person goes round the picture's corners, not by dice (a corner left out for minutes
-    held a collection up), and mostly stays about as far from the camera as they stand."""
+    held a collection up)."""
     intr = LENS.intrinsics(1)
     points = np.array(_dwells(_carrier([(MOUNT, intr)], seed=5), 600.0))[1:]
     uv = project(points, MOUNT, intr)
@@ -65,10 +65,6 @@ def test_the_corners_are_taken_in_turn_and_the_distance_mostly_kept() -> None:
     assert len(corner) >= 20
     for i in range(len(corner) - 5):  # each corner within any six in a row (four in turn,
         assert len(set(corner[i:i + 6])) == 4, corner[i:i + 6]  # some points near one anyway)
-    depth = np.linalg.norm(points - MOUNT.position, axis=1)
-    kept = np.abs(depth[1:] / depth[:-1] - 1) <= DISTANCE_SPREAD + 1e-9
-    assert KEEP_DISTANCE - 0.15 <= kept.mean() <= 0.95, kept.mean()  # the rest: anywhere
-    assert np.ptp(depth) > 3000, "and still the whole depth of the view"
 
 
 def test_without_a_camera_in_calibration_mode_it_wanders_over_the_crater() -> None:

@@ -35,6 +35,9 @@ from services.gantry.settings import GantrySettings
 
 POLL_S = 0.01
 STEP_MM = 100.0
+TICK_MARGIN = 0.1
+"""Of the sampling period: no step is written this near the controller's tick, either side (a write
+held up a few milliseconds on a busy machine would miss it, and its reaction be a period longer)."""
 RAMP_MM_S = 100.0
 
 
@@ -202,6 +205,17 @@ class Recorder:
         return Series(data[:, 0], data[:, 1])
 
 
+def cycle_tick(taken: np.ndarray, period: float) -> float:
+    """A time the controller took a setpoint, from when the poller saw its counter go up:
+    each sighting is late (by part of a poll, and by whatever held the poller up on a busy
+    machine), never early, so the earliest phase among the recent ones (now if none)."""
+    recent = taken[-12:]
+    if not len(recent):
+        return time.time()
+    last = recent[-1]
+    return float(last + np.min((recent - last + period / 2) % period - period / 2))
+
+
 def run_moves(recorder: Recorder, start: np.ndarray, box: float, steps: int,
               progress: Callable[[str], None]) -> Plan:
     """Steps, long moves and a ramp along x within ±box/2 of ``start``; the crane enabled
@@ -215,9 +229,11 @@ def run_moves(recorder: Recorder, start: np.ndarray, box: float, steps: int,
     step = min(STEP_MM, box / 4)
     progress(f"{steps} steps of {step:.0f} mm (sampling every {period:.3f} s)")
     for k in range(steps):
-        taken = recorder.sampling_times()
-        phase = (k + 0.5) / steps * period  # writes spread evenly over the cycle
-        due = (taken[-1] if len(taken) else time.time()) + period + phase
+        # writes spread evenly over the cycle, clear of its tick by TICK_MARGIN both ways
+        phase = (TICK_MARGIN + (1 - 2 * TICK_MARGIN) * (k + 0.5) / steps) * period
+        due = cycle_tick(recorder.sampling_times(), period) + phase
+        while due < time.time() + POLL_S:
+            due += period
         time.sleep(max(due - time.time(), 0.0))
         target = start + [step if k % 2 == 0 else 0.0, 0.0]
         plan.steps_s.append(time.time())
