@@ -20,7 +20,7 @@ from common.bus import Bus
 from services.experiment.gantry import gantry_for, make_lab, run
 from services.gantry.settings import GantrySettings
 from services.sim.robots import MARKER_HEIGHT_MM
-from tests.conftest import free_port, stb_process, wait_for
+from tests.conftest import ahead_of_other_work, free_port, stb_process, wait_for
 from tests.gantry.rig import Operator
 
 END_S = 30.0  # scenario seconds run
@@ -80,12 +80,14 @@ def test_the_live_service_tracks_as_the_experiment_does(tmp_path: Path, router_e
     bus.subscribe(keys.TRUTH_CRANE, cranes.append, latest=False)
     health: list[m.ServiceHealth] = []
     bus.subscribe(keys.HEALTH, health.append, service="gantry")
-    gantry = stb_process("gantry", "--lab", str(lab))
+    first = ahead_of_other_work()  # the loop's timekeeping, not the other worker's load
+    gantry = stb_process("gantry", "--lab", str(lab), preexec_fn=first)
     sim = tracker = None
     try:
         wait_for(lambda: health, timeout=30)  # started: it waits for the crane controller
-        sim = stb_process("sim", "--lab", str(lab))
-        tracker = stb_process("tracker", "--lab", str(lab))  # the crane's marker, as in a lab
+        sim = stb_process("sim", "--lab", str(lab), preexec_fn=first)
+        # the crane's marker from the tracker, as in a lab
+        tracker = stb_process("tracker", "--lab", str(lab), preexec_fn=first)
         wait_for(lambda: len(robots) > 0, timeout=20)
         start = robots[0].measured_s  # the sim's clock starts just before its first truth
         operator = Operator(make_bus())  # arms once the gantry sees the robot, as the
