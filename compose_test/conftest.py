@@ -120,12 +120,15 @@ def lab(engine: Engine, images: dict, reference_follow_mm: float) -> Iterator[di
 
 
 def keep_calib_data(engine: Engine, volume: str) -> None:
-    """``volume``'s files copied into ``MEASURED_POSES`` (made afresh), owners kept."""
+    """``volume``'s files copied into ``MEASURED_POSES`` (made afresh), owners kept; no such
+    volume when the copy failed (the three-host lab then calibrates, and its figure says so)."""
     engine.docker("volume", "rm", "-f", MEASURED_POSES, check=False)
     engine.docker("volume", "create", MEASURED_POSES)
-    engine.docker("run", "--rm", "--user", "root", "--entrypoint", "cp",
-                  "-v", f"{volume}:/from:ro", "-v", f"{MEASURED_POSES}:/to", IMAGE,
-                  "-a", "/from/.", "/to/", check=False)
+    copied = engine.docker("run", "--rm", "--user", "root", "--entrypoint", "cp",
+                           "-v", f"{volume}:/from:ro", "-v", f"{MEASURED_POSES}:/to", IMAGE,
+                           "-a", "/from/.", "/to/", check=False)
+    if copied.returncode != 0:
+        engine.docker("volume", "rm", "-f", MEASURED_POSES, check=False)
 
 
 @pytest.fixture(scope="session")
