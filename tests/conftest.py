@@ -100,23 +100,6 @@ SHARED_LABS = ("tests/operator/",)
 """Packages whose tests share one lab (a package-scoped fixture such as ``live_lab``)."""
 
 
-LONGEST_FIRST = ("tests/calib/test_zoom_collect_e2e.py", "tests/operator/",
-                 "tests/gantry/test_commission.py", "tests/reliability/test_fault_campaign.py",
-                 "tests/calib/test_demo_calibration.py", "tests/calib/test_collect_e2e.py")
-"""The longest units of ``make test-system``, longest first (its --durations): on two workers
-the last one to start decides the end (a CI run started the 3-minute campaign last, with one
-worker idle meanwhile)."""
-
-
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The tests of ``LONGEST_FIRST`` first, in its order; the others after, as collected
-    (a stable sort: the order within a file or package stays)."""
-    def rank(item: pytest.Item) -> int:
-        return next((i for i, prefix in enumerate(LONGEST_FIRST)
-                     if item.nodeid.startswith(prefix)), len(LONGEST_FIRST))
-    items.sort(key=rank)
-
-
 def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
     """On two workers (``make test-system``: ``--dist loadgroup``) each package of
     ``SHARED_LABS`` runs on one worker, so that its lab runs once and not beside itself; every
