@@ -189,14 +189,14 @@ def survey_camera(visit: Callable[[list[np.ndarray]], Stands], targets: dict[str
     the lens (a 12 mm lens where the lab file says 8 sees two thirds of the ground planned for
     8 mm, and no corner). The camera is fitted from the probe's and the survey's stops; a
     probe more than ``REPLAN`` off the lab file's focal length is noted."""
-    middles = np.array(list(targets.values()))
-    probe = visit(camera_pattern(middles, nominal, PROBE_GRID, PROBE_SPAN))
+    targets_xyz = np.array(list(targets.values()))
+    probe = visit(camera_pattern(targets_xyz, nominal, PROBE_GRID, PROBE_SPAN))
     first = _first_fit(probe, targets, nominal, frame, height_mm)
     if notes is not None and abs(first.camera.focal_mm / nominal.focal_mm - 1.0) > REPLAN:
         notes.append(f"camera: the lens measured {first.camera.focal_mm:.2f} mm where the lab "
                      f"file says {nominal.focal_mm:g} mm; the stops planned for the lens measured")
     planned = nominal.model_copy(update={"focal_mm": first.camera.focal_mm})
-    stands = probe + visit(camera_pattern(middles, planned))
+    stands = probe + visit(camera_pattern(targets_xyz, planned))
     return camera_from_stands(stands, targets, planned, frame, height_mm,
                               max_residual_px=max_residual_px)
 
