@@ -12,7 +12,7 @@ import pytest
 
 from common.bus import Bus
 from services.gantry.commissioning.identify_cli import main
-from services.gantry.commissioning.identify_run import cycle_tick
+from services.gantry.commissioning.identify_run import cycle_tick, tick_after
 from services.sim.crane import CraneParams, ramp_following_s
 from tests.gantry.rig import MARKER_MM, CraneRig, feeding
 
@@ -89,3 +89,16 @@ def test_the_controllers_tick_is_the_earliest_sighting_not_the_last() -> None:
     found = cycle_tick(seen, period)
     assert abs((found - tick + period / 2) % period - period / 2) <= 0.005
     assert abs((seen[-1] - tick + period / 2) % period - period / 2) > 0.04  # what it used
+
+
+def test_the_tick_after_a_write_is_on_the_grid_not_the_late_sighting() -> None:
+    """The dead time counts from the tick that took the step: a poller held up after the write
+    sees the counter late; the grid of the ticks around it does not."""
+    period, tick = 0.25, 50.0
+    ticks = tick + period * np.arange(24)
+    seen = ticks + 0.003
+    seen[9] += 0.03  # the first sighting after the write, late
+    written = ticks[8] + 0.1
+    found = tick_after(seen, period, written)
+    assert found is not None and abs(found - ticks[9]) <= 0.005
+    assert tick_after(seen[:0], period, written) is None

@@ -216,6 +216,17 @@ def cycle_tick(taken: np.ndarray, period: float) -> float:
     return float(last + np.min((recent - last + period / 2) % period - period / 2))
 
 
+def tick_after(taken: np.ndarray, period: float, t_s: float) -> float | None:
+    """The controller's first tick after ``t_s``: on the grid of its ticks around then (the
+    earliest phase among the sightings within a few periods, as ``cycle_tick``), not the
+    first sighting after it, which a poller held up sees late."""
+    near = taken[np.abs(taken - t_s) <= 6 * period]
+    if not len(near):
+        return None
+    tick = cycle_tick(near, period)
+    return float(tick + np.ceil((t_s - tick) / period) * period)
+
+
 def run_moves(recorder: Recorder, start: np.ndarray, box: float, steps: int,
               progress: Callable[[str], None]) -> Plan:
     """Steps, long moves and a ramp along x within ±box/2 of ``start``; the crane enabled
@@ -276,12 +287,13 @@ class Measurements:
         top_figure = Figure.of(np.abs(speed.values)[np.abs(speed.values) >= 0.95 * top])
         moves = [o for t in plan.moves_s if (o := set_off(camera, t, t + 2.0, top))]
         taken = recorder.sampling_times()
+        period = float(np.median(np.diff(taken))) if len(taken) > 2 else 0.0
         dead, reaction = [], []
         for t_w in plan.steps_s:
-            sampled = taken[taken > t_w]
+            sampled = tick_after(taken, period, t_w) if period > 0 else None
             began = set_off(camera, t_w, t_w + 1.0, top)
-            if len(sampled) and began is not None:
-                dead.append(began.t_s - sampled[0])
+            if sampled is not None and began is not None:
+                dead.append(began.t_s - sampled)
                 reaction.append(began.t_s - t_w)
         accel = Figure.of([o.accel_mm_s2 for o in moves])
         ramp = (recorder.reported(0).t_s >= plan.ramp_s[0]) & (
