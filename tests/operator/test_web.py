@@ -58,7 +58,9 @@ def sign_in(tab: object, url: str, user: tuple[str, str]) -> None:
     tab.fill("#user", user[0])  # type: ignore[attr-defined]
     tab.fill("#password", user[1])  # type: ignore[attr-defined]
     tab.click("button[type='submit']")  # type: ignore[attr-defined]
-    tab.wait_for_selector("#map", timeout=15_000)  # type: ignore[attr-defined]
+    # the password check and the page's load: seconds on a busy machine (a CI run beside the
+    # zoom collection took over 15)
+    tab.wait_for_selector("#map", timeout=45_000)  # type: ignore[attr-defined]
     wait_for(lambda: tab.locator("#who").inner_text().startswith(user[0]),  # type: ignore[attr-defined]
              timeout=10)
 
