@@ -294,7 +294,9 @@ class Measurements:
             began = set_off(camera, t_w, t_w + 1.0, top)
             if sampled is not None and began is not None:
                 dead.append(began.t_s - sampled)
-                reaction.append(began.t_s - t_w)
+                # a write at a random moment waits half a period for the tick, on average (the
+                # steps' own waits are their planned phases, not a random moment's)
+                reaction.append(began.t_s - sampled + period / 2)
         accel = Figure.of([o.accel_mm_s2 for o in moves])
         ramp = (recorder.reported(0).t_s >= plan.ramp_s[0]) & (
             recorder.reported(0).t_s <= plan.ramp_s[1] + 1.0)
