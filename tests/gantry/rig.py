@@ -95,9 +95,10 @@ class Operator:
         ident = self._publish(command)
         return wait_for(lambda: self._reply(ident), timeout=timeout)
 
-    def arm_within(self, timeout: float) -> m.GantryCommandReply:
+    def arm_within(self, timeout: float, period: float = 0.5) -> m.GantryCommandReply:
         """Arm as an operator at a lab that is still starting would: wait for the gantry, ask
-        again while it does not answer or refuses (no estimate yet), at most ``timeout``."""
+        again (every ``period``) while it does not answer or refuses (no estimate yet), at most
+        ``timeout``; a reply that does not come is asked again, not a failure."""
         answer: m.GantryCommandReply | None = None
 
         def armed() -> m.GantryCommandReply | None:
@@ -108,7 +109,7 @@ class Operator:
             answer = poll(lambda: self._reply(ident), timeout=3) or answer
             return answer if answer is not None and answer.accepted else None
 
-        accepted = poll(armed, timeout=timeout, period=0.5)  # the operator asks every 0.5 s
+        accepted = poll(armed, timeout=timeout, period=period)
         if accepted:
             return accepted
         pytest.fail(f"the gantry was not armed within {timeout:g} s: "

@@ -26,7 +26,7 @@ TARGET = np.array([600.0, -300.0])
 
 def _moving(rig: dict) -> None:
     operator: Operator = rig["operator"]
-    wait_for(lambda: operator.send("arm").accepted, timeout=5, period=0.2)
+    operator.arm_within(10)
     wait_for(lambda: np.linalg.norm(rig["crane"].state()[1]) > 100.0, timeout=4)
 
 

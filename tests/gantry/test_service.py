@@ -37,7 +37,7 @@ def _armed(rig: dict, robot: Callable[[float], np.ndarray | None]) -> Iterator[N
     the robot. The frames stop when the block ends."""
     with feeding(rig["crane"], rig["world"], robot):
         operator: Operator = rig["operator"]
-        wait_for(lambda: operator.send("arm").accepted, timeout=5, period=0.2)
+        operator.arm_within(10)
         yield
 
 
@@ -123,7 +123,7 @@ def test_the_crane_holds_while_the_router_is_down_and_tracks_again_after(
                                                       30.0, done), daemon=True)
         feeder.start()
         operator = Operator(bus())
-        wait_for(lambda: operator.send("arm").accepted, timeout=10, period=0.2)
+        operator.arm_within(10)
         wait_for(lambda: np.linalg.norm(crane.state()[1]) > 30.0, timeout=10)
         router.send_signal(signal.SIGKILL)
         router.wait(5)
