@@ -186,7 +186,7 @@ def _gantry_samples(quiet: Quiet, samples: list[tuple[float, float, float]]) -> 
         _robot(quiet, sample[0], at=at)
         _crane(quiet, sample[1], at=at)
         _offload(quiet, sample[2], at=at)
-        wait_for(functools.partial(_page_has, quiet, sample), timeout=5)
+        wait_for(functools.partial(_page_has, quiet, sample), timeout=10)
 
 
 def test_1_before_any_data_every_panel_says_what_it_waits_for(
@@ -279,13 +279,13 @@ def test_4_an_alarm_that_clears_leaves_the_banner_and_is_listed(tab: object,
                                                                  quiet: Quiet) -> None:
     # the crane 200 mm behind: the sideways-pull alarm
     _gantry_samples(quiet, [(100.0 * i, 100.0 * i - 200, 200.0) for i in range(5)])
-    wait_for(lambda: "sideways pull" in _text(tab, "#alarms"), timeout=5)
+    wait_for(lambda: "sideways pull" in _text(tab, "#alarms"), timeout=10)
     # a second of the crane back on the robot
     _gantry_samples(quiet, [(500.0 + 100.0 * i, 500.0 + 100.0 * i - 30, 30.0) for i in range(5)])
-    wait_for(lambda: "sideways pull" not in _text(tab, "#alarms"), timeout=5)
-    assert "sideways pull" in _text(tab, "#ended")
+    wait_for(lambda: "sideways pull" not in _text(tab, "#alarms"), timeout=10)
+    wait_for(lambda: "sideways pull" in _text(tab, "#ended"), timeout=10)
     _crane(quiet, 0.0, mode="stopped", status="stopped")
-    wait_for(lambda: "gantry stopped" in _text(tab, "#alarms"), timeout=5)
+    wait_for(lambda: "gantry stopped" in _text(tab, "#alarms"), timeout=10)
     assert "run 3 (operator): reset, then arm" in _text(tab, "#alarms")
     _shot(tab, quiet, "4-cleared")
 
