@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from common.bus import Bus
+from services.gantry.commissioning.identify import cycle_tick, tick_after
 from services.gantry.commissioning.identify_cli import main
-from services.gantry.commissioning.identify_run import cycle_tick, tick_after
 from services.sim.crane import CraneParams, ramp_following_s
 from tests.gantry.rig import MARKER_MM, CraneRig, feeding
 
@@ -86,7 +86,7 @@ def test_the_controllers_tick_is_the_earliest_sighting_not_the_last() -> None:
     late = rng.uniform(0.0, 0.005, 20)
     late[[5, 12, 19]] = [0.04, 0.06, 0.05]  # the poller held up, the last sighting among them
     seen = ticks + late
-    found = cycle_tick(seen, period)
+    found = cycle_tick(seen, period, seen[-1])
     assert abs((found - tick + period / 2) % period - period / 2) <= 0.005
     assert abs((seen[-1] - tick + period / 2) % period - period / 2) > 0.04  # what it used
 

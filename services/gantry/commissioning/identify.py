@@ -129,3 +129,25 @@ def ramp_lag(camera: Series, ramp_s: tuple[float, float], start_mm: float, speed
         return None
     written = start_mm + speed_mm_s * (camera.t_s[inside] - t0)
     return float(np.mean((written - camera.values[inside]) / speed_mm_s))
+
+
+def cycle_tick(taken: np.ndarray, period: float, now_s: float) -> float:
+    """A time the controller took a setpoint, from when the poller saw its counter go up:
+    each sighting is late (by part of a poll, and by whatever held the poller up on a busy
+    machine), never early, so the earliest phase among the recent ones (``now_s`` if none)."""
+    recent = taken[-12:]
+    if not len(recent):
+        return now_s
+    last = recent[-1]
+    return float(last + np.min((recent - last + period / 2) % period - period / 2))
+
+
+def tick_after(taken: np.ndarray, period: float, t_s: float) -> float | None:
+    """The controller's first tick after ``t_s``: on the grid of its ticks around then (the
+    earliest phase among the sightings within a few periods, as ``cycle_tick``), not the
+    first sighting after it, which a poller held up sees late."""
+    near = taken[np.abs(taken - t_s) <= 6 * period]
+    if not len(near):
+        return None
+    tick = cycle_tick(near, period, t_s)
+    return float(tick + np.ceil((t_s - tick) / period) * period)

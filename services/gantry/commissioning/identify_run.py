@@ -23,10 +23,12 @@ from services.args import EXIT_CONFIG, overrides_from
 from services.gantry.commissioning.identify import (
     Figure,
     Series,
+    cycle_tick,
     ramp_lag,
     report_timing,
     sampling_period,
     set_off,
+    tick_after,
 )
 from services.gantry.crane import RegisterCrane
 from services.gantry.frames import FrameInbox, FrameSource, OpenCvFrames
@@ -205,28 +207,6 @@ class Recorder:
         return Series(data[:, 0], data[:, 1])
 
 
-def cycle_tick(taken: np.ndarray, period: float) -> float:
-    """A time the controller took a setpoint, from when the poller saw its counter go up:
-    each sighting is late (by part of a poll, and by whatever held the poller up on a busy
-    machine), never early, so the earliest phase among the recent ones (now if none)."""
-    recent = taken[-12:]
-    if not len(recent):
-        return time.time()
-    last = recent[-1]
-    return float(last + np.min((recent - last + period / 2) % period - period / 2))
-
-
-def tick_after(taken: np.ndarray, period: float, t_s: float) -> float | None:
-    """The controller's first tick after ``t_s``: on the grid of its ticks around then (the
-    earliest phase among the sightings within a few periods, as ``cycle_tick``), not the
-    first sighting after it, which a poller held up sees late."""
-    near = taken[np.abs(taken - t_s) <= 6 * period]
-    if not len(near):
-        return None
-    tick = cycle_tick(near, period)
-    return float(tick + np.ceil((t_s - tick) / period) * period)
-
-
 def run_moves(recorder: Recorder, start: np.ndarray, box: float, steps: int,
               progress: Callable[[str], None]) -> Plan:
     """Steps, long moves and a ramp along x within ±box/2 of ``start``; the crane enabled
@@ -242,7 +222,7 @@ def run_moves(recorder: Recorder, start: np.ndarray, box: float, steps: int,
     for k in range(steps):
         # writes spread evenly over the cycle, clear of its tick by TICK_MARGIN both ways
         phase = (TICK_MARGIN + (1 - 2 * TICK_MARGIN) * (k + 0.5) / steps) * period
-        due = cycle_tick(recorder.sampling_times(), period) + phase
+        due = cycle_tick(recorder.sampling_times(), period, time.time()) + phase
         while due < time.time() + POLL_S:
             due += period
         time.sleep(max(due - time.time(), 0.0))
