@@ -30,9 +30,11 @@ demo: $(KERNEL)
 
 ## Lint and type-check, then the test suite but for the long whole-lab runs, on two workers
 ## (pytest-xdist; about 4 minutes on 2 cores).
-test: $(KERNEL)
+test: $(STAMP)
 	$(BIN)/ruff check common services tests benchmarks compose_test
-	$(BIN)/mypy
+	# the type check beside the detector's loop being built: each takes one core for ~20 s
+	$(BIN)/mypy & typecheck=$$!; $(MAKE) --no-print-directory $(KERNEL); built=$$?; \
+	  wait $$typecheck && test $$built = 0
 	$(BIN)/python -m pytest -q -m "not system" -n 2
 
 ## The long whole-lab runs on real time (fault campaign, demo calibration, live vs experiment,
