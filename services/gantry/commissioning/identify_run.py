@@ -267,7 +267,8 @@ class Measurements:
         top_figure = Figure.of(np.abs(speed.values)[np.abs(speed.values) >= 0.95 * top])
         moves = [o for t in plan.moves_s if (o := set_off(camera, t, t + 2.0, top))]
         taken = recorder.sampling_times()
-        period = float(np.median(np.diff(taken))) if len(taken) > 2 else 0.0
+        sampling = sampling_period(taken)
+        period = sampling.median if sampling.n > 1 else 0.0
         dead, reaction = [], []
         for t_w in plan.steps_s:
             sampled = tick_after(taken, period, t_w) if period > 0 else None
@@ -283,7 +284,6 @@ class Measurements:
         reported = recorder.reported(0)
         age, spread = report_timing(Series(reported.t_s[ramp], reported.values[ramp]), camera,
                                     RAMP_MM_S)
-        sampling = sampling_period(taken)
         trails = ramp_lag(camera, plan.ramp_s, plan.ramp_from_mm, RAMP_MM_S)
         follows = [] if trails is None else [trails - sampling.median / 2]
         return cls(sampling, Figure.of(dead), Figure.of(reaction), Figure.of(follows),
