@@ -53,13 +53,18 @@ def live_lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveLab]:
         bus = Bus(session, client_settings(endpoint))
         crane: list[m.CraneState] = []
         ptz: dict[str, m.PtzState] = {}
+        birds_eye: list[m.CameraFrame] = []
         bus.subscribe(keys.GANTRY_STATE, crane.append, latest=False)
+        bus.subscribe(keys.VIDEO, birds_eye.append, latest=False, camera="observation")
         bus.subscribe(keys.PTZ_STATE, lambda s: ptz.__setitem__(s.camera, s), latest=False)
         operator = Operator(bus)  # the crane moves once an operator arms the gantry
         operator.arm_within(40)
         wait_for(lambda: crane and crane[-1].status == "tracking", timeout=40, period=0.2)
         wait_for(lambda: all(ptz.get(c) and ptz[c].status == "tracking" for c in MOUNTS),
                  timeout=20, period=0.2)
+        # the recordings expect the bird's-eye view: the observation service is up and sending
+        wait_for(lambda: birds_eye, timeout=40, period=0.2,
+                 why=lambda: "no bird's-eye picture on video/observation")
         bus.close()
         session.close()
         session = None
