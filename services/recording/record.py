@@ -70,9 +70,9 @@ class RecordSettings(ServiceSettings):
     min_free_mb: float = Field(64.0, ge=0, description="the recording stops (exit 5) when the "
                                "disk has less free than this, while the file can still be "
                                "finished with its summary")
-    reserve_mb: float = Field(8.0, ge=0, description="room held on the disk (a hidden file "
-                              "beside the recording) from the start and given back to finish "
-                              "the file, should another process fill the disk; 0: none")
+    reserve_mb: float = Field(8.0, ge=0, description="room kept allocated inside the file, "
+                              "just past its end, to finish it should another process fill "
+                              "the disk; 0: none")
     split_mb: float | None = Field(None, gt=0, description="start a new file (each a complete "
                                    "MCAP: run-001.mcap, run-002.mcap, …) at this size")
     split_s: float | None = Field(None, gt=0, description="start a new file after this many "
@@ -114,11 +114,13 @@ class Recorder:
                  scene: LabScene | None = None, raw_frames: bool = True,
                  metadata: dict[str, str] | None = None, split: SplitRule = NO_SPLIT,
                  next_part: Callable[[], IO[bytes]] | None = None,
-                 clock: Callable[[], float] = time.time) -> None:
+                 clock: Callable[[], float] = time.time,
+                 out_of_room: Callable[[], bool] = lambda: False) -> None:
         """``clock``: the receive time stamped on every sample (UNIX seconds), by which the
-        parts are cut."""
+        parts are cut; ``out_of_room``: the disk filled up from outside, what room is left
+        is for finishing the file (no more samples are written)."""
         self.prefix, self.with_json, self._session = prefix, with_json, session
-        self._clock = clock
+        self._clock, self._out_of_room = clock, out_of_room
         self.raw_frames = raw_frames  # False: camera streams as the scene's video only
         self.write_error: OSError | None = None  # the disk is full: nothing more is written
         self.scene = scene
@@ -162,7 +164,7 @@ class Recorder:
 
     def _run(self) -> None:
         while (item := self._queue.get()) is not None:
-            if self.write_error is not None:
+            if self.write_error is not None or self._out_of_room():
                 self.stats.lost += 1  # the disk is full: the rest is counted, not written
                 continue
             try:
@@ -316,16 +318,14 @@ def record(args: argparse.Namespace) -> int:
         log.info("recording: part %d, %s", len(paths), paths[-1])
         return reserve.open(paths[-1])
 
-    reserve = DiskReserve(paths[0].parent)
+    reserve = DiskReserve(settings.reserve_mb)
     try:
         out = reserve.open(paths[0])
     except OSError as err:
         raise ToolError(f"cannot write {paths[0]}: {err}") from err
-    reserve.hold(settings.reserve_mb)
     try:
         session = tool_session(settings)
     except ToolError:
-        reserve.release()
         out.close()
         paths[0].unlink(missing_ok=True)
         raise
@@ -340,7 +340,8 @@ def record(args: argparse.Namespace) -> int:
                         with_json=settings.json_copy, metadata=metadata,
                         raw_frames=settings.raw_frames or not settings.typed,
                         scene=LabScene(crater(settings.height_map), video=True)
-                        if settings.typed else None, split=split, next_part=next_part)
+                        if settings.typed else None, split=split, next_part=next_part,
+                        out_of_room=lambda: reserve.spent is not None)
     print(f"stb record: recording {' '.join(exprs)} to {paths[0]}"
           f"{' (and parts after it)' if split.splits else ''} (Ctrl-C ends)", file=sys.stderr)
     recorder.ask_latest()
@@ -352,8 +353,7 @@ def record(args: argparse.Namespace) -> int:
     finally:
         for video in videos:
             video.stop()
-        reserve.release()  # the room to finish the file, however full the disk is now
-        recorder.close()
+        recorder.close()  # into the room kept in the file, however full the disk is now
         token.undeclare()
         try:
             recorder.out.close()

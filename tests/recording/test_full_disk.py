@@ -6,6 +6,7 @@ from __future__ import annotations
 import errno
 import io
 import logging
+import os
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -18,7 +19,7 @@ from common import keys
 from common import messages as m
 from common.bus import Bus
 from services.args import EXIT_DISK
-from services.recording.disk import DiskReserve, DiskWatch
+from services.recording.disk import DiskReserve, DiskWatch, allocate_ahead
 from services.recording.record import Recorder
 from tests.conftest import stb_process, wait_for
 
@@ -94,18 +95,49 @@ def test_a_disk_full_while_the_file_is_finished_ends_without_an_exception(
     assert recorder.write_error is not None and recorder.write_error.errno == errno.ENOSPC
 
 
-def test_a_write_that_finds_the_disk_full_spends_the_reserve(tmp_path: Path) -> None:
-    """The room held beside the recording is given back at the first ENOSPC and the write is
-    made again (``/dev/full`` stays full, so that one fails too) and ``spent`` tells why."""
-    reserve = DiskReserve(tmp_path)
-    reserve.hold(1.0)
-    held = list(tmp_path.glob(".stb-record-*.reserve"))
-    assert len(held) == 1 and held[0].stat().st_blocks * 512 >= 1e6, "its blocks allocated"
+def _allocated(f: io.BufferedWriter) -> tuple[int, int]:
+    """(size, bytes allocated on the disk) of an open file."""
+    st = os.fstat(f.fileno())
+    return st.st_size, st.st_blocks * 512
+
+
+def test_the_room_is_kept_past_the_files_end_and_given_back(tmp_path: Path) -> None:
+    """The room to finish a recording is allocated inside the file, just past what is written,
+    and follows it as it grows (no other process can take it); closing gives the rest back."""
+    reserve = DiskReserve(1.0)
+    with reserve.open(tmp_path / "run.mcap") as f:
+        size, allocated = _allocated(f)
+        assert size == 0 and allocated >= 1e6, "room from the start, the file still empty"
+        for _ in range(50):  # 3.3 MB
+            f.write(b"x" * 65536)
+            f.flush()
+            size, allocated = _allocated(f)
+            assert allocated >= size + 0.75e6, (size, allocated)
+        assert reserve.spent is None
+    size, allocated = (tmp_path / "run.mcap").stat().st_size, \
+        (tmp_path / "run.mcap").stat().st_blocks * 512
+    assert size == 50 * 65536 and allocated < size + 65536, "the room not used is given back"
+
+
+def test_a_disk_that_fills_from_outside_stops_the_recording_with_room_to_finish(
+        tmp_path: Path) -> None:
+    """The room cannot be topped up (ENOSPC): ``spent`` says so, the watch stops the recording;
+    what was allocated before is still ahead of the file's end."""
+    allowed = [True]
+
+    def allocate(fd: int, offset: int, length: int) -> None:
+        if not allowed[0]:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        allocate_ahead(fd, offset, length)
+
+    reserve = DiskReserve(1.0, allocate=allocate)
     watch = DiskWatch([tmp_path / "run.mcap"], 0.0, lambda: None, reserve)
-    assert not watch.full()
-    with reserve.open(Path("/dev/full")) as full, pytest.raises(OSError) as raised:
-        full.write(b"x" * 10_000)
-        full.flush()
-    assert raised.value.errno == errno.ENOSPC
-    assert reserve.spent is not None and not list(tmp_path.glob(".stb-record-*.reserve"))
+    with reserve.open(tmp_path / "run.mcap") as f:
+        assert not watch.full()
+        allowed[0] = False  # another process fills the disk
+        while reserve.spent is None:
+            f.write(b"x" * 65536)
+            f.flush()
+        size, allocated = _allocated(f)
+        assert allocated >= size + 0.6e6, "about three quarters of the room still ahead"
     assert watch.full() and "the disk ran full under it" in watch.why
