@@ -7,7 +7,7 @@ zoom curve slow over most steps and steep at the end, barrel distortion at the w
 in its lab file only. Twice, each time in a fresh ``stb up`` lab (router, sim, tracker, calib,
 ptz1; ``[ptz] zoom = 9999``), as the system test does:
 
-* ``measured``: ``stb calib collect --zooms 1,1500,3000,5500,7000,8000,9000,9999`` — the pose and
+* ``measured``: ``stb calib collect --zooms 1,1500,3500,5500,7000,8000,9000,9999`` — the pose and
   the lens from one fit;
 * ``straight``: ``stb calib collect`` at zoom 1 — the pose alone, through the pinhole model,
   and the data sheet's straight line from 3.8 to 46 mm.

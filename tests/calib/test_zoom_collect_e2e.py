@@ -22,12 +22,11 @@ from common.camera import Intrinsics, Pose, head_pose, project
 from common.ptz_lens import PtzLens, measured_lens
 from tests.calib.test_collect_e2e import calibration_lab
 from tests.calib.test_solve import errors
-from tests.calib.test_zoom_fit import EDGE_BAND, STEPS, distortion_error_px, drawn_lens
+from tests.calib.test_zoom_fit import EDGE_BAND, STEPS, ZOOMS, distortion_error_px, drawn_lens
 from tests.conftest import ROOT, wait_for
 from tests.services.test_processes import _lab_for_up
 
 PTZ1_MOUNT = Pose(3550, 1090, 2190, 180, 30, 165)  # as write_lab configures the sim
-ZOOMS = [1, 1500, 3000, 5500, 7000, 8000, 9000, 9999]
 TRUTH_HZ = 20  # the sim's truth_rate_hz
 FOLLOW_S = 30.0  # 600 true views
 

@@ -14,7 +14,7 @@ from services.calib.solve import Options, solve
 from services.calib.synthetic import PAPER_POSE, zoom_passpoints
 from services.calib.zoom_fit import solve_zooms
 
-ZOOMS = [1, 1500, 3000, 5500, 7000, 8000, 9000, 9999]
+ZOOMS = [1, 1500, 3500, 5500, 7000, 8000, 9000, 9999]  # benchmarks.zoom_plan chose them
 STEPS = [float(z) for z in range(1, 10000, 7)]  # every 7th zoom step, as the camera counts
 
 
