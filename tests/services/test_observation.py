@@ -33,14 +33,18 @@ def test_the_bird_s_eye_view_goes_on_the_bus(observation: dict,
     health: list[m.ServiceHealth] = []
     bus.subscribe(keys.VIDEO, frames.append, latest=False, camera="observation")
     bus.subscribe(keys.HEALTH, health.append, latest=False, service="observation")
-    wait_for(lambda: len(frames) >= 4, timeout=60,
+    wait_for(lambda: len(frames) >= 13, timeout=60,
              why=lambda: f"{len(frames)} frames; health {health[-1:]}")
-    image = cv2.imdecode(np.frombuffer(frames[-1].data, np.uint8), cv2.IMREAD_UNCHANGED)
+    got = list(frames)
+    image = cv2.imdecode(np.frombuffer(got[-1].data, np.uint8), cv2.IMREAD_UNCHANGED)
     assert image is not None and image.shape == (480, 640, 3)
-    assert (frames[-1].width_px, frames[-1].height_px) == (640, 480)
-    assert [f.seq for f in frames] == sorted(f.seq for f in frames)
-    gaps = np.diff([f.measured_s for f in frames])
-    assert np.all(gaps > 0) and np.median(gaps) == pytest.approx(0.25, abs=0.1)
+    assert (got[-1].width_px, got[-1].height_px) == (640, 480)
+    assert [f.seq for f in got] == sorted(f.seq for f in got)
+    stamps = np.array([f.measured_s for f in got])
+    assert np.all(np.diff(stamps) > 0)
+    # 4 a second over three seconds: each stamped when it arrived, and on a busy machine they
+    # arrive in bursts (a CI run: gaps of 0.77 s, then 5 ms), so the mean, not each gap
+    assert (stamps[-1] - stamps[0]) / (len(stamps) - 1) == pytest.approx(0.25, abs=0.1)
     wait_for(lambda: any(h.status == "ok" for h in health), timeout=10,
              why=lambda: f"health {health[-1:]}")
 
