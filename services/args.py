@@ -18,6 +18,8 @@ from common.setting_text import setting_value
 EXIT_CONFIG = 2
 EXIT_DISK = 5
 """The disk is (nearly) full: what was being written stopped, its file readable."""
+EXIT_INTERRUPTED = 130
+"""Interrupted (SIGINT) before the command began to handle it: nothing was done."""
 NUMBERS = re.compile(r"^-\.?\d[\d.,eE+-]*$")
 """A value that starts with a minus: -5, -.5, -1e3, -100,200,3000 (a vector)."""
 

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from common.errors import ConfigError
-from services.args import EXIT_CONFIG, Parser
+from services.args import EXIT_CONFIG, EXIT_INTERRUPTED, Parser
 from services.registry import SERVICES, TOOLS, settings_class
 
 
@@ -86,6 +86,9 @@ def run() -> None:
         if isinstance(stop.code, str):
             print(stop.code, file=sys.stderr)
         code = stop.code if isinstance(stop.code, int) else 0 if stop.code is None else 1
+    except KeyboardInterrupt:  # Ctrl-C (or the page's stop) before a command took the signal
+        print("stb: interrupted while starting", file=sys.stderr)
+        code = EXIT_INTERRUPTED
     threading._shutdown()  # type: ignore[attr-defined]  # as at exit: joins the threads
     atexit._run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):

@@ -8,6 +8,7 @@ serves the reports' files.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import re
 import signal
@@ -15,6 +16,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -24,6 +26,7 @@ NAME = re.compile(r"^[0-9]{8}-[0-9]{6}$")
 REPORT_FILE = re.compile(r"^[A-Za-z0-9_.-]{1,100}$")
 LISTED = 30  # past recordings listed on the page
 STOP_WAIT_S = 20.0
+FILE_LOOK_S = 0.1  # how often a starting recording's file is looked for
 REPORT_TIMEOUT_S = 600.0
 
 
@@ -38,12 +41,20 @@ class _Run:
     started_s: float
     process: subprocess.Popen
     log: Path
+    recording_s: float | None = None
+    """when its file appeared: ``stb record`` started up (its imports can take seconds on a
+    busy host) and records; the page counts the recording's time from here"""
+
+
+RECORDER = (sys.executable, "-m", "services.cli", "record")
 
 
 class RecordingDesk:
     def __init__(self, folder: Path, environment: dict[str, str],
-                 height_map: Path | None = None) -> None:
+                 height_map: Path | None = None, recorder: Sequence[str] = RECORDER) -> None:
+        """``recorder``: the command that records into the path given after it."""
         self.folder, self.environment, self.height_map = folder, environment, height_map
+        self.recorder = list(recorder)
         self._lock = threading.Lock()
         self._run: _Run | None = None
         self._reporting: dict[str, str] = {}  # name → state while its report is made or failed
@@ -56,7 +67,7 @@ class RecordingDesk:
             self.folder.mkdir(parents=True, exist_ok=True)
             name = time.strftime("%Y%m%d-%H%M%S")
             out = self.folder / f"{name}.mcap"
-            command = [sys.executable, "-m", "services.cli", "record", str(out)]
+            command = [*self.recorder, str(out)]
             if seconds:
                 command += ["--duration", f"{seconds:g}"]
             log_path = self.folder / f"{name}.log"
@@ -96,7 +107,9 @@ class RecordingDesk:
             reporting = dict(self._reporting)
         current = None
         if run is not None and run.process.poll() is None:
-            current = {"name": run.name, "by": run.by, "elapsed_s": time.time() - run.started_s,
+            since = run.recording_s
+            current = {"name": run.name, "by": run.by, "starting": since is None,
+                       "elapsed_s": 0.0 if since is None else time.time() - since,
                        "size_mb": _size_mb(self.folder / f"{run.name}.mcap")}
         past = []
         files = sorted(self.folder.glob("*.mcap"), reverse=True) if self.folder.is_dir() else []
@@ -123,8 +136,14 @@ class RecordingDesk:
         return path if path.is_file() else None
 
     def _report_when_done(self, run: _Run) -> None:
-        run.process.wait()
         mcap = self.folder / f"{run.name}.mcap"
+        while run.recording_s is None and run.process.poll() is None:
+            if mcap.exists():
+                run.recording_s = time.time()
+                break
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                run.process.wait(FILE_LOOK_S)
+        run.process.wait()
         if not mcap.is_file():
             return
         with self._lock:

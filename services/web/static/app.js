@@ -592,9 +592,9 @@ async function loadRecordings() {
     if (reply.status === 401) return signedOut();
     const view = await reply.json();
     const now = document.getElementById("record-now");
-    now.textContent = view.current
-      ? `recording ${view.current.name}: ${fmt(view.current.elapsed_s, 0, " s")}, ${fmt(view.current.size_mb, 1, " MB")} (${view.current.by})`
-      : "not recording";
+    now.textContent = !view.current ? "not recording"
+      : view.current.starting ? `starting ${view.current.name} (${view.current.by}) …`
+      : `recording ${view.current.name}: ${fmt(view.current.elapsed_s, 0, " s")}, ${fmt(view.current.size_mb, 1, " MB")} (${view.current.by})`;
     now.dataset.recording = view.current ? view.current.name : "";
     now.dataset.elapsed = view.current ? String(view.current.elapsed_s) : "";
     document.getElementById("recordings").innerHTML = view.past.length ? view.past.map((r) =>
