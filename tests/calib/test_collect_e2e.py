@@ -22,7 +22,7 @@ from common import messages as m
 from common.bus import Bus
 from common.camera import Pose
 from tests.calib.test_solve import errors
-from tests.conftest import ROOT, client_settings, stb_process, wait_for
+from tests.conftest import ROOT, ahead_of_other_work, client_settings, stb_process, wait_for
 from tests.services.test_processes import AliveWatcher, _lab_for_up, _open_when_up, _stop
 
 PTZ1_MOUNT = Pose(3550, 1090, 2190, 180, 30, 165)  # as write_lab configures the sim
@@ -33,10 +33,13 @@ def _pose_of(msg: m.CameraPose) -> Pose:
 
 
 @contextmanager
-def calibration_lab(lab: Path, endpoint: str, env: dict[str, str]) -> Iterator[Bus]:
+def calibration_lab(lab: Path, endpoint: str, env: dict[str, str],
+                    ahead: bool = False) -> Iterator[Bus]:
     """``stb up`` with the lab file, a bus client once the calibration's services are alive;
-    on leaving, ``stb up`` is stopped and must exit cleanly."""
-    up = stb_process("up", "--lab", str(lab), "--no-view", env=env)
+    on leaving, ``stb up`` is stopped and must exit cleanly. ``ahead``: the lab's processes
+    scheduled ahead of the other worker's tests (``ahead_of_other_work``)."""
+    up = stb_process("up", "--lab", str(lab), "--no-view", env=env,
+                     preexec_fn=ahead_of_other_work() if ahead else None)
     session = None
     try:
         session = _open_when_up(endpoint)

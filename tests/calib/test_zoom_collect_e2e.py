@@ -23,7 +23,7 @@ from common.ptz_lens import PtzLens, measured_lens
 from tests.calib.test_collect_e2e import calibration_lab
 from tests.calib.test_solve import errors
 from tests.calib.test_zoom_fit import EDGE_BAND, STEPS, ZOOMS, distortion_error_px, drawn_lens
-from tests.conftest import ROOT, wait_for
+from tests.conftest import ROOT, ahead_of_other_work, wait_for
 from tests.services.test_processes import _lab_for_up
 
 PTZ1_MOUNT = Pose(3550, 1090, 2190, 180, 30, 165)  # as write_lab configures the sim
@@ -75,7 +75,8 @@ def collect(lab: Path, zooms: list[int], count: int) -> subprocess.CompletedProc
     done = subprocess.run(
         [sys.executable, "-m", "services.cli", "calib", "collect", "--camera", "ptz1",
          "--count", str(count), "--timeout", "900", *at, "--lab", str(lab)],
-        cwd=ROOT, capture_output=True, text=True, timeout=1000, env=dict(os.environ))
+        cwd=ROOT, capture_output=True, text=True, timeout=1000, env=dict(os.environ),
+        preexec_fn=ahead_of_other_work())
     print(done.stdout[-2000:], done.stderr[-3000:])
     print(f"collected and solved in {time.monotonic() - started:.0f} s")
     return done
@@ -119,7 +120,10 @@ def test_collect_at_several_zooms_measures_the_sim_cameras_lens(tmp_path: Path,
     truth = drawn_lens(np.random.default_rng(seed))
     lab, endpoint = _lab_for_up(tmp_path)
     with_lens(lab, truth)
-    with calibration_lab(lab, endpoint, {}) as bus:
+    # the lens as the lab's own machine measures it, not beside another test's lab: the
+    # snapshots' timing under the other worker's load spread the passpoints (mean error
+    # 1.25 px against 0.41 idle in a CI run, the distortion then 1.05 px against its 1 px)
+    with calibration_lab(lab, endpoint, {}, ahead=True) as bus:
         collected = collect(lab, ZOOMS, count=90)
         assert collected.returncode == 0, collected.stderr
         (pose,) = bus.query_latest(keys.CALIB_POSE, timeout_s=2.0, camera="ptz1")
