@@ -8,6 +8,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Awaitable, Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any, TypeVar
 
@@ -138,22 +139,33 @@ def router_endpoint() -> Iterator[str]:
         session.close()
 
 
-@pytest.fixture
-def make_bus(router_endpoint: str) -> Iterator[Callable[..., Bus]]:
-    """Factory of client Buses on the module's router; all closed after the test."""
+@contextmanager
+def buses(endpoint: str, opener: Callable[[ZenohSettings], zenoh.Session] = open_session
+          ) -> Iterator[Callable[..., Bus]]:
+    """Factory of client Buses on the router at ``endpoint`` (``opener``: how a session is
+    opened, e.g. ``open_when_up`` for a router still starting); all closed on leaving."""
     opened: list[tuple[Bus, zenoh.Session]] = []
 
     def make(**bus_settings: object) -> Bus:
-        settings = client_settings(router_endpoint, **bus_settings)
-        session = open_session(settings.zenoh)
+        settings = client_settings(endpoint, **bus_settings)
+        session = opener(settings.zenoh)
         bus = Bus(session, settings)
         opened.append((bus, session))
         return bus
 
-    yield make
-    for bus, session in opened:
-        bus.close()
-        session.close()
+    try:
+        yield make
+    finally:
+        for bus, session in opened:
+            bus.close()
+            session.close()
+
+
+@pytest.fixture
+def make_bus(router_endpoint: str) -> Iterator[Callable[..., Bus]]:
+    """Factory of client Buses on the module's router; all closed after the test."""
+    with buses(router_endpoint) as make:
+        yield make
 
 
 class StbProcess(subprocess.Popen[str]):

@@ -140,9 +140,9 @@ class RecordingDesk:
         while run.recording_s is None and run.process.poll() is None:
             if mcap.exists():
                 run.recording_s = time.time()
-                break
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                run.process.wait(FILE_LOOK_S)
+            else:
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    run.process.wait(FILE_LOOK_S)
         run.process.wait()
         if not mcap.is_file():
             return

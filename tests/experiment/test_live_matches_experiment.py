@@ -12,17 +12,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import zenoh
 
 from common import keys
 from common import messages as m
-from common.bus import Bus
 from services.experiment.gantry import gantry_for, make_lab, run
 from services.gantry.settings import GantrySettings
 from services.sim.robots import MARKER_HEIGHT_MM
 from tests.conftest import (
     ahead_of_other_work,
-    client_settings,
+    buses,
     free_port,
     open_when_up,
     stb_process,
@@ -87,41 +85,34 @@ def test_the_live_service_tracks_as_the_experiment_does(tmp_path: Path,
     # priority followed at 19.4 mm against 11.8) — ahead of the other worker's
     first = ahead_of_other_work()
     router = stb_process("router", "--lab", str(lab), preexec_fn=first)
-    opened: list[tuple[Bus, zenoh.Session]] = []
-
-    def bus() -> Bus:
-        settings = client_settings(endpoint)
-        session = open_when_up(settings.zenoh)
-        opened.append((Bus(session, settings), session))
-        return opened[-1][0]
-
     robots: list[m.RobotTruth] = []
     cranes: list[m.CraneTruth] = []
     health: list[m.ServiceHealth] = []
     gantry = sim = tracker = None
     try:
-        watch = bus()
-        watch.subscribe(keys.TRUTH_ROBOT, robots.append, latest=False)
-        watch.subscribe(keys.TRUTH_CRANE, cranes.append, latest=False)
-        watch.subscribe(keys.HEALTH, health.append, service="gantry")
-        gantry = stb_process("gantry", "--lab", str(lab), preexec_fn=first)
-        wait_for(lambda: health, timeout=30)  # started: it waits for the crane controller
-        sim = stb_process("sim", "--lab", str(lab), preexec_fn=first)
-        # the crane's marker from the tracker, as in a lab
-        tracker = stb_process("tracker", "--lab", str(lab), preexec_fn=first)
-        wait_for(lambda: len(robots) > 0, timeout=20)
-        start = robots[0].measured_s  # the sim's clock starts just before its first truth
-        operator = Operator(bus())  # arms once the gantry sees the robot, as the
-        operator.arm_within(10, period=0.1)  # experiment
-        wait_for(lambda: cranes and cranes[-1].measured_s - start > END_S, timeout=END_S + 30)
+        with buses(endpoint, open_when_up) as bus:
+            try:
+                watch = bus()
+                watch.subscribe(keys.TRUTH_ROBOT, robots.append, latest=False)
+                watch.subscribe(keys.TRUTH_CRANE, cranes.append, latest=False)
+                watch.subscribe(keys.HEALTH, health.append, service="gantry")
+                gantry = stb_process("gantry", "--lab", str(lab), preexec_fn=first)
+                wait_for(lambda: health, timeout=30)  # started: it waits for the controller
+                sim = stb_process("sim", "--lab", str(lab), preexec_fn=first)
+                # the crane's marker from the tracker, as in a lab
+                tracker = stb_process("tracker", "--lab", str(lab), preexec_fn=first)
+                wait_for(lambda: len(robots) > 0, timeout=20)
+                start = robots[0].measured_s  # the sim's clock starts just before its truth
+                operator = Operator(bus())  # arms once the gantry sees the robot, as the
+                operator.arm_within(10, period=0.1)  # experiment
+                wait_for(lambda: cranes and cranes[-1].measured_s - start > END_S,
+                         timeout=END_S + 30)
+            finally:
+                for proc in (gantry, tracker, sim):
+                    if proc is not None and proc.poll() is None:
+                        proc.send_signal(signal.SIGINT)
+                        proc.wait(10)
     finally:
-        for proc in (gantry, tracker, sim):
-            if proc is not None and proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-                proc.wait(10)
-        for each, session in opened:
-            each.close()
-            session.close()
         router.send_signal(signal.SIGINT)
         router.wait(10)
     by_time = {round(c.measured_s, 3): c for c in cranes}

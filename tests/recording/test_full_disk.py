@@ -114,8 +114,8 @@ def test_the_room_is_kept_past_the_files_end_and_given_back(tmp_path: Path) -> N
             size, allocated = _allocated(f)
             assert allocated >= size + 0.75e6, (size, allocated)
         assert reserve.spent is None
-    size, allocated = (tmp_path / "run.mcap").stat().st_size, \
-        (tmp_path / "run.mcap").stat().st_blocks * 512
+    kept = (tmp_path / "run.mcap").stat()
+    size, allocated = kept.st_size, kept.st_blocks * 512
     assert size == 50 * 65536 and allocated < size + 65536, "the room not used is given back"
 
 
