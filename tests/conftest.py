@@ -7,7 +7,7 @@ import os
 import subprocess
 import sys
 import time
-from collections.abc import Awaitable, Callable, Iterator
+from collections.abc import Awaitable, Callable, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any, TypeVar
@@ -17,13 +17,16 @@ import pytest
 import zenoh
 
 from common.bus import Bus, BusUnreachable, open_session
+from common.keys import Topic
 from common.markers import warm_up
+from common.messages import Message
 from common.settings import BusSettings, ZenohSettings
 from tests.ports import free_port
 from tests.simlab import crater, crater_file, lab  # noqa: F401 - shared fixtures
 
 ROOT = Path(__file__).resolve().parent.parent
 T = TypeVar("T")
+M = TypeVar("M", bound=Message)
 
 
 def client_settings(endpoint: str, **bus: object) -> BusSettings:
@@ -39,7 +42,7 @@ def poll(predicate: Callable[[], T | None], timeout: float = 5.0,
         value = predicate()
         if value:
             return value
-        time.sleep(period)
+        time.sleep(period)  # the poll's period: the condition is asked again
     return None
 
 
@@ -52,7 +55,7 @@ async def poll_async(step: Callable[[], Awaitable[T | None]], timeout: float = 5
         value = await step()
         if value:
             return value
-        await asyncio.sleep(period)
+        await asyncio.sleep(period)  # the poll's period: the step is awaited again
     return None
 
 
@@ -65,6 +68,15 @@ def wait_for(predicate: Callable[[], T | None], timeout: float = 5.0, period: fl
         pytest.fail(f"condition not met within {timeout} s: {predicate}"
                     + (f": {why()}" if why else ""))
     return value
+
+
+def publish_paced(publisher: Bus, topic: Topic[M], samples: Iterable[M], period_s: float,
+                  **fmt: str) -> None:
+    """Publish ``samples`` on ``topic`` one every ``period_s``, a device's pace: the bus may
+    drop a burst of big samples that it would carry at the rate a camera sends them."""
+    for sample in samples:
+        publisher.publish(topic, sample, max_age_s=None, **fmt)
+        time.sleep(period_s)  # a device's pace (the subject is the samples, not the burst)
 
 
 def until_heard(publisher: Bus, key: str, timeout: float = 10.0) -> None:

@@ -21,7 +21,7 @@ from common.bus import Bus
 from services.args import EXIT_DISK
 from services.recording.disk import DiskReserve, DiskWatch, allocate_ahead
 from services.recording.record import Recorder
-from tests.conftest import stb_process, wait_for
+from tests.conftest import publish_paced, stb_process, wait_for
 
 
 def _robot(t: float) -> m.RobotPosition:
@@ -70,11 +70,11 @@ def test_a_disk_that_fills_up_stops_the_writing_with_one_error(
     wait_for(lambda: publisher.publish(keys.TRACKER_ROBOT, _robot(time.time())) or
              sum(recorder.stats.samples.values()), why=lambda: "the recorder hears the bus")
     noise = np.random.default_rng(0)
-    for i in range(40):  # 12 MB of noise, which zstd cannot shrink
-        publisher.publish(keys.GANTRY_FRAME, m.CameraFrame(
-            measured_s=time.time(), camera="tracking", seq=i + 2, width_px=640, height_px=480,
-            encoding="mono8", data=noise.integers(0, 256, 640 * 480, np.uint8).tobytes()))
-        time.sleep(0.02)  # a pace the bus keeps up with (a burst is dropped)
+    publish_paced(publisher, keys.GANTRY_FRAME, (  # 12 MB of noise, which zstd cannot shrink
+        m.CameraFrame(measured_s=time.time(), camera="tracking", seq=i + 2, width_px=640,
+                      height_px=480, encoding="mono8",
+                      data=noise.integers(0, 256, 640 * 480, np.uint8).tobytes())
+        for i in range(40)), 0.02)
     wait_for(lambda: recorder.write_error is not None, timeout=10)
     wait_for(lambda: recorder.stats.lost > 0)
     recorder.close()  # no exception: nothing more is written

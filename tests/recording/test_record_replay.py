@@ -23,7 +23,7 @@ from services.recording.record import Recorder
 from services.recording.replay import pace, replay, retimed
 from services.recording.typed import LabScene
 from services.sim.render import Blob, draw
-from tests.conftest import stb_process, until_heard, wait_for
+from tests.conftest import publish_paced, stb_process, until_heard, wait_for
 from tests.recording.typed import decoded_typed
 
 ROBOT = "stb/tracker/robot"
@@ -267,9 +267,7 @@ def test_a_calibration_snapshot_is_stored_once_as_h264(make_bus: Callable[..., B
                                        data=jpeg))
 
     def publish() -> None:
-        for snapshot in snapshots:
-            publisher.publish(keys.PTZ_SNAPSHOT, snapshot, camera="ptz1")
-            time.sleep(0.02)  # a camera's pace: the bus may drop a burst
+        publish_paced(publisher, keys.PTZ_SNAPSHOT, snapshots, 0.02, camera="ptz1")
 
     recorder = _record(recorder_bus, path, publish, expect=10, scene=LabScene(video=True),
                        raw_frames=False, heard=(publisher, "stb/ptz/ptz1/snapshot"))
@@ -299,9 +297,7 @@ def test_camera_frames_are_recorded_as_h264_video_that_decodes_in_order_on_their
               for i in range(30)]
 
     def publish() -> None:
-        for frame in frames:
-            publisher.publish(keys.GANTRY_FRAME, frame)
-            time.sleep(1 / 30)  # a camera's pace (a burst of 9 MB may be dropped by the bus)
+        publish_paced(publisher, keys.GANTRY_FRAME, frames, 1 / 30)  # 9 MB in all
 
     recorder = _record(recorder_bus, path, publish, expect=25,  # most of them, on a busy machine
                        scene=LabScene(video=True), raw_frames=False,
