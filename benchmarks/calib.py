@@ -28,8 +28,9 @@ import cma
 import cv2
 import numpy as np
 
-from common.camera import Intrinsics, Pose, pose_distance
+from common.camera import Pose, pose_distance
 from common.passpoints import Passpoints
+from common.ptz_lens import axis_215
 from services.args import Parser
 from services.calib.pnp import camera_matrix, pose_from_cv
 from services.calib.solve import Options, Solution, solve, warm_up
@@ -39,7 +40,7 @@ PAPER = {"cmaes": (0.08, 4446), "simplex": (0.04, None)}
 
 
 def opencv_pnp(points: Passpoints) -> Pose:
-    _, rvec, tvec = cv2.solvePnP(points.world_mm, points.pixels, camera_matrix(Intrinsics(3.8)),
+    _, rvec, tvec = cv2.solvePnP(points.world_mm, points.pixels, camera_matrix(axis_215(3.8)),
                                  None)
     return pose_from_cv(rvec, tvec)
 

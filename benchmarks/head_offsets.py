@@ -26,8 +26,9 @@ import math
 import numpy as np
 
 from benchmarks.gantry_table import seeds_of
-from common.camera import Intrinsics, Pose, mount_pose, project
+from common.camera import Pose, mount_pose, project
 from common.passpoints import Passpoints
+from common.ptz_lens import axis_215
 from services.calib.options import Options
 from services.calib.solve import solve
 from services.calib.synthetic import points_in_view
@@ -35,7 +36,7 @@ from services.ptz.aim import aim_at
 from services.sim.ptz import PtzHead
 
 MOUNT = Pose(3550, 1090, 2190, 180, 30, 165)  # ptz1 in the demo lab (services/sim/settings.py)
-WIDE, LONG = Intrinsics(3.8), Intrinsics(46.0)
+WIDE, LONG = axis_215(3.8), axis_215(46.0)
 OFFSET_MM = 60.0
 
 
@@ -56,7 +57,7 @@ def calibrated_mount(head: PtzHead, rng: np.random.Generator, count: int) -> Pos
     seen_from = head.pose_at(0.0, 0.0)
     world = points_in_view(seen_from, WIDE, rng, count)
     pixels = project(world, seen_from, WIDE) + rng.normal(0.0, 0.5, (count, 2))
-    solution = solve(Passpoints(world, pixels), Options(focal_mm=WIDE.focal_mm))
+    solution = solve(Passpoints(world, pixels), Options(focal_px=WIDE.focal_px))
     return mount_pose(solution.pose, 0.0, 0.0)
 
 

@@ -32,7 +32,7 @@ import numpy as np
 
 from common import keys
 from common.camera import Pose, pose_distance
-from common.ptz_lens import PtzLens, measured_lens
+from common.ptz_lens import PtzLens, lens_of
 from tests.calib.test_collect_e2e import calibration_lab
 from tests.calib.test_zoom_collect_e2e import (
     PTZ1_MOUNT,
@@ -68,8 +68,8 @@ def run(model: str, truth: PtzLens, seconds: float, count: int) -> dict:
     position, angle = pose_distance(Pose.of(pose), PTZ1_MOUNT)
     lens = {}
     if pose.lens:  # the measured lens against the truth, as the system test judges it
-        fitted = measured_lens([(p.zoom, p.focal_mm, p.distortion) for p in pose.lens])
-        worst = max(abs(fitted.focal_mm(float(z)) / truth.focal_mm(float(z)) - 1) for z in STEPS)
+        fitted = lens_of(pose)
+        worst = max(abs(fitted.focal_px(float(z)) / truth.focal_px(float(z)) - 1) for z in STEPS)
         lens = {"focal_error_percent_worst_step": round(100 * worst, 2),
                 "distortion_error_px_zoom_1": round(distortion_error_px(
                     fitted.intrinsics(1), truth.intrinsics(1)), 2)}

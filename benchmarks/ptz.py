@@ -50,6 +50,7 @@ from common import messages as m
 from common.bus import Bus, BusUnreachable, open_session
 from common.camera import Pose, head_pose, project
 from common.markers import closest, detect
+from common.ptz_lens import axis_215_px
 from common.settings import BusSettings, ZenohSettings
 from services.args import Parser
 from services.ptz import vapix
@@ -300,7 +301,7 @@ def _percentile(values: np.ndarray, q: float) -> float | None:
 
 def _true_pose(cam: PtzCameraSettings) -> m.CameraPose:
     return m.CameraPose(measured_s=time.time(), camera=cam.name, **Pose.of(cam).fields(),
-                        focal_mm=3.8, mean_error_px=0.0, passpoints=0)
+                        focal_px=axis_215_px(3.8), mean_error_px=0.0, passpoints=0)
 
 
 def _lab_file(path: Path, endpoint: str, settings: SimSettings, realtime_priority: int,

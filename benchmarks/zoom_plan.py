@@ -46,8 +46,8 @@ NOISE_PX = 0.35
 def interpolation_error(lens: PtzLens, zooms: list[int]) -> float:
     """The largest relative focal-length error 1–9999 of the curve through the true focal
     lengths at ``zooms``."""
-    through = ZoomCurve(tuple(float(z) for z in zooms), tuple(lens.focal_mm(z) for z in zooms))
-    return max(abs(through.focal_mm(z) / lens.focal_mm(z) - 1) for z in STEPS)
+    through = ZoomCurve(tuple(float(z) for z in zooms), tuple(lens.focal_px(z) for z in zooms))
+    return max(abs(through.focal(z) / lens.focal_px(z) - 1) for z in STEPS)
 
 
 def _wide_pixels(rng: np.random.Generator, per_corner: int, anywhere_else: int = 170
@@ -130,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
             fit, _ = solve_zooms(collection(PAPER_POSE, truth, rng, 3, per_step, steps_rng),
                                  Options())
             lens = fit.lens()
-            focal.append(100 * max(abs(lens.focal_mm(z) / truth.focal_mm(z) - 1)
+            focal.append(100 * max(abs(lens.focal_px(z) / truth.focal_px(z) - 1)
                                    for z in STEPS))
             bend.append(distortion_error_px(lens.intrinsics(1), truth.intrinsics(1)))
         print(f"| {per_step} | {np.median(focal):.2f} % | {max(focal):.2f} % | "

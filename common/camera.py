@@ -1,5 +1,6 @@
-"""The paper's camera model (eq. 1–3) and the AXIS 215 PTZ intrinsics (Table 1), with the
-lens's distortion (OpenCV's model, ``common.lens``) where it was measured.
+"""The paper's camera model (eq. 1–3) and a PTZ camera's picture in pixels (the AXIS 215's of
+Table 1 by default), with the lens's distortion (OpenCV's model, ``common.lens``) where it was
+measured.
 
 Frames. The camera frame has its x axis along the optical axis, y to the image's right and z
 to the image's bottom (so u grows with y and v with z, eq. 3). The pose ``T_world_camera``
@@ -133,36 +134,65 @@ class Pose:
         return np.asarray(points_camera, dtype=float) @ self.rotation.T + self.position
 
 
+PAL_PICTURES = ((704, 576), (352, 288), (176, 144))  # a 4:3 chip in PAL's pixel grid
+NTSC_PICTURES = ((704, 480), (352, 240), (176, 120))  # … and in NTSC's
+
+
+def picture_pixel_aspect(width_px: int, height_px: int) -> float:
+    """The pixels' aspect of a picture of this size (their height over their width, as the
+    focal lengths in pixels go: fv / fu): the analogue-TV sizes of a 4:3 chip have
+    non-square pixels (PAL 12/11, NTSC 10/11: the AXIS 215's 704 × 576 picture of its
+    3.6 × 2.7 mm chip); every other size has square ones (1920 × 1080, 1280 × 720, …)."""
+    if (width_px, height_px) in PAL_PICTURES + NTSC_PICTURES:
+        return height_px / width_px * 4 / 3
+    return 1.0
+
+
 @dataclass(frozen=True)
 class Intrinsics:
-    """A camera from its data sheet: focal length, chip size, resolution (Table 1); and its
-    lens's distortion (k1, k2, p1, p2, k3 on normalised coordinates; none by default)."""
+    """A camera's picture in pixels (OpenCV's camera matrix; no chip size needed): the focal
+    length along the picture's width in pixels, the picture's size, the pixels' aspect (the
+    focal length along the height over that along the width; None: as the picture's size
+    has it, ``picture_pixel_aspect``), the principal point (u, v; None: the picture's
+    centre) and the lens's distortion (k1, k2, p1, p2, k3 on normalised coordinates; none by
+    default)."""
 
-    focal_mm: float
-    chip_width_mm: float = 3.6
-    chip_height_mm: float = 2.7
+    focal_px: float
     width_px: int = 704
     height_px: int = 576
+    pixel_aspect: float | None = None
+    principal_px: tuple[float, float] | None = None
     distortion: tuple[float, float, float, float, float] = NO_DISTORTION
+
+    @classmethod
+    def from_chip(cls, focal_mm: float, chip_mm: tuple[float, float], width_px: int,
+                  height_px: int, **rest: Any) -> Intrinsics:
+        """A camera from its data sheet: focal length and chip size (mm), picture size."""
+        return cls(focal_mm * width_px / chip_mm[0], width_px, height_px,
+                   (height_px / chip_mm[1]) / (width_px / chip_mm[0]), **rest)
 
     @property
     def fy_px(self) -> float:
-        return self.focal_mm / (self.chip_width_mm / self.width_px)
+        """The focal length along the picture's width (u, the camera's y axis), pixels."""
+        return self.focal_px
 
     @property
     def fz_px(self) -> float:
-        return self.focal_mm / (self.chip_height_mm / self.height_px)
+        """… along its height (v, the camera's z axis)."""
+        aspect = self.pixel_aspect if self.pixel_aspect is not None else \
+            picture_pixel_aspect(self.width_px, self.height_px)
+        return self.focal_px * aspect
 
     @property
     def cy_px(self) -> float:
-        return self.width_px / 2
+        return self.width_px / 2 if self.principal_px is None else self.principal_px[0]
 
     @property
     def cz_px(self) -> float:
-        return self.height_px / 2
+        return self.height_px / 2 if self.principal_px is None else self.principal_px[1]
 
-    def with_focal(self, focal_mm: float) -> Intrinsics:
-        return replace(self, focal_mm=focal_mm)
+    def with_focal(self, focal_px: float) -> Intrinsics:
+        return replace(self, focal_px=focal_px)
 
     def pinhole(self) -> Intrinsics:
         """The same camera without its lens's distortion."""

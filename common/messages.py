@@ -19,6 +19,8 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from common.names import AlgorithmName, GantryCommandName, GantryMode
 from common.pose_fields import PoseFields
 
+AXIS_215_PX_PER_MM = 704 / 3.6  # its picture's width over its chip's (Table 1)
+
 NAME_CHARS, WHO_CHARS, TEXT_CHARS = 64, 128, 500
 Name = Annotated[str, Field(min_length=1, max_length=NAME_CHARS, pattern=r"^[A-Za-z0-9_.-]+$")]
 """A camera's, a service's, a body's name: what a key expression may hold."""
@@ -150,6 +152,17 @@ PtzStatus = Literal["waiting_for_pose", "tracking", "idle", "calibrating", "came
                     "manual", "held"]
 
 
+def _focal_in_pixels(data: object) -> object:
+    """A message written before focal lengths were pixels (a stored pose, a recording): its
+    ``focal_mm`` was the AXIS 215's, whose model was the only one then (704 px over 3.6 mm)."""
+    if isinstance(data, dict) and "focal_mm" in data and "focal_px" not in data:
+        data = {k: v for k, v in data.items() if k != "focal_mm"} | {
+            "focal_px": float(data["focal_mm"]) * AXIS_215_PX_PER_MM}
+        if isinstance(data.get("lens"), list):
+            data["lens"] = [_focal_in_pixels(at) for at in data["lens"]]
+    return data
+
+
 class PtzState(Message):
     """What a PTZ camera reports and how well it points at the robot."""
 
@@ -158,7 +171,8 @@ class PtzState(Message):
     pan_deg: float = Field(ge=-180, le=180)
     tilt_deg: float = Field(ge=-90, le=90)
     zoom: int = Field(ge=1, le=19999, description="VAPIX zoom step, 1 = wide")
-    focal_mm: float = Field(gt=0, description="focal length for that zoom step")
+    focal_px: float = Field(gt=0, le=1e5, description="focal length for that zoom step, in "
+                            "pixels of the camera's picture")
     aim_error_deg: float = Field(
         ge=0, description="angle between the optical axis and the robot; 0 if not tracking"
     )
@@ -171,6 +185,8 @@ class PtzState(Message):
                          "(status held: it does not follow until released); empty: nobody")
     presets: list[str] = Field(default_factory=list, max_length=64,
                                description="the camera's own preset positions, by name")
+
+    _written_in_mm = model_validator(mode="before")(_focal_in_pixels)
 
 
 HandAction = Literal["hold", "move", "nudge", "preset", "follow"]
@@ -211,11 +227,13 @@ class LensAtZoom(BaseModel):
     model_config = Message.model_config
 
     zoom: int = Field(ge=1, le=19999)
-    focal_mm: float = Field(gt=0, le=1000)
+    focal_px: float = Field(gt=0, le=1e5, description="in pixels of the pose's picture")
     distortion: list[float] = Field(min_length=5, max_length=5, description="OpenCV's k1, k2, "
                                     "p1, p2, k3 on normalised image coordinates")
     passpoints: int = Field(ge=0, description="inliers at this zoom")
     mean_error_px: float = Field(ge=0, description="mean reprojection error at this zoom")
+
+    _written_in_mm = model_validator(mode="before")(_focal_in_pixels)
 
 
 class CameraPose(PoseFields, Message):
@@ -223,7 +241,11 @@ class CameraPose(PoseFields, Message):
     its six fields: common/pose_fields.py)."""
 
     camera: Name
-    focal_mm: float = Field(gt=0, description="focal length the pose was fitted with")
+    focal_px: float = Field(gt=0, le=1e5, description="focal length the pose was fitted with, "
+                            "in pixels of its picture")
+    width_px: int = Field(704, gt=0, le=8192, description="the picture the pose and the lens "
+                          "were measured in (the AXIS 215's 704 × 576 by default)")
+    height_px: int = Field(576, gt=0, le=8192)
     mean_error_px: float = Field(ge=0, description="mean reprojection error over the inliers")
     passpoints: int = Field(ge=0, description="passpoints used (inliers)")
     time_offset_s: float = Field(0.0, description="mocap clock minus camera clock (add it to a "
@@ -236,6 +258,8 @@ class CameraPose(PoseFields, Message):
                          "this camera: a newer pose has a higher version (or the same version, "
                          "measured later); a PTZ service takes a pose only from the calibration "
                          "service's answer, a message on the key is only news to ask again")
+
+    _written_in_mm = model_validator(mode="before")(_focal_in_pixels)
 
 
 class CalibrationMode(Message):

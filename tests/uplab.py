@@ -21,7 +21,7 @@ def store_poses(data_dir: Path, version: int = 0) -> None:
     store = PoseStore(data_dir)
     for camera, mount in MOUNTS.items():
         store.save(m.CameraPose(measured_s=time.time(), camera=camera, **mount.fields(),
-                                focal_mm=3.8, mean_error_px=1.5, passpoints=100,
+                                focal_px=743.1, mean_error_px=1.5, passpoints=100,
                                 version=version),
                    {"method": "stored"})
 

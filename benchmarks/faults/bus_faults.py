@@ -159,7 +159,7 @@ class BusFaults(CampaignBase):
         for version in (2**53, 2**53 - 1):
             self.bus.publish(keys.CALIB_POSE, m.CameraPose(
                 measured_s=time.time(), camera=camera,
-                **(mount.fields() | {"rz_deg": mount.rz_deg + 40.0}), focal_mm=3.8,
+                **(mount.fields() | {"rz_deg": mount.rz_deg + 40.0}), focal_px=743.1,
                 mean_error_px=0.5, passpoints=100, version=version), camera=camera)
 
         def reported() -> float | None:

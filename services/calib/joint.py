@@ -22,7 +22,7 @@ OFFSET_GRID_STEP_S = 0.01
 @dataclass(frozen=True)
 class JointFit:
     pose: Pose
-    focal_mm: float
+    focal_px: float
     time_offset_s: float | None
     evaluations: int
 
@@ -58,14 +58,14 @@ def refine_jointly(pose: Pose, points: Passpoints, intr: Intrinsics, *, fit_foca
     from scipy.spatial.transform import Rotation
 
     start = np.concatenate([Rotation.from_matrix(pose.rotation).as_rotvec(), pose.position,
-                            [intr.focal_mm] if fit_focal else [],
+                            [intr.focal_px] if fit_focal else [],
                             [time_offset_s] if fit_offset else []])
-    scale = np.concatenate([[0.01] * 3, [10.0] * 3, [0.05] if fit_focal else [],
+    scale = np.concatenate([[0.01] * 3, [10.0] * 3, [10.0] if fit_focal else [],
                             [0.005] if fit_offset else []])
 
     def unpack(p: np.ndarray) -> tuple[Pose, Intrinsics, float]:
         rotation = Rotation.from_rotvec(p[0:3]).as_matrix()
-        focal = p[6] if fit_focal else intr.focal_mm
+        focal = p[6] if fit_focal else intr.focal_px
         offset = p[-1] if fit_offset else 0.0
         return Pose.from_matrix(rotation, p[3:6]), intr.with_focal(float(focal)), float(offset)
 
@@ -82,4 +82,4 @@ def refine_jointly(pose: Pose, points: Passpoints, intr: Intrinsics, *, fit_foca
 
     result = least_squares(residuals, start, x_scale=scale, method="lm")
     fitted, intr_fit, offset = unpack(result.x)
-    return JointFit(fitted, intr_fit.focal_mm, offset if fit_offset else None, int(result.nfev))
+    return JointFit(fitted, intr_fit.focal_px, offset if fit_offset else None, int(result.nfev))

@@ -6,8 +6,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-from common.camera import Pose
+from common.camera import Intrinsics, Pose
 from common.passpoints import Track
+from common.ptz_lens import AXIS_215_PICTURE_PX, axis_215_px
 
 Method = Literal["auto", "cmaes", "simplex"]
 
@@ -16,7 +17,8 @@ Method = Literal["auto", "cmaes", "simplex"]
 class Options:
     method: Method = "auto"
     initial: Pose | None = None
-    focal_mm: float = 3.8
+    focal_px: float = axis_215_px(3.8)  # the AXIS 215 at its widest (Table 1)
+    picture_px: tuple[int, int] = AXIS_215_PICTURE_PX  # the snapshots' size
     fit_focal: bool = False
     track: Track | None = None
     max_time_offset_s: float = 0.5
@@ -24,3 +26,7 @@ class Options:
     max_mean_error_px: float = 20.0
     min_inlier_fraction: float = 0.5
     seed: int = 1
+
+    def intrinsics(self, focal_px: float | None = None) -> Intrinsics:
+        """The camera's picture at ``focal_px`` (default the options' own)."""
+        return Intrinsics(self.focal_px if focal_px is None else focal_px, *self.picture_px)

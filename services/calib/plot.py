@@ -11,7 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from common.camera import Intrinsics, project, project_camera  # noqa: E402
+from common.camera import project, project_camera  # noqa: E402
 from common.passpoints import Passpoints  # noqa: E402
 from common.ptz_lens import PtzLens  # noqa: E402
 from services.calib.solve import Solution  # noqa: E402
@@ -41,7 +41,7 @@ def _fitness_plot(solution: Solution, path: Path) -> Path:
 
 
 def _residual_plot(solution: Solution, points: Passpoints, path: Path) -> Path:
-    intr = Intrinsics(solution.focal_mm)
+    intr = solution.intrinsics()
     world = solution.world_mm
     predicted = project(world, solution.pose, intr)
     inlier = np.zeros(len(points), dtype=bool)
@@ -82,13 +82,14 @@ def write_lens_plot(fit: ZoomFit, path: Path) -> Path:
     lens = fit.lens()
     fig, (curve, grid, spread) = plt.subplots(1, 3, figsize=(15.0, 4.4), layout="constrained")
     steps = np.linspace(fit.zooms[0], fit.zooms[-1], 400)
-    curve.plot(steps, [lens.focal_mm(z) for z in steps], color="tab:blue", label="PCHIP curve")
+    curve.plot(steps, [lens.focal_px(z) for z in steps], color="tab:blue", label="PCHIP curve")
     line = PtzLens()
-    curve.plot(steps, [line.focal_mm(z) for z in steps], color="tab:gray", ls="--",
-               label="data sheet's straight line")
-    curve.plot(fit.zooms, fit.focals_mm, "o", color="tab:red", label="fitted at the step")
+    curve.plot(steps, [line.intrinsics(z, *fit.picture_px).focal_px for z in steps],
+               color="tab:gray", ls="--", label="the AXIS 215 data sheet's straight line")
+    curve.plot(fit.zooms, fit.focals_px, "o", color="tab:red", label="fitted at the step")
     curve.set_xlabel("zoom step (VAPIX)")
-    curve.set_ylabel("focal length, mm")
+    curve.set_ylabel(f"focal length, px of the {fit.picture_px[0]} × {fit.picture_px[1]} "
+                     "picture")
     curve.set_yscale("log")
     curve.legend()
     curve.grid(True, which="both", alpha=0.3)

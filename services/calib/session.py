@@ -166,7 +166,7 @@ class Session:
             points, track = c.collector.passpoints(), c.collector.track()
         self.store.save_inputs(self.camera, points, track)
         s = self.settings
-        options = Options(focal_mm=state.focal_mm, fit_focal=s.fit_focal, track=track,
+        options = Options(focal_px=state.focal_px, fit_focal=s.fit_focal, track=track,
                           max_time_offset_s=s.max_time_offset_s, inlier_px=s.inlier_px,
                           max_mean_error_px=s.max_mean_error_px)
         try:
@@ -177,7 +177,7 @@ class Session:
         mount = mount_pose(solution.pose, state.pan_deg, state.tilt_deg)
         pose = m.CameraPose(
             measured_s=time.time(), camera=self.camera, **mount.fields(),
-            focal_mm=solution.focal_mm, mean_error_px=solution.mean_error_px,
+            focal_px=solution.focal_px, mean_error_px=solution.mean_error_px,
             passpoints=len(solution.inliers), time_offset_s=solution.time_offset_s or 0.0)
         report = solution.report() | {"pan_deg": state.pan_deg, "tilt_deg": state.tilt_deg,
                                       "zoom": state.zoom}
@@ -211,12 +211,12 @@ class Session:
         used = sum(len(k) for k in fit.inliers)
         pose = m.CameraPose(
             measured_s=time.time(), camera=self.camera, **mount.fields(),
-            focal_mm=fit.focals_mm[0], mean_error_px=fit.mean_error_px(), passpoints=used,
+            focal_px=fit.focals_px[0], mean_error_px=fit.mean_error_px(), passpoints=used,
             time_offset_s=first.time_offset_s or 0.0, lens=lens)
         report = fit.report() | {"pan_deg": state.pan_deg, "tilt_deg": state.tilt_deg,
                                  "time_offset_s": round(first.time_offset_s or 0.0, 5)}
         self._take(pose, report, f"{used} passpoints at {len(fit.zooms)} zoom steps, focal "
-                   f"{fit.focals_mm[0]:.2f}–{fit.focals_mm[-1]:.2f} mm, clock offset "
+                   f"{fit.focals_px[0]:.0f}–{fit.focals_px[-1]:.0f} px, clock offset "
                    f"{1e3 * (first.time_offset_s or 0.0):.1f} ms")
 
     def _take(self, pose: m.CameraPose, report: dict, summary: str) -> None:

@@ -21,6 +21,7 @@ import numpy as np
 
 from common.camera import Intrinsics, Pose, reprojection_px
 from common.passpoints import CalibrationError, Passpoints, Track
+from common.ptz_lens import AXIS_215_PICTURE_PX
 from services.calib.cost import Fitness
 from services.calib.joint import best_offset_on_grid, refine_jointly
 from services.calib.options import Options
@@ -29,14 +30,15 @@ from services.calib.search import SearchMethod, search
 
 MIN_PASSPOINTS = 6
 JOINT_ROUNDS = 4
-FOCAL_SEARCH_MM = (3.0, 60.0)
+FOCAL_SEARCH_WIDTHS = (3.0 / 3.6, 60.0 / 3.6)  # focal lengths in picture widths: 3–60 mm on
+                                              # the AXIS 215's 3.6 mm wide chip
 FOCAL_SEARCH_STEPS = 32
 
 
 @dataclass(frozen=True)
 class Solution:
     pose: Pose
-    focal_mm: float
+    focal_px: float
     mean_error_px: float
     evaluations: int
     seconds: float
@@ -48,6 +50,10 @@ class Solution:
     position_std_mm: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
     orientation_std_deg: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
     fitness_curve: list[tuple[int, float]] = field(default_factory=list)
+    picture_px: tuple[int, int] = AXIS_215_PICTURE_PX  # the snapshots' size
+
+    def intrinsics(self) -> Intrinsics:
+        return Intrinsics(self.focal_px, *self.picture_px)
 
     def report(self) -> dict:
         """The JSON that ``stb calib solve --json`` prints."""
@@ -61,7 +67,7 @@ class Solution:
             "inliers": self.inliers.tolist(),
             "rejected": sorted(set(range(len(self.residuals_px))) - set(self.inliers.tolist())),
             "method": self.method,
-            "focal_mm": round(self.focal_mm, 4),
+            "focal_px": round(self.focal_px, 2),
             "position_std_mm": [round(float(v), 3) for v in self.position_std_mm],
             "orientation_std_deg": [round(float(v), 5) for v in self.orientation_std_deg],
         }
@@ -102,7 +108,7 @@ def solve(points: Passpoints, options: Options = Options()) -> Solution:
     prepare(options)  # imports are not the solve's time (warm_up: nor the first calls)
     started = time.perf_counter()
     check_input(points, options)
-    intr = Intrinsics(options.focal_mm)
+    intr = options.intrinsics()
     if options.fit_focal and options.method == "auto":
         intr = _focal_seed(points, options)
     points = _at_offset(points, options.track, 0.0)
@@ -121,10 +127,10 @@ def solve(points: Passpoints, options: Options = Options()) -> Solution:
                                               points.pixels[inliers], intr)
                                      if len(inliers) > MIN_PASSPOINTS else
                                      (np.full(3, np.inf), np.full(3, np.inf)))
-    solution = Solution(pose, intr.focal_mm, float(np.mean(residuals[inliers])) if len(inliers)
+    solution = Solution(pose, intr.focal_px, float(np.mean(residuals[inliers])) if len(inliers)
                         else np.inf, evaluations, time.perf_counter() - started, inliers,
                         residuals, options.method, points.world_mm, offset, position_std,
-                        orientation_std, curve)
+                        orientation_std, curve, options.picture_px)
     check_result(solution, points, options)
     return solution
 
@@ -161,8 +167,8 @@ def check_input(points: Passpoints, options: Options) -> None:
             raise CalibrationError("every passpoint is behind the camera at the initial guess "
                                    "(x ≤ 0 along its optical axis): check the guess's "
                                    "orientation, or use method auto, which needs no guess")
-    if not 0 < options.focal_mm < 1000:
-        raise CalibrationError(f"focal length {options.focal_mm} mm is not plausible")
+    if not 0 < options.focal_px < 1e5:
+        raise CalibrationError(f"focal length {options.focal_px} px is not plausible")
 
 
 def check_result(solution: Solution, points: Passpoints, options: Options) -> None:
@@ -220,7 +226,7 @@ def _joint(pose: Pose, points: Passpoints, inliers: np.ndarray, intr: Intrinsics
     for _ in range(JOINT_ROUNDS):
         fit = refine_jointly(pose, points.subset(inliers), intr, fit_focal=options.fit_focal,
                              track=options.track, time_offset_s=offset or 0.0)
-        pose, intr, offset = fit.pose, intr.with_focal(fit.focal_mm), fit.time_offset_s
+        pose, intr, offset = fit.pose, intr.with_focal(fit.focal_px), fit.time_offset_s
         evaluations += fit.evaluations
         again = np.flatnonzero(_residuals(pose, points, intr, options.track, offset)
                                <= options.inlier_px)
@@ -245,11 +251,13 @@ def _residuals(pose: Pose, points: Passpoints, intr: Intrinsics, track: Track | 
 
 
 def _focal_seed(points: Passpoints, options: Options) -> Intrinsics:
-    """For a focal-length fit: the lens focal length (on a geometric grid over the AXIS 215
+    """For a focal-length fit: the lens focal length (on a geometric grid over a PTZ zoom's
     range) at which RANSAC finds the most inliers with the lowest error."""
-    best: tuple[int, float, float] = (-1, np.inf, options.focal_mm)
-    for focal in np.geomspace(*FOCAL_SEARCH_MM, FOCAL_SEARCH_STEPS):
-        intr = Intrinsics(float(focal))
+    best: tuple[int, float, float] = (-1, np.inf, options.focal_px)
+    width = options.picture_px[0]
+    shortest, longest = (width * w for w in FOCAL_SEARCH_WIDTHS)
+    for focal in np.geomspace(shortest, longest, FOCAL_SEARCH_STEPS):
+        intr = options.intrinsics(float(focal))
         seeded = ransac_seed(points.world_mm, points.pixels, intr, options.inlier_px,
                              options.seed)
         if seeded is None:
@@ -259,4 +267,4 @@ def _focal_seed(points: Passpoints, options: Options) -> Intrinsics:
                                               points.pixels[inliers], intr)))
         if (len(inliers), -error) > (best[0], -best[1]):
             best = (len(inliers), error, float(focal))
-    return Intrinsics(best[2])
+    return options.intrinsics(best[2])

@@ -38,9 +38,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="auto: SQPnP + RANSAC + LM, no guess (default); cmaes / simplex: "
                              "the paper's searches from --initial")
     focal = parser.add_mutually_exclusive_group()
-    focal.add_argument("--focal-mm", type=float, default=3.8,
-                       help="focal length of the images (default 3.8, the AXIS 215 at wide)")
+    focal.add_argument("--focal-px", type=float, default=None,
+                       help="focal length of the images in pixels (default the AXIS 215's "
+                       "3.8 mm at wide in its picture: 743)")
     focal.add_argument("--fit-focal", action="store_true", help="fit the focal length too")
+    parser.add_argument("--picture", type=_picture_size, default=(704, 576), metavar="WxH",
+                        help="the snapshots' size in pixels (default 704x576, the AXIS 215's)")
     parser.add_argument("--mocap-track", type=Path, help="CSV: t,X,Y,Z; fits the clock offset")
     parser.add_argument("--max-offset-s", type=float, default=0.5,
                         help="largest clock offset searched (default 0.5 s)")
@@ -58,7 +61,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         points = read_passpoints(args.passpoints)
         options = Options(method=args.method, initial=_parse_pose(args.initial),
-                          focal_mm=args.focal_mm, fit_focal=args.fit_focal,
+                          **({} if args.focal_px is None else {"focal_px": args.focal_px}),
+                          fit_focal=args.fit_focal, picture_px=args.picture,
                           track=read_track(args.mocap_track) if args.mocap_track else None,
                           max_time_offset_s=args.max_offset_s, inlier_px=args.inlier_px,
                           seed=args.seed)
@@ -102,12 +106,21 @@ def _solve_zooms(points: Passpoints, options: Options, args: argparse.Namespace)
 def _human_zooms(report: dict) -> str:
     lines = [*_pose_lines(report),
              f"error       {report['mean_error_px']:.2f} px mean over every zoom's inliers",
-             "zoom    focal mm  k1       k2       p1        p2        k3       px   points"]
+             "zoom    focal px  k1       k2       p1        p2        k3       px   points"]
     for at in report["lens"]:
         k1, k2, p1, p2, k3 = at["distortion"]
-        lines.append(f"{at['zoom']:<7d} {at['focal_mm']:8.3f}  {k1:+.4f} {k2:+.4f} {p1:+.5f} "
+        lines.append(f"{at['zoom']:<7d} {at['focal_px']:8.1f}  {k1:+.4f} {k2:+.4f} {p1:+.5f} "
                      f"{p2:+.5f} {k3:+.4f} {at['mean_error_px']:5.2f} {at['passpoints']:4d}")
     return "\n".join(lines + _clock_and_plots(report))
+
+
+def _picture_size(text: str) -> tuple[int, int]:
+    width, _, height = text.lower().partition("x")
+    if not (width.isdigit() and height.isdigit() and 0 < int(width) <= 8192
+            and 0 < int(height) <= 8192):
+        raise argparse.ArgumentTypeError(f"{text!r}: a picture's size is WIDTHxHEIGHT in "
+                                         "pixels, as 1920x1080")
+    return int(width), int(height)
 
 
 def _parse_pose(text: str | None) -> Pose | None:
@@ -141,7 +154,7 @@ def _human(report: dict) -> str:
     lines = [*_pose_lines(report),
              "1σ          ±{:.1f} ±{:.1f} ±{:.1f} mm, ±{:.3f} ±{:.3f} ±{:.3f} deg".format(
                  *report["position_std_mm"], *report["orientation_std_deg"]),
-             f"focal       {report['focal_mm']:.3f} mm",
+             f"focal       {report['focal_px']:.1f} px",
              f"error       {report['mean_error_px']:.2f} px mean over "
              f"{len(report['inliers'])} inliers; rejected {report['rejected'] or 'none'}",
              f"method      {report['method']}, {report['evaluations']} evaluations, "

@@ -7,7 +7,7 @@ import numpy as np
 
 from common.camera import Intrinsics, Pose, project, undistort_pixels
 from common.passpoints import AtZoom, Passpoints, Track
-from common.ptz_lens import PtzLens
+from common.ptz_lens import PtzLens, axis_215
 
 PAPER_POSE = Pose(3413.0, 1093.0, 2163.0, 197.0, 27.0, 159.0)
 """Near the paper's optimum for its camera (Table 2)."""
@@ -32,7 +32,7 @@ def passpoints(pose: Pose, rng: np.random.Generator, count: int = 100, noise_px:
                                                                               np.ndarray]:
     """``count`` passpoints with Gaussian pixel noise; a fraction of them paired with a wrong
     pixel (≥ 40 px away). Returns the passpoints and the indices of the wrong ones."""
-    intr = Intrinsics(focal_mm)
+    intr = axis_215(focal_mm)
     world = points_in_view(pose, intr, rng, count)
     pixels = project(world, pose, intr) + rng.normal(0.0, noise_px, (count, 2))
     wrong = np.sort(rng.choice(count, int(round(wrong_fraction * count)), replace=False))
@@ -52,7 +52,7 @@ def moving_marker(pose: Pose, rng: np.random.Generator, *, count: int = 100,
     """A marker carried at constant speed between points in view; the camera's clock runs
     ``offset_s`` behind the mocap's (mocap time = camera time + offset_s). Returns passpoints
     with image times (camera clock) and the mocap track."""
-    intr = Intrinsics(3.8)
+    intr = axis_215(3.8)
     waypoints = points_in_view(pose, intr, rng, 40, margin_px=40.0)
     legs = np.linalg.norm(np.diff(waypoints, axis=0), axis=1) / speed_mm_s
     key_t = np.concatenate([[0.0], np.cumsum(legs)])

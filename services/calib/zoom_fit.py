@@ -21,7 +21,7 @@ import numpy as np
 from common.camera import Intrinsics, Pose, project
 from common.lens import NO_DISTORTION
 from common.passpoints import AtZoom, CalibrationError, Passpoints
-from common.ptz_lens import STRAIGHT_LINE, Distortion, PtzLens, measured_lens
+from common.ptz_lens import AXIS_215_PICTURE_PX, Distortion, PtzLens, measured_lens
 from services.calib.solve import Options, Solution, solve
 
 PRIOR_PX = np.array([0.5, 0.5, 0.5, 0.5, 5.0])
@@ -34,22 +34,24 @@ POSE_PARAMS, LENS_PARAMS = 6, 6  # rotation vector + position; focal + five coef
 class ZoomFit:
     pose: Pose  # the head's pose at the hold (pan and tilt of the collection)
     zooms: tuple[int, ...]
-    focals_mm: tuple[float, ...]
+    focals_px: tuple[float, ...]  # in pixels of the picture the passpoints are in
     distortions: tuple[Distortion, ...]
     residuals_px: tuple[np.ndarray, ...]  # every passpoint's, per zoom
     inliers: tuple[np.ndarray, ...]  # indices per zoom
     evaluations: int
+    picture_px: tuple[int, int] = AXIS_215_PICTURE_PX
 
     def lens(self) -> PtzLens:
-        return measured_lens(list(zip(self.zooms, self.focals_mm, self.distortions,
-                                      strict=True)))
+        return measured_lens(list(zip(self.zooms, self.focals_px, self.distortions,
+                                      strict=True)), width_px=self.picture_px[0],
+                             height_px=self.picture_px[1])
 
     def at_zoom(self) -> list[dict]:
         """Per zoom: the step, focal length, distortion, inliers and their mean error."""
-        return [{"zoom": z, "focal_mm": round(f, 4), "distortion": [round(c, 6) for c in d],
+        return [{"zoom": z, "focal_px": round(f, 2), "distortion": [round(c, 6) for c in d],
                  "passpoints": len(self.inliers[i]), "mean_error_px": round(
                      self.mean_error_px(i), 4)}
-                for i, (z, f, d) in enumerate(zip(self.zooms, self.focals_mm, self.distortions,
+                for i, (z, f, d) in enumerate(zip(self.zooms, self.focals_px, self.distortions,
                                                   strict=True))]
 
     def report(self) -> dict:
@@ -69,24 +71,27 @@ class ZoomFit:
         return float(np.mean(errors)) if len(errors) else float("inf")
 
 
-def closed_form_focal_mm(pose: Pose, world_mm: np.ndarray, pixels: np.ndarray,
+def closed_form_focal_px(pose: Pose, world_mm: np.ndarray, pixels: np.ndarray,
                          intr: Intrinsics) -> float:
     """The focal length that puts the passpoints nearest their pixels for a known pose
-    (pinhole: u − c_u = f · y/x / pixel pitch, least squares over u and v)."""
+    (pinhole: u − c_u = f · y/x, v − c_v = f · aspect · z/x; least squares over u and v);
+    ``intr``: the picture (its focal length is not used)."""
     cam = pose.to_camera(world_mm)
     ahead = cam[:, 0] > 0
     if ahead.sum() < 2:
         raise CalibrationError("the passpoints are behind the camera")
     cam, px = cam[ahead], pixels[ahead]
-    a = np.concatenate([cam[:, 1] / cam[:, 0] * intr.width_px / intr.chip_width_mm,
-                        cam[:, 2] / cam[:, 0] * intr.height_px / intr.chip_height_mm])
+    unit = intr.with_focal(1.0)
+    a = np.concatenate([cam[:, 1] / cam[:, 0] * unit.fy_px, cam[:, 2] / cam[:, 0] * unit.fz_px])
     b = np.concatenate([px[:, 0] - intr.cy_px, px[:, 1] - intr.cz_px])
     return float(a @ b / (a @ a))
 
 
-def fit_zooms(sets: list[AtZoom], pose: Pose, focals_mm: list[float], *,
-              width_px: int = 704, height_px: int = 576, inlier_px: float = 10.0) -> ZoomFit:
-    """The joint fit, from a start ``pose`` and a focal length per set."""
+def fit_zooms(sets: list[AtZoom], pose: Pose, focals_px: list[float], *,
+              picture_px: tuple[int, int] = AXIS_215_PICTURE_PX, inlier_px: float = 10.0
+              ) -> ZoomFit:
+    """The joint fit, from a start ``pose`` and a focal length per set (pixels of a
+    ``picture_px`` picture)."""
     from scipy.optimize import least_squares  # only to fit
     from scipy.spatial.transform import Rotation
 
@@ -97,11 +102,10 @@ def fit_zooms(sets: list[AtZoom], pose: Pose, focals_mm: list[float], *,
         if len(s.pixels) < MIN_PER_ZOOM:
             raise CalibrationError(f"zoom {s.zoom}: {len(s.pixels)} passpoints, at least "
                                    f"{MIN_PER_ZOOM} needed")
-    base = Intrinsics(1.0, width_px=width_px, height_px=height_px)
     start = np.concatenate([Rotation.from_matrix(pose.rotation).as_rotvec(), pose.position,
-                            *[[f, *NO_DISTORTION] for f in focals_mm]])
+                            *[[f, *NO_DISTORTION] for f in focals_px]])
     scale = np.concatenate([[0.01] * 3, [10.0] * 3,
-                            *[[0.05 * f, 0.01, 0.01, 0.001, 0.001, 0.01] for f in focals_mm]])
+                            *[[0.05 * f, 0.01, 0.01, 0.001, 0.001, 0.01] for f in focals_px]])
     kept = [np.arange(len(s.pixels)) for s in sets]
 
     def unpack(p: np.ndarray) -> tuple[Pose, list[Intrinsics]]:
@@ -109,8 +113,8 @@ def fit_zooms(sets: list[AtZoom], pose: Pose, focals_mm: list[float], *,
         lenses = []
         for i in range(len(sets)):
             f, *d = p[POSE_PARAMS + LENS_PARAMS * i: POSE_PARAMS + LENS_PARAMS * (i + 1)]
-            lenses.append(Intrinsics(float(f), base.chip_width_mm, base.chip_height_mm,
-                                     width_px, height_px, (d[0], d[1], d[2], d[3], d[4])))
+            lenses.append(Intrinsics(float(f), *picture_px,
+                                     distortion=(d[0], d[1], d[2], d[3], d[4])))
         return fitted, lenses
 
     def residuals(p: np.ndarray) -> np.ndarray:
@@ -142,9 +146,10 @@ def fit_zooms(sets: list[AtZoom], pose: Pose, focals_mm: list[float], *,
     order = np.argsort([s.zoom for s in sets])
     return ZoomFit(Pose.from_matrix(fitted.rotation, fitted.position),
                    tuple(sets[i].zoom for i in order),
-                   tuple(lenses[i].focal_mm for i in order),
+                   tuple(lenses[i].focal_px for i in order),
                    tuple(lenses[i].distortion for i in order),
-                   tuple(errors[i] for i in order), tuple(kept[i] for i in order), evaluations)
+                   tuple(errors[i] for i in order), tuple(kept[i] for i in order), evaluations,
+                   picture_px)
 
 
 def solve_zooms(by_zoom: dict[int, Passpoints], options: Options) -> tuple[ZoomFit, Solution]:
@@ -155,21 +160,22 @@ def solve_zooms(by_zoom: dict[int, Passpoints], options: Options) -> tuple[ZoomF
         raise CalibrationError("a lens across the zoom range needs passpoints at two or more "
                                "zoom steps")
     widest = min(by_zoom)
-    first = solve(by_zoom[widest], replace(options, fit_focal=True,
-                                           focal_mm=STRAIGHT_LINE.focal_mm(widest)))
+    seed = PtzLens().intrinsics(widest, *options.picture_px).focal_px  # the data sheet's
+    first = solve(by_zoom[widest], replace(options, fit_focal=True, focal_px=seed))
     sets = []
     for zoom, points in sorted(by_zoom.items()):
         world = points.world_mm
         if options.track is not None and points.times_s is not None:
             world = options.track.at(points.times_s + (first.time_offset_s or 0.0))
         sets.append(AtZoom(zoom, world, points.pixels))
-    unit = Intrinsics(1.0)
-    focals = [first.focal_mm if s.zoom == widest else
-              closed_form_focal_mm(first.pose, s.world_mm, s.pixels, unit) for s in sets]
-    fit = fit_zooms(sets, first.pose, focals, inlier_px=options.inlier_px)
-    if np.any(np.diff(fit.focals_mm) <= 0):
+    picture = options.intrinsics()
+    focals = [first.focal_px if s.zoom == widest else
+              closed_form_focal_px(first.pose, s.world_mm, s.pixels, picture) for s in sets]
+    fit = fit_zooms(sets, first.pose, focals, picture_px=options.picture_px,
+                    inlier_px=options.inlier_px)
+    if np.any(np.diff(fit.focals_px) <= 0):
         raise CalibrationError("the fitted focal lengths do not grow with the zoom step ("
-                               + ", ".join(f"{z}: {f:.2f} mm" for z, f in
-                                           zip(fit.zooms, fit.focals_mm, strict=True))
+                               + ", ".join(f"{z}: {f:.0f} px" for z, f in
+                                           zip(fit.zooms, fit.focals_px, strict=True))
                                + "): too few passpoints at some zoom, or the zoom moved?")
     return fit, first

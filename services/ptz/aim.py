@@ -76,15 +76,14 @@ def aim_error_deg(target_world: np.ndarray, pose: Pose, pan_deg: float,
 
 
 def zoom_for_size(distance_mm: float, *, object_mm: float, image_fraction: float,
-                  chip_height_mm: float = 2.7, limits: PtzLimits = DEFAULT_LIMITS,
-                  lens: PtzLens = STRAIGHT_LENS) -> int:
+                  limits: PtzLimits = DEFAULT_LIMITS, lens: PtzLens = STRAIGHT_LENS) -> int:
     """Zoom step that makes an object of ``object_mm`` fill ``image_fraction`` of the image
     height at ``distance_mm`` (beyond the paper: constant apparent size), read off the
     lens's zoom curve (measured, or the data sheet's straight line)."""
     if distance_mm <= 0 or object_mm <= 0 or not 0 < image_fraction <= 1:
         raise ValueError("distance, object size and image fraction must be positive")
-    focal = image_fraction * chip_height_mm * distance_mm / object_mm
-    zoom = lens.zoom_for_focal(focal)
+    half_view = math.degrees(math.atan(object_mm / image_fraction / 2 / distance_mm))
+    zoom = lens.zoom_for_view(half_view)
     return int(min(max(zoom, limits.min_zoom), limits.max_zoom))
 
 

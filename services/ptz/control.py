@@ -19,7 +19,7 @@ import numpy as np
 from common import messages as m
 from common.backoff import doubled
 from common.camera import Pose, PtzLimits
-from common.ptz_lens import PtzLens, measured_lens
+from common.ptz_lens import PtzLens, lens_of
 from services.ptz.aim import aim_error_deg
 from services.ptz.follow import Command, Follower
 from services.ptz.override import ManualOverride
@@ -80,8 +80,7 @@ class PtzControl:
         self.pointing.forget()
         self.infrared.again()
         self.pose_msg, self.pose = msg, Pose.of(msg)
-        self.follower.lens = measured_lens(
-            [(p.zoom, p.focal_mm, p.distortion) for p in msg.lens])
+        self.follower.lens = lens_of(msg)
         return "taken"
 
     def command(self, msg: m.RobotPosition, now: float, calibrating: bool) -> Command | None:

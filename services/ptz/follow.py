@@ -20,8 +20,6 @@ from common.ptz_lens import PtzLens
 from common.volume import Volume
 from services.ptz.aim import aim_at, aim_error_deg, predict, zoom_for_size
 
-CHIP_HEIGHT_MM = 2.7  # the AXIS 215's 1/4-inch chip (Table 1): the narrower field of view
-
 
 @dataclass(frozen=True)
 class Command:
@@ -60,8 +58,8 @@ class Follower:
         self._seen = (pan_deg, tilt_deg, zoom)
 
     def half_view_deg(self, zoom: float) -> float:
-        """Half the picture's height as an angle at ``zoom`` (the lens's focal length)."""
-        return math.degrees(math.atan(CHIP_HEIGHT_MM / 2 / self.lens.focal_mm(zoom)))
+        """Half the picture's height as an angle at ``zoom`` (the narrower field of view)."""
+        return self.lens.half_view_deg(zoom)
 
     def forget(self) -> None:
         """Send the next command whatever the last one was (the camera was moved away)."""
@@ -104,9 +102,8 @@ class Follower:
         pan, tilt, zoom = self._seen
         off = aim_error_deg(target, pose, pan, tilt)
         if off > self.central * self.half_view_deg(zoom):
-            focal = CHIP_HEIGHT_MM / 2 / math.tan(math.radians(min(1.5 * off / self.central,
-                                                                    80.0)))
-            wider = max(min(self.lens.zoom_for_focal(focal), wanted), self.limits.min_zoom)
+            view = self.lens.zoom_for_view(min(1.5 * off / self.central, 80.0))
+            wider = max(min(view, wanted), self.limits.min_zoom)
             self._backed_out = wider if self._backed_out is None else min(wider,
                                                                           self._backed_out)
             return self._backed_out

@@ -298,7 +298,7 @@ class PtzLoop:
         pan, tilt, zoom = self.control.on_the_wire(pan, tilt, zoom)
         self.node.bus.publish(keys.PTZ_STATE, m.PtzState(
             measured_s=now, camera=self.settings.instance, status=status,
-            pan_deg=pan, tilt_deg=tilt, zoom=zoom, focal_mm=self.control.lens.focal_mm(zoom),
+            pan_deg=pan, tilt_deg=tilt, zoom=zoom, focal_px=self.control.lens.focal_px(zoom),
             aim_error_deg=error, pointing_error_deg=pointing_error, pointing_problem=problem,
             held_by=held_by, presets=[m.name(p) for p in self.presets]),
             camera=self.settings.instance)

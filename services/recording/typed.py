@@ -294,8 +294,9 @@ class LabScene:
         if camera not in self.poses:
             return None
         state = self.heads.get(camera)
-        focal = state.focal_mm if state is not None else self.poses[camera].focal_mm
-        intr = Intrinsics(focal)
+        pose = self.poses[camera]
+        intr = Intrinsics(state.focal_px if state is not None else pose.focal_px,
+                          pose.width_px, pose.height_px)
         d = CONE_M / MM
         half_w, half_h = d * intr.cy_px / intr.fy_px, d * intr.cz_px / intr.fz_px
         corners = [_point(d, sy * half_w, sz * half_h)

@@ -13,10 +13,10 @@ import numpy as np
 
 from common import codec, keys
 from common import messages as m
-from common.camera import Intrinsics, Pose, head_pose, reprojection_px
+from common.camera import Pose, head_pose, reprojection_px
 from common.mcap_file import Sample, read_run
 from common.passpoint_collector import Collector
-from common.ptz_lens import measured_lens
+from common.ptz_lens import intrinsics_of
 
 STATE_MATCH_S = 0.5
 """A crane state is compared with the robot only if a robot sample lies this close."""
@@ -220,14 +220,12 @@ def calibration_residuals(rec: Recording, marker_label: str = "wand") -> dict[st
         track = collector.track()
         world = track.at(points.times_s + pose_msg.time_offset_s) if track.covers(
             points.times_s + pose_msg.time_offset_s) else points.world_mm
-        lens = measured_lens([(p.zoom, p.focal_mm, p.distortion) for p in pose_msg.lens])
         residuals = []
         for time_s, xyz, pixel in zip(points.times_s, world, points.pixels, strict=True):
             i = int(np.clip(np.searchsorted(st, time_s), 0, len(st) - 1))
             head = head_pose(mount, pan_tilt[i, 0], pan_tilt[i, 1])
             # through the measured lens at the zoom of the time; one zoom: the fitted focal
-            intr = lens.intrinsics(pan_tilt[i, 2]) if pose_msg.lens else \
-                Intrinsics(pose_msg.focal_mm)
+            intr = intrinsics_of(pose_msg, pan_tilt[i, 2])
             residuals.append(reprojection_px(head, xyz[None, :], pixel[None, :], intr)[0])
         out[camera] = np.array(residuals)
     return out

@@ -62,7 +62,7 @@ class ObservationView:
         return Pose.from_matrix(rotation, np.array([lens[0], lens[1], self.height_mm]))
 
     def intrinsics(self, width: int, height: int) -> Intrinsics:
-        return Intrinsics(self.focal_mm, self.chip_mm[0], self.chip_mm[1], width, height)
+        return Intrinsics.from_chip(self.focal_mm, self.chip_mm, width, height)
 
 
 def legs_mm(marker_mm: np.ndarray, heading_rad: float, ground_mm: float, phase_rad: float

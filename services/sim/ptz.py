@@ -110,8 +110,9 @@ class PtzHead:
                   + camera @ np.asarray(self.optical_centre_mm, float))
         return Pose.from_matrix(camera, centre)
 
-    def focal_mm(self, now: float) -> float:
-        return self.lens.focal_mm(self.state(now)[2])
+    def focal_px(self, now: float) -> float:
+        """Its focal length at the zoom of ``now``, in pixels of its own picture."""
+        return self.lens.focal_px(self.state(now)[2])
 
     def intrinsics(self, now: float, width_px: int, height_px: int) -> Intrinsics:
         """Its lens at the zoom of ``now``, for a picture of this size."""

@@ -16,7 +16,7 @@ from common.crane_registers import RegisterMap
 from common.lab_paths import SIM_CRATER_FILE
 from common.lens import NO_DISTORTION
 from common.pose_fields import PoseFields
-from common.ptz_lens import STRAIGHT_LINE, PtzLens, ZoomCurve
+from common.ptz_lens import AXIS_215_CHIP_MM, AXIS_215_PICTURE_PX, DATA_SHEET_MM, PtzLens, ZoomCurve
 from common.settings import NAME_PATTERN, ServiceSettings, above_its_minimum
 from common.tracking_camera import TrackingCameraModel
 from services.sim.crane import CraneParams
@@ -62,7 +62,7 @@ class PtzCameraSettings(PoseFields, _Section):
     mjpeg_fps: float = Field(2.0, gt=0, le=30, description="the MJPEG stream's frame rate "
                              "(mjpg/video.cgi) when the request names none")
     zoom_focal_mm: list[tuple[float, float]] = Field(
-        default_factory=STRAIGHT_LINE.points, min_length=2,
+        default_factory=DATA_SHEET_MM.points, min_length=2,
         max_length=64, description="the lens's truth: [zoom step, focal length mm] points, "
         "interpolated monotonically (PCHIP); default the AXIS 215's 3.8–46 mm spread evenly "
         "over steps 1–9999")
@@ -94,12 +94,15 @@ class PtzCameraSettings(PoseFields, _Section):
         return points
 
     def lens(self) -> PtzLens:
-        """The camera's true lens (only the sim knows it: calibration measures it)."""
-        curve = ZoomCurve.of(self.zoom_focal_mm)
-        if not any(self.distortion) and not any(self.distortion_long or ()):
-            return PtzLens(curve)
-        ends = (curve.focals_mm[0], curve.focals_mm[-1])
-        return PtzLens(curve, ends, (self.distortion, self.distortion_long or self.distortion))
+        """The camera's true lens in pixels of its picture (only the sim knows it:
+        calibration measures it), from its focal lengths in mm on its chip."""
+        width, height = AXIS_215_PICTURE_PX
+        chip_w, chip_h = AXIS_215_CHIP_MM
+        curve = ZoomCurve.of(self.zoom_focal_mm).scaled(width / chip_w)
+        bent = any(self.distortion) or any(self.distortion_long or ())
+        return PtzLens(curve, (curve.focals[0], curve.focals[-1]) if bent else (),
+                       (self.distortion, self.distortion_long or self.distortion) if bent
+                       else (), width, height, (height / chip_h) / (width / chip_w))
 
 
 def _default_cameras() -> list[PtzCameraSettings]:

@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 
 from common import messages as m
-from common.camera import Intrinsics, Pose, project
+from common.camera import Pose, project
 from common.passpoint_collector import Collector
 from common.passpoints import Passpoints, format_passpoints, read_passpoints, write_passpoints
+from common.ptz_lens import axis_215, axis_215_px
 from services.calib.solve_cli import main
 from services.calib.synthetic import (
     PAPER_GUESS,
@@ -45,7 +46,7 @@ def test_solve_cli_prints_the_promised_json_and_plots(tmp_path: Path, capsys) ->
     report = json.loads(capsys.readouterr().out)
     assert code == 0
     assert set(report) >= {"position_mm", "orientation_deg", "mean_error_px", "evaluations",
-                           "seconds", "inliers", "focal_mm"}
+                           "seconds", "inliers", "focal_px"}
     assert "time_offset_s" not in report, "only when a track is given"
     assert report["rejected"] == wrong.tolist()
     from common.camera import Pose
@@ -65,7 +66,7 @@ def test_solve_cli_with_a_track_and_a_fitted_focal_length(tmp_path: Path, capsys
     assert main([str(csv), "--mocap-track", str(track_csv), "--fit-focal", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert abs(report["time_offset_s"] - 0.1) < 0.01
-    assert abs(report["focal_mm"] / 3.8 - 1) < 0.02
+    assert abs(report["focal_px"] / axis_215_px(3.8) - 1) < 0.02
 
 
 @pytest.mark.parametrize(("content", "args", "code", "message"), [
@@ -100,7 +101,7 @@ def test_solve_cli_measures_the_lens_from_a_file_of_several_zooms(tmp_path: Path
     report = json.loads(capsys.readouterr().out)
     assert [at["zoom"] for at in report["lens"]] == [1, 5000, 8000, 9999]
     for at in report["lens"]:
-        assert at["focal_mm"] == pytest.approx(truth.focal_mm(at["zoom"]), rel=0.01)
+        assert at["focal_px"] == pytest.approx(truth.focal_px(at["zoom"]), rel=0.01)
     assert errors(Pose(*report["position_mm"], *report["orientation_deg"]),
                   PAPER_POSE)[0] < 10.0
     assert (tmp_path / "plots" / "lens.png").stat().st_size > 10_000
@@ -142,7 +143,7 @@ def _detections(t: float, spots: list[tuple[float, float]]) -> m.MarkerDetection
 
 
 def test_collector_interpolates_the_wand_and_ignores_what_stays_put() -> None:
-    intr = Intrinsics(3.8)
+    intr = axis_215(3.8)
     collector = Collector(target=1000, marker_label="wand", min_spacing_mm=50.0)
 
     def wand_at(t: float) -> np.ndarray:  # 500 mm/s along a slanted line in view
@@ -173,7 +174,7 @@ def test_collector_interpolates_the_wand_and_ignores_what_stays_put() -> None:
 def test_a_reflection_that_flickers_is_left_out_as_one_that_stays() -> None:
     """A reflection at the threshold (or the picture's edge) shows in every other snapshot
     only: it stays put while the wand moves, so it is not the wand."""
-    intr = Intrinsics(3.8)
+    intr = axis_215(3.8)
     collector = Collector(target=1000, marker_label="wand", min_spacing_mm=50.0)
 
     def wand_at(t: float) -> np.ndarray:
@@ -197,7 +198,7 @@ def test_a_reflection_that_flickers_is_left_out_as_one_that_stays() -> None:
 def test_a_snapshot_answered_later_than_usual_is_skipped_only_while_the_wand_moves() -> None:
     """The camera answers in about 40 ms; now and then a busy machine makes it 60 ms later:
     taken at 500 mm/s that is 30 mm of doubt (skipped, "late snapshot"); held still, none."""
-    intr = Intrinsics(3.8)
+    intr = axis_215(3.8)
     collector = Collector(target=1000, marker_label="wand", min_spacing_mm=1.0)
     rng = np.random.default_rng(3)
 

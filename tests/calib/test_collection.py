@@ -30,7 +30,7 @@ WIDTH, HEIGHT = 704, 576
 
 def _state(t: float, zoom: int = 1, pan: float = 0.0) -> m.PtzState:
     return m.PtzState(measured_s=t, camera="ptz1", status="calibrating", pan_deg=pan,
-                      tilt_deg=-4.0, zoom=zoom, focal_mm=3.8, aim_error_deg=0.0)
+                      tilt_deg=-4.0, zoom=zoom, focal_px=743.1, aim_error_deg=0.0)
 
 
 def _frame(t: float) -> m.MarkerFrame:

@@ -15,7 +15,7 @@ from services.calib.pose_rules import (
 
 SOLVED: dict[str, Any] = dict(
     measured_s=100.0, camera="ptz1", x_mm=3550.0, y_mm=1090.0, z_mm=2190.0, rx_deg=180.0,
-    ry_deg=30.0, rz_deg=165.0, focal_mm=3.8, mean_error_px=1.2, passpoints=100)
+    ry_deg=30.0, rz_deg=165.0, focal_px=743.1, mean_error_px=1.2, passpoints=100)
 
 
 def test_a_solve_is_one_version_above_the_held_pose() -> None:

@@ -23,7 +23,7 @@ from tests.conftest import wait_for
 
 SOLVED: dict[str, Any] = dict(
     camera="ptz1", x_mm=3550.0, y_mm=1090.0, z_mm=2190.0, rx_deg=180.0, ry_deg=30.0,
-    rz_deg=165.0, focal_mm=3.8, mean_error_px=1.2, passpoints=100)
+    rz_deg=165.0, focal_px=743.1, mean_error_px=1.2, passpoints=100)
 
 
 def _service(make_bus: Callable[..., Bus], data_dir: Path) -> tuple[Calib, Node]:

@@ -6,8 +6,9 @@ import cv2
 import numpy as np
 import pytest
 
-from common.camera import Intrinsics, Pose, pose_distance
+from common.camera import Pose, pose_distance
 from common.passpoints import CalibrationError, Passpoints
+from common.ptz_lens import axis_215, axis_215_px
 from services.calib.pnp import camera_matrix, pose_from_cv
 from services.calib.solve import Options, solve
 from services.calib.synthetic import PAPER_GUESS, PAPER_POSE, moving_marker, passpoints
@@ -33,7 +34,7 @@ errors = pose_distance
 
 
 def opencv_pnp_lm(points: Passpoints) -> Pose:
-    k = camera_matrix(Intrinsics(3.8))
+    k = camera_matrix(axis_215(3.8))
     _, rvec, tvec = cv2.solvePnP(points.world_mm, points.pixels, k, None)
     rvec, tvec = cv2.solvePnPRefineLM(points.world_mm, points.pixels, k, None, rvec, tvec)
     return pose_from_cv(rvec, tvec)
@@ -89,9 +90,10 @@ def test_focal_length_fitted_within_2_percent(method: str) -> None:
         points, _ = passpoints(truth, np.random.default_rng(5), focal_mm=focal)
         initial = None if method == "auto" else rough_guess(truth)
         solution = solve(points, Options(method=method, initial=initial,  # type: ignore[arg-type]
-                                         fit_focal=True, focal_mm=focal * start))
-        assert abs(solution.focal_mm / focal - 1) < 0.02, (method, focal, solution.focal_mm)
-        assert solution.report()["focal_mm"] == pytest.approx(solution.focal_mm, abs=1e-3)
+                                         fit_focal=True, focal_px=axis_215_px(focal * start)))
+        fitted = solution.focal_px / axis_215_px(focal)
+        assert abs(fitted - 1) < 0.02, (method, focal, solution.focal_px)
+        assert solution.report()["focal_px"] == pytest.approx(solution.focal_px, abs=0.01)
 
 
 def test_a_tenth_of_a_second_clock_offset_is_recovered_within_10_ms() -> None:
@@ -112,7 +114,7 @@ def test_the_report_has_every_field_the_cli_promises() -> None:
     points, _ = passpoints(PAPER_POSE, np.random.default_rng(2))
     report = solve(points, Options(method="cmaes", initial=PAPER_GUESS)).report()
     assert set(report) >= {"position_mm", "orientation_deg", "mean_error_px", "evaluations",
-                           "seconds", "inliers", "focal_mm"}
+                           "seconds", "inliers", "focal_px"}
     assert len(report["position_mm"]) == 3 and len(report["orientation_deg"]) == 3
     assert report["evaluations"] > 100 and 0 < report["seconds"] < 10
     assert all(-180 < a <= 180 for a in report["orientation_deg"])
@@ -156,6 +158,6 @@ def test_degenerate_input_gives_a_clear_error_never_a_pose(case: str, message: s
         rng = np.random.default_rng(9)
         points = Passpoints(points.world_mm, rng.uniform([0, 0], [704, 576], (30, 2)))
     elif case == "wrong focal length":
-        options = Options(focal_mm=12.0)
+        options = Options(focal_px=axis_215_px(12.0))
     with pytest.raises(CalibrationError, match=message):
         solve(points, options)

@@ -57,9 +57,9 @@ def test_the_solvers_never_load_in_the_service_and_the_fit_comes_back(tmp_path: 
         session.collection.collector.track = lambda: None
         session.store.save_inputs = lambda *args: None
         session._solve_zooms(m.PtzState(measured_s=0.0, camera="ptz1", status="calibrating",
-                                        pan_deg=0.0, tilt_deg=0.0, zoom=1, focal_mm=3.8,
+                                        pan_deg=0.0, tilt_deg=0.0, zoom=1, focal_px=743.1,
                                         aim_error_deg=0.0))
-        print(session.state, [(p.zoom, p.focal_mm) for p in poses[0].lens][-1])
+        print(session.state, [(p.zoom, p.focal_px) for p in poses[0].lens][-1])
         print(sorted(m for m in ("scipy", "cma", "matplotlib") if m in sys.modules))
         """)
     done = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True,
@@ -68,7 +68,7 @@ def test_the_solvers_never_load_in_the_service_and_the_fit_comes_back(tmp_path: 
     state, last = done.stdout.strip().splitlines()[-2].split(" ", 1)
     zoom, focal = last.strip("()").split(", ")
     assert state == "done" and int(zoom) == ZOOMS[-1]
-    assert abs(float(focal) / truth.focal_mm(ZOOMS[-1]) - 1) < 0.02
+    assert abs(float(focal) / truth.focal_px(ZOOMS[-1]) - 1) < 0.02
     assert done.stdout.strip().splitlines()[-1] == "[]"
     assert (tmp_path / "ptz1" / "lens.png").stat().st_size > 10_000
 

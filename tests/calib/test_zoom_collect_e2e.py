@@ -19,7 +19,7 @@ from common import keys
 from common import messages as m
 from common.bus import Bus
 from common.camera import Intrinsics, Pose, head_pose, project
-from common.ptz_lens import PtzLens, measured_lens
+from common.ptz_lens import PtzLens, axis_215_px, lens_of
 from tests.calib.test_collect_e2e import calibration_lab
 from tests.calib.test_solve import errors
 from tests.calib.test_zoom_fit import EDGE_BAND, STEPS, ZOOMS, distortion_error_px, drawn_lens
@@ -33,7 +33,8 @@ FOLLOW_S = 30.0  # 600 true views
 
 def with_lens(lab: Path, lens: PtzLens) -> None:
     """ptz1's lens in the sim's lab file, as a lab engineer would write it down."""
-    table = ", ".join(f"[{z:.0f}, {f!r}]" for z, f in lens.curve.points())
+    in_mm = lens.curve.scaled(1 / axis_215_px(1.0))  # on the sim's chip, the AXIS 215's
+    table = ", ".join(f"[{z:.0f}, {f!r}]" for z, f in in_mm.points())
     wide, long = lens.distortions
     text = lab.read_text().replace("rz_deg = 165\n", "rz_deg = 165\n"
                                    f"zoom_focal_mm = [{table}]\n"
@@ -131,8 +132,8 @@ def test_collect_at_several_zooms_measures_the_sim_cameras_lens(tmp_path: Path,
         following = follow(bus, FOLLOW_S)
     assert isinstance(pose, m.CameraPose) and [p.zoom for p in pose.lens] == ZOOMS
     assert (tmp_path / "calib" / "ptz1" / "lens.png").stat().st_size > 10_000
-    lens = measured_lens([(p.zoom, p.focal_mm, p.distortion) for p in pose.lens])
-    focal_error = max(abs(lens.focal_mm(z) / truth.focal_mm(z) - 1) for z in STEPS)
+    lens = lens_of(pose)
+    focal_error = max(abs(lens.focal_px(z) / truth.focal_px(z) - 1) for z in STEPS)
     distortion_px = distortion_error_px(lens.intrinsics(1), truth.intrinsics(1))
     covered_px = distortion_error_px(lens.intrinsics(1), truth.intrinsics(1), inset=EDGE_BAND)
     position, angle = errors(Pose.of(pose), PTZ1_MOUNT)

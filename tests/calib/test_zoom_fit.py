@@ -4,12 +4,14 @@ end fading towards the long end, in the sim's terms — fitted jointly with one 
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from common.camera import Intrinsics, pose_distance, project_camera, undistort_pixels
 from common.passpoints import CalibrationError, Passpoints
-from common.ptz_lens import PtzLens, ZoomCurve
+from common.ptz_lens import PtzLens, ZoomCurve, axis_215_px
 from services.calib.solve import Options, solve
 from services.calib.synthetic import PAPER_POSE, zoom_passpoints
 from services.calib.zoom_fit import solve_zooms
@@ -20,7 +22,8 @@ STEPS = [float(z) for z in range(1, 10000, 7)]  # every 7th zoom step, as the ca
 
 def drawn_lens(rng: np.random.Generator) -> PtzLens:
     """A table of twelve points of a smooth, bent curve (no line, no power law the code knows
-    of), and distortion at both ends, all drawn."""
+    of), and distortion at both ends, all drawn: focal lengths of 3.8 mm to 40–50 mm on the
+    AXIS 215's chip, in pixels of its picture."""
     zooms = np.round(np.linspace(1, 9999, 12))  # whole steps, as a lab file would list them
     bend = rng.uniform(1.5, 3.0)
     long_mm = rng.uniform(40.0, 50.0)
@@ -28,6 +31,7 @@ def drawn_lens(rng: np.random.Generator) -> PtzLens:
     wide = (rng.uniform(-0.35, -0.15), rng.uniform(0.03, 0.15), rng.uniform(-2e-3, 2e-3),
             rng.uniform(-2e-3, 2e-3), rng.uniform(-0.02, 0.02))
     long = [float(c) for c in rng.uniform(-0.05, 0.05, 5) * [1, 1, 0.01, 0.01, 0]]
+    focal = focal * axis_215_px(1.0)
     return PtzLens(ZoomCurve(tuple(float(z) for z in zooms), tuple(float(f) for f in focal)),
                    (float(focal[0]), float(focal[-1])),
                    (wide, (long[0], long[1], long[2], long[3], long[4])))
@@ -56,7 +60,7 @@ def distortion_error_px(fitted: Intrinsics, truth: Intrinsics, inset: float = 0.
     straight = undistort_pixels(seen, truth)
     rays = np.column_stack([np.ones(len(seen)), (straight[:, 0] - truth.cy_px) / truth.fy_px,
                             (straight[:, 1] - truth.cz_px) / truth.fz_px])
-    bent = project_camera(rays, Intrinsics(truth.focal_mm, distortion=fitted.distortion))
+    bent = project_camera(rays, replace(truth, distortion=fitted.distortion))
     return float(np.max(np.linalg.norm(bent - seen, axis=1)))
 
 
@@ -67,7 +71,7 @@ def test_focal_within_2_percent_everywhere_and_distortion_within_1_px(seed: int)
     sets = zoom_passpoints(PAPER_POSE, truth, ZOOMS, rng, count=100)
     fit, _ = solve_zooms(_as_passpoints(sets), Options())
     lens = fit.lens()
-    focal_error = max(abs(lens.focal_mm(z) / truth.focal_mm(z) - 1) for z in STEPS)
+    focal_error = max(abs(lens.focal_px(z) / truth.focal_px(z) - 1) for z in STEPS)
     assert focal_error < 0.02, f"{100 * focal_error:.2f} %"
     assert distortion_error_px(lens.intrinsics(1), truth.intrinsics(1)) <= 1.0
     position, angle = pose_distance(fit.pose, PAPER_POSE)
@@ -84,7 +88,7 @@ def test_the_straight_line_is_far_off_such_a_lens() -> None:
     """What the fit is for: the data sheet's line misses a bent curve by far more than 2 %."""
     truth = drawn_lens(np.random.default_rng(0))
     line = PtzLens()
-    assert max(abs(line.focal_mm(z) / truth.focal_mm(z) - 1) for z in STEPS) > 0.3
+    assert max(abs(line.focal_px(z) / truth.focal_px(z) - 1) for z in STEPS) > 0.3
 
 
 def test_one_zoom_or_too_few_passpoints_at_one_is_refused_saying_why() -> None:
@@ -111,7 +115,7 @@ def test_geometry_driven_zoom_keeps_the_robots_size_with_the_measured_lens() -> 
     for distance in np.linspace(2500.0, 6000.0, 30):
         for name, lens in (("measured", fit.lens()), ("straight line", PtzLens())):
             zoom = zoom_for_size(distance, object_mm=500.0, image_fraction=0.3, lens=lens)
-            seen = 500.0 * truth.focal_mm(zoom) / distance / 2.7  # of the picture's height
+            seen = 500.0 * truth.intrinsics(zoom).fz_px / distance / 576  # of its height
             worst[name] = max(worst[name], abs(seen / 0.3 - 1))
     assert worst["measured"] <= 0.10, worst
     assert worst["straight line"] > 0.25, worst

@@ -6,24 +6,24 @@ import numpy as np
 import pytest
 
 from common.camera import (
-    Intrinsics,
     Pose,
     euler_xyz_deg,
     project,
     rotation_xyz,
     thin_lens_image_distance_mm,
 )
+from common.ptz_lens import axis_215
 
 
 def test_axis_215_intrinsics_of_table_1() -> None:
-    intr = Intrinsics(3.8)
+    intr = axis_215(3.8)
     assert intr.fy_px == pytest.approx(3.8 / (3.6 / 704))
     assert intr.fz_px == pytest.approx(3.8 / (2.7 / 576))
     assert (intr.cy_px, intr.cz_px) == (352, 288)
 
 
 def test_identity_pose_projects_by_equation_3() -> None:
-    intr = Intrinsics(3.8)
+    intr = axis_215(3.8)
     uv = project(np.array([[2000.0, 100.0, -50.0]]), Pose(0, 0, 0, 0, 0, 0), intr)
     assert uv[0, 0] == pytest.approx(intr.fy_px * 100 / 2000 + 352)
     assert uv[0, 1] == pytest.approx(intr.fz_px * -50 / 2000 + 288)
@@ -52,7 +52,7 @@ def test_paper_estimate_looks_at_the_crater_centre() -> None:
 
 def test_points_behind_the_camera_do_not_project() -> None:
     uv = project(np.array([[-10.0, 0, 0], [10.0, 0, 0]]), Pose(0, 0, 0, 0, 0, 0),
-                 Intrinsics(3.8))
+                 axis_215(3.8))
     assert np.isnan(uv[0]).all() and np.isfinite(uv[1]).all()
 
 

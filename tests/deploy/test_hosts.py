@@ -135,7 +135,7 @@ def _serve_true_pose(calib: Bus) -> None:
     pose, and publish it (a PTZ service takes a pose only from such an answer)."""
     cam = SimSettings().cameras[0]
     pose = m.CameraPose(measured_s=time.time(), camera=cam.name, **Pose.of(cam).fields(),
-                        focal_mm=3.8, mean_error_px=0.5, passpoints=100)
+                        focal_px=743.1, mean_error_px=0.5, passpoints=100)
     calib.serve_latest(keys.CALIB_POSE, lambda: pose, camera=cam.name)
     calib.publish(keys.CALIB_POSE, pose, camera=cam.name)
 

@@ -24,7 +24,7 @@ from tests.conftest import ROOT, stb_process
 def _pose_msg(pose: Pose, camera: str = "ptz1") -> m.CameraPose:
     return m.CameraPose(measured_s=0.0, camera=camera, x_mm=pose.x_mm, y_mm=pose.y_mm,
                         z_mm=pose.z_mm, rx_deg=pose.rx_deg, ry_deg=pose.ry_deg,
-                        rz_deg=pose.rz_deg, focal_mm=3.8, mean_error_px=1.0, passpoints=80)
+                        rz_deg=pose.rz_deg, focal_px=743.1, mean_error_px=1.0, passpoints=80)
 
 
 def _calibration_run(pose_msg: m.CameraPose, rng: np.random.Generator) -> Recording:

@@ -216,7 +216,7 @@ def test_2_calibration_progress_per_camera(tab: object, quiet: Quiet) -> None:
     _progress(quiet, "ptz1", "collecting", 12)  # 12 in 30 s: 28 more take about 70 s
     quiet.bus.publish(keys.PTZ_STATE, m.PtzState(
         measured_s=time.time(), camera="ptz1", status="calibrating", pan_deg=10.0,
-        tilt_deg=-20.0, zoom=1, focal_mm=3.8, aim_error_deg=0.0), camera="ptz1")
+        tilt_deg=-20.0, zoom=1, focal_px=743.1, aim_error_deg=0.0), camera="ptz1")
     picture = np.full((576, 704), 40, np.uint8)
     cv2.circle(picture, (300, 200), 6, 255, -1)  # the wand's marker
     jpeg = cv2.imencode(".jpg", picture)[1].tobytes()

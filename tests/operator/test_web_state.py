@@ -24,7 +24,7 @@ from tests.calib.test_demo_calibration import MOUNTS
 
 def _pose(camera: str = "ptz1") -> m.CameraPose:
     mount = MOUNTS[camera]
-    return m.CameraPose(measured_s=1.0, camera=camera, **mount.fields(), focal_mm=3.8,
+    return m.CameraPose(measured_s=1.0, camera=camera, **mount.fields(), focal_px=743.1,
                         mean_error_px=1.2, passpoints=90)
 
 
@@ -68,7 +68,7 @@ def test_cameras_show_pose_direction_and_preview_but_not_the_jpeg_in_the_json() 
     older = _pose().model_copy(update={"measured_s": 0.5, "x_mm": 0.0})
     state.on_message(older)
     state.on_message(m.PtzState(measured_s=2.0, camera="ptz1", status="tracking", pan_deg=-10,
-                                tilt_deg=-8, zoom=1, focal_mm=3.8, aim_error_deg=0.3))
+                                tilt_deg=-8, zoom=1, focal_px=743.1, aim_error_deg=0.3))
     state.on_message(m.PtzPreview(measured_s=2.0, camera="ptz1", seq=7, width_px=704,
                                   height_px=576, jpeg=b"\xff\xd8jpeg", pan_deg=-10, tilt_deg=-8,
                                   markers=[], robot_px=[350.0, 290.0]))

@@ -84,7 +84,7 @@ class LocalBus:
 
 def true_pose(measured_s: float) -> m.CameraPose:
     """ptz1's pose as the calibration service would measure it, without error."""
-    return m.CameraPose(measured_s=measured_s, camera="ptz1", **MOUNT.fields(), focal_mm=3.8,
+    return m.CameraPose(measured_s=measured_s, camera="ptz1", **MOUNT.fields(), focal_px=743.1,
                         mean_error_px=1.0, passpoints=100)
 
 

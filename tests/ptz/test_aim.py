@@ -11,7 +11,7 @@ import pytest
 
 from common import messages as m
 from common.camera import Pose
-from common.ptz_lens import STRAIGHT_LINE, PtzLens, ZoomCurve
+from common.ptz_lens import STRAIGHT_LINE, PtzLens, ZoomCurve, axis_215_px
 from services.ptz.aim import (
     PtzLimits,
     aim_at,
@@ -82,16 +82,22 @@ def test_zoom_keeps_the_apparent_size() -> None:
     near = zoom_for_size(2000, object_mm=500, image_fraction=0.5)
     far = zoom_for_size(6000, object_mm=500, image_fraction=0.5)
     assert far > near
-    assert STRAIGHT_LINE.focal_mm(far) == pytest.approx(0.5 * 2.7 * 6000 / 500, rel=1e-3)
+    # the object fills half the picture's height: 288 px = f_v · 500 / 6000
+    assert PtzLens().intrinsics(far).fz_px == pytest.approx(0.5 * 576 * 6000 / 500, rel=1e-3)
+    assert STRAIGHT_LINE.focal(far) == pytest.approx(axis_215_px(0.5 * 2.7 * 6000 / 500),
+                                                     rel=1e-3)
     assert zoom_for_size(100, object_mm=500, image_fraction=0.5) == 1  # clamped to wide
 
 
 def test_zoom_for_size_follows_the_measured_curve() -> None:
     """A lens whose focal length grows slowly, then steeply: the step for a focal length is
     read off its own curve, not the straight line."""
-    lens = PtzLens(ZoomCurve((1, 5000, 8000, 9999), (3.8, 8.0, 18.0, 46.0)))
+    lens = PtzLens(ZoomCurve((1, 5000, 8000, 9999), (743.0, 1564.0, 3520.0, 8996.0)))
     zoom = zoom_for_size(6000, object_mm=500, image_fraction=0.5, lens=lens)
-    assert lens.focal_mm(zoom) == pytest.approx(0.5 * 2.7 * 6000 / 500, rel=1e-3)
+    assert lens.intrinsics(zoom).fz_px == pytest.approx(0.5 * 576 * 6000 / 500, rel=1e-3)
+    hd = PtzLens(lens.curve.scaled(1920 / 704), width_px=1920, height_px=1080)  # square pixels
+    assert hd.intrinsics(zoom_for_size(6000, object_mm=500, image_fraction=0.5, lens=hd)
+                         ).fz_px == pytest.approx(0.5 * 1080 * 6000 / 500, rel=1e-3)
     assert zoom != zoom_for_size(6000, object_mm=500, image_fraction=0.5)
 
 
@@ -110,7 +116,7 @@ def test_the_aim_command_takes_a_negative_target_and_the_calib_services_pose_fil
 
     mount = Pose(3550.0, 1090.0, 2190.0, 180.0, 30.0, 165.0)
     stored = PoseStore(tmp_path).save(m.CameraPose(
-        measured_s=1.0, camera="ptz1", **mount.fields(), focal_mm=3.8, mean_error_px=0.5,
+        measured_s=1.0, camera="ptz1", **mount.fields(), focal_px=743.1, mean_error_px=0.5,
         passpoints=100), {"method": "auto"})
     solved = tmp_path / "solved.json"
     solved.write_text(json.dumps({"position_mm": [mount.x_mm, mount.y_mm, mount.z_mm],

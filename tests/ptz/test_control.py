@@ -21,7 +21,7 @@ def _control() -> PtzControl:
 
 def _pose(measured_s: float = 100.0, version: int = 1, rz_deg: float = 165.0) -> m.CameraPose:
     return m.CameraPose(measured_s=measured_s, camera="ptz1",
-                        **(MOUNT.fields() | {"rz_deg": rz_deg}), focal_mm=3.8,
+                        **(MOUNT.fields() | {"rz_deg": rz_deg}), focal_px=743.1,
                         mean_error_px=0.5, passpoints=100, version=version)
 
 

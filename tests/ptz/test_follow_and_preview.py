@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from common import messages as m
-from common.camera import Intrinsics, Pose, PtzLimits, head_pose, project
-from common.ptz_lens import PtzLens, ZoomCurve
+from common.camera import Pose, PtzLimits, head_pose, project
+from common.ptz_lens import PtzLens, ZoomCurve, axis_215, axis_215_px
 from common.volume import Volume
 from services.ptz.aim import aim_at, predict
 from services.ptz.follow import Follower
@@ -16,7 +16,7 @@ from services.ptz.preview import robot_view
 MOUNT = Pose(3550.0, 1090.0, 2190.0, 180.0, 30.0, 165.0)
 ROBOT = np.array([0.0, -900.0, 80.0])
 STILL = np.zeros(3)
-WIDE = Intrinsics(3.8, width_px=704, height_px=576)
+WIDE = axis_215(3.8)
 
 
 def test_the_follower_aims_where_the_robot_will_be_after_the_cameras_latency() -> None:
@@ -67,7 +67,7 @@ def test_a_preview_puts_the_robot_where_it_will_be_when_the_picture_is_taken() -
     robot = _robot(100.0, (290.0, 0.0, 0.0))
     found = robot_view(MOUNT, robot, pan, tilt, WIDE, at_s=100.5)[0]
     expected = project((ROBOT + [145.0, 0.0, 0.0])[None, :], head_pose(MOUNT, pan, tilt),
-                       Intrinsics(3.8, width_px=704, height_px=576))[0]
+                       axis_215(3.8))[0]
     assert found == pytest.approx(expected.tolist(), abs=0.06)  # rounded to 0.1 px
     capped = robot_view(MOUNT, robot, pan, tilt, WIDE, at_s=160.0)[0]
     assert capped == robot_view(MOUNT, robot, pan, tilt, WIDE, at_s=101.0)[0]
@@ -87,10 +87,10 @@ def test_a_preview_says_how_large_the_robot_marker_appears() -> None:
     it so): about 1.3 px at 5.3 m at the widest zoom."""
     pan, tilt = aim_at(ROBOT, MOUNT)
     distance = float(np.linalg.norm(ROBOT - MOUNT.position))
-    fy = Intrinsics(3.8, width_px=704, height_px=576).fy_px
+    fy = axis_215(3.8).fy_px
     radius = robot_view(MOUNT, _robot(100.0), pan, tilt, WIDE, 100.0, 19.0)[1]
     assert radius is not None and radius == pytest.approx(fy * 9.5 / distance, abs=0.01)
-    twice = robot_view(MOUNT, _robot(100.0), pan, tilt, WIDE.with_focal(7.6), 100.0, 19.0)[1]
+    twice = robot_view(MOUNT, _robot(100.0), pan, tilt, WIDE.with_focal(2 * WIDE.focal_px), 100.0, 19.0)[1]
     assert twice == pytest.approx(2 * radius, abs=0.02)
     assert robot_view(None, _robot(1.0), pan, tilt, WIDE, 1.0, 19.0)[1] is None
     assert robot_view(MOUNT, _robot(1.0), pan + 180.0, tilt, WIDE, 1.0, 19.0)[1] is None
@@ -110,7 +110,7 @@ def test_at_a_long_zoom_the_dead_band_shrinks_with_the_picture() -> None:
 
 
 def test_a_robot_off_the_centre_of_a_long_zoom_makes_the_camera_zoom_out_and_back() -> None:
-    lens = PtzLens(ZoomCurve((1, 6000, 9999), (3.8, 9.0, 46.0)))
+    lens = PtzLens(ZoomCurve((1, 6000, 9999), (3.8, 9.0, 46.0)).scaled(axis_215_px(1.0)))
     follower = Follower(min_interval_s=0.0, zoom=9999, lens=lens)
     pan, tilt = aim_at(ROBOT, MOUNT)
     follower.seen(pan + 2.0, tilt, 9999)  # the camera is 2° behind: off a ±1.7° picture

@@ -14,7 +14,8 @@ import pytest
 from common import keys
 from common import messages as m
 from common.bus import Bus
-from common.camera import Intrinsics, head_pose, project
+from common.camera import head_pose, project
+from common.ptz_lens import axis_215, axis_215_px
 from services.ptz.aim import aim_error_deg
 from services.ptz.camera import AxisPtzCamera
 from services.ptz.service import watch_recordings
@@ -45,7 +46,7 @@ def test_no_move_without_a_pose_then_it_follows() -> None:
     rig.solve()
     rig.until(following(rig), 1.0)
     assert true_aim_error(rig) < 0.5
-    assert rig.states[-1].zoom == 1 and rig.states[-1].focal_mm == 3.8
+    assert rig.states[-1].zoom == 1 and rig.states[-1].focal_px == pytest.approx(axis_215_px(3.8))
 
 
 def test_calibration_mode_holds_still_detects_and_ends_with_its_lease() -> None:
@@ -77,7 +78,7 @@ def test_calibration_mode_holds_still_detects_and_ends_with_its_lease() -> None:
         abs(s.pan_deg - HELD[0]) < 0.1 and abs(s.tilt_deg - HELD[1]) < 0.1 for s in during), \
         [(s.pan_deg, s.tilt_deg) for s in during]
     assert {s.status for s in during} == {"calibrating"}
-    expected = project(TARGET[None, :], head_pose(MOUNT, *HELD), Intrinsics(3.8))[0]
+    expected = project(TARGET[None, :], head_pose(MOUNT, *HELD), axis_215(3.8))[0]
     detections = rig.of(keys.PTZ_DETECTIONS)
     for d in detections:  # none from before the camera stood where it was held
         (marker,) = d.markers

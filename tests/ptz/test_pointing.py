@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from common import messages as m
-from common.camera import Intrinsics
+from common.ptz_lens import axis_215
 from services.ptz.pointing import NOT_SEEN, InfraredSchedule, PointingCheck, pointing_error_deg
 
-INTR = Intrinsics(3.8)
+INTR = axis_215(3.8)
 
 
 def _marker(u: float, v: float) -> m.DetectedMarker:

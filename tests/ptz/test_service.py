@@ -18,6 +18,7 @@ from common import messages as m
 from common.bus import Bus
 from common.lab_views import CameraConnection
 from common.node import Node
+from common.ptz_lens import axis_215_px
 from common.ptz_settings import PtzSettings
 from services.ptz.aim import aim_error_deg
 from services.ptz.service import run
@@ -104,7 +105,7 @@ def test_waits_for_a_pose_then_follows_the_robot(service: dict) -> None:
     wait_for(on_target, timeout=5, period=0.05)
     last = states[-1]
     assert aim_error_deg(TARGET, MOUNT, last.pan_deg, last.tilt_deg) < 0.5
-    assert last.zoom == 1 and last.focal_mm == 3.8
+    assert last.zoom == 1 and last.focal_px == pytest.approx(axis_215_px(3.8))
 
 
 def test_previews_show_the_robot_near_the_image_centre_once_on_target(service: dict) -> None:
@@ -135,7 +136,7 @@ def test_late_start_gets_the_pose_by_query(service: dict, make_bus: Callable[...
     calib = make_bus()
     pose = m.CameraPose(measured_s=time.time(), camera="ptz1", x_mm=MOUNT.x_mm,
                         y_mm=MOUNT.y_mm, z_mm=MOUNT.z_mm, rx_deg=MOUNT.rx_deg,
-                        ry_deg=MOUNT.ry_deg, rz_deg=MOUNT.rz_deg, focal_mm=3.8,
+                        ry_deg=MOUNT.ry_deg, rz_deg=MOUNT.rz_deg, focal_px=743.1,
                         mean_error_px=1.0, passpoints=100)
     calib.serve_latest(keys.CALIB_POSE, lambda: pose, camera="ptz1")
     wait_for(lambda: service["world"].query_latest(keys.CALIB_POSE, timeout_s=0.5,

@@ -85,7 +85,7 @@ def _tick(writer: RecordWriter, i: int, t: float, jpeg: bytes, video: dict[str, 
         if i % (MOCAP_HZ // PTZ_HZ) == 0:
             _put(writer, keys.PTZ_STATE, m.PtzState(
                 measured_s=t, camera=camera, status="tracking", pan_deg=10.0, tilt_deg=-20.0,
-                zoom=1, focal_mm=3.5, aim_error_deg=0.3), t, camera=camera)
+                zoom=1, focal_px=684.4, aim_error_deg=0.3), t, camera=camera)
         if i % (MOCAP_HZ // PREVIEW_HZ) == 0:
             _put(writer, keys.PTZ_PREVIEW, m.PtzPreview(
                 measured_s=t, camera=camera, seq=i, width_px=704, height_px=576, jpeg=jpeg,

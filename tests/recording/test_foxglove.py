@@ -54,13 +54,13 @@ def _offload(t: float, warning: bool) -> m.GravityOffload:
 
 
 def _pose(camera: str = "ptz1") -> m.CameraPose:
-    return m.CameraPose(measured_s=1.0, camera=camera, **MOUNTS[camera].fields(), focal_mm=3.8,
+    return m.CameraPose(measured_s=1.0, camera=camera, **MOUNTS[camera].fields(), focal_px=743.1,
                         mean_error_px=1.0, passpoints=90)
 
 
 def _ptz(t: float, camera: str = "ptz1") -> m.PtzState:
     return m.PtzState(measured_s=t, camera=camera, status="tracking", pan_deg=-12.0,
-                      tilt_deg=-8.0, zoom=1, focal_mm=3.8, aim_error_deg=0.2)
+                      tilt_deg=-8.0, zoom=1, focal_px=743.1, aim_error_deg=0.2)
 
 
 def _entities(out: list[Typed], topic: str = SCENE) -> dict[str, Any]:

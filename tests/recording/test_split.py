@@ -26,7 +26,7 @@ from tests.conftest import wait_for
 from tests.recording.typed import decoded_typed
 
 POSE = m.CameraPose(measured_s=1.0, camera="ptz1", x_mm=1.0, y_mm=2.0, z_mm=3.0, rx_deg=0.0,
-                    ry_deg=0.0, rz_deg=0.0, focal_mm=4.0, mean_error_px=0.5, passpoints=20)
+                    ry_deg=0.0, rz_deg=0.0, focal_px=782.2, mean_error_px=0.5, passpoints=20)
 
 
 def test_a_part_is_full_at_its_size_or_its_time() -> None:

@@ -38,7 +38,7 @@ def _parse(module: str, argv: list[str]) -> object:
 VECTOR = "-100,200,-3000,180.5,-0.5,1e3"
 CASES = [
     ("services.calib.solve_cli", ["p.csv", "--initial", VECTOR], "initial", VECTOR),
-    ("services.calib.solve_cli", ["p.csv", "--focal-mm", "-3.8"], "focal_mm", -3.8),
+    ("services.calib.solve_cli", ["p.csv", "--focal-px", "-743"], "focal_px", -743.0),
     ("services.calib.solve_cli", ["p.csv", "--max-offset-s", "-.5"], "max_offset_s", -0.5),
     ("services.calib.solve_cli", ["p.csv", "--inlier-px", "-10"], "inlier_px", -10.0),
     ("services.calib.solve_cli", ["p.csv", "--seed", "-1"], "seed", -1),

@@ -12,7 +12,7 @@ from pydantic import ValidationError
 
 from common.camera import Intrinsics, Pose, project
 from common.markers import detect
-from common.ptz_lens import STRAIGHT_LINE
+from common.ptz_lens import PtzLens
 from services.sim.camera_server import CameraServer, SimCamera
 from services.sim.lab import Lab
 from services.sim.ptz import PtzHead
@@ -189,7 +189,7 @@ def test_the_picture_shows_the_crater_and_the_robot(servers: dict, lab: Lab,
     head, now = lab.heads[camera], server.camera.clock()
     marker, _, ground = lab.robot_pose(0.0)
     below = marker - [0.0, 0.0, (marker[2] - ground) / 2]  # the middle of its chassis
-    u, v = project(below[None, :], head.pose(now), Intrinsics(head.focal_mm(now)))[0]
+    u, v = project(below[None, :], head.pose(now), head.intrinsics(now, 704, 576))[0]
     assert 0 < u < 704 and 0 < v < 576, "the robot is in this camera's view"
     chassis = image[int(v) - 1:int(v) + 2, int(u) - 1:int(u) + 2].mean()
     around = np.median(image[max(int(v) - 60, 0):int(v) + 60, max(int(u) - 60, 0):int(u) + 60])
@@ -212,8 +212,7 @@ def test_marker_renders_where_the_camera_model_predicts(servers: dict, lab: Lab,
     image = _snapshot(client, compression="0")
     assert image.shape == (576, 704)
     now = server.camera.clock()
-    predicted = project(lab.bright_points(0.0), head.pose(now),
-                        Intrinsics(head.focal_mm(now)))
+    predicted = project(lab.bright_points(0.0), head.pose(now), head.intrinsics(now, 704, 576))
     visible = [(u, v) for u, v in predicted if 5 < u < 699 and 5 < v < 571]
     assert visible, "the scene must put at least one marker in view"
     spots = _bright_spots(image)
@@ -267,13 +266,14 @@ def test_a_sim_camera_draws_through_its_own_lens(seed: int) -> None:
     zoom = int(rng.integers(1, 800))
     head.absolute(0.0, 0.0, 0.0, zoom)
     truth = head.intrinsics(10.0, 704, 576)
-    assert truth.focal_mm == pytest.approx(settings.lens().focal_mm(zoom))
+    assert truth.focal_px == pytest.approx(settings.lens().focal_px(zoom))
+    assert truth.fy_px == pytest.approx(settings.lens().focal_px(zoom))
     points = _grid_in_view(head.pose(10.0), truth.pinhole(), 3000.0)
     camera = SimCamera("ptz1", head, lambda: points, [], lambda: 10.0,
                        np.random.default_rng(seed))
     spots = _bright_spots(camera.snapshot(704, 576))
     expected = project(points, head.pose(10.0), truth)
-    straight = project(points, head.pose(10.0), Intrinsics(STRAIGHT_LINE.focal_mm(zoom)))
+    straight = project(points, head.pose(10.0), PtzLens().intrinsics(zoom))
     inside = [(u, v) for u, v in expected if 4 < u < 700 and 4 < v < 572]
     assert len(inside) >= 20
     worst_pinhole = 0.0

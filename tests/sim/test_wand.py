@@ -6,11 +6,12 @@ from __future__ import annotations
 import numpy as np
 
 from common.camera import Pose, project
-from common.ptz_lens import PtzLens, ZoomCurve
+from common.ptz_lens import PtzLens, ZoomCurve, axis_215_px
 from services.sim.wand import WandCarrier
 
 MOUNT = Pose(3550.0, 1090.0, 2190.0, 180.0, 30.0, 165.0)
-LENS = PtzLens(ZoomCurve((1, 6000, 9999), (3.8, 9.0, 46.0)), (3.8, 46.0),
+LENS = PtzLens(ZoomCurve((1, 6000, 9999), (3.8, 9.0, 46.0)).scaled(axis_215_px(1.0)),
+               (axis_215_px(3.8), axis_215_px(46.0)),
                ((-0.3, 0.1, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0, 0.0)))
 
 
