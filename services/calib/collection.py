@@ -22,6 +22,7 @@ import numpy as np
 
 from common import messages as m
 from common.passpoint_collector import Collector
+from common.ptz_lens import AXIS_215_PICTURE_PX
 from services.calib.settings import CalibSettings
 
 log = logging.getLogger(__name__)
@@ -112,6 +113,7 @@ class Collection:
             wide = self.collectors[each.index(widest)]
             wide.coverage, wide.corners = WIDE_COVERAGE, WIDE_CORNERS
         self.collector = self.collectors[0]
+        self.picture_px = AXIS_215_PICTURE_PX  # the snapshots' size, as their detections say
         self._zoom_index = 0
         self._zoom_since: float | None = None  # the camera's first state at the present zoom
         self._pending: deque[m.MarkerDetections] = deque(maxlen=200)
@@ -131,6 +133,7 @@ class Collection:
     def on_detections(self, msg: m.MarkerDetections) -> None:
         if msg.measured_s >= self.started_s:
             self._pending.append(msg)
+            self.picture_px = (msg.width_px, msg.height_px)
 
     def on_state(self, msg: m.PtzState) -> None:
         if self._holding and msg.status == "calibrating" and msg.measured_s >= self.started_s:

@@ -167,6 +167,7 @@ class Session:
         self.store.save_inputs(self.camera, points, track)
         s = self.settings
         options = Options(focal_px=state.focal_px, fit_focal=s.fit_focal, track=track,
+                          picture_px=c.picture_px,
                           max_time_offset_s=s.max_time_offset_s, inlier_px=s.inlier_px,
                           max_mean_error_px=s.max_mean_error_px)
         try:
@@ -177,7 +178,8 @@ class Session:
         mount = mount_pose(solution.pose, state.pan_deg, state.tilt_deg)
         pose = m.CameraPose(
             measured_s=time.time(), camera=self.camera, **mount.fields(),
-            focal_px=solution.focal_px, mean_error_px=solution.mean_error_px,
+            focal_px=solution.focal_px, width_px=options.picture_px[0],
+            height_px=options.picture_px[1], mean_error_px=solution.mean_error_px,
             passpoints=len(solution.inliers), time_offset_s=solution.time_offset_s or 0.0)
         report = solution.report() | {"pan_deg": state.pan_deg, "tilt_deg": state.tilt_deg,
                                       "zoom": state.zoom}
@@ -197,7 +199,8 @@ class Session:
         self.store.save_inputs(self.camera, Passpoints.joined(by_zoom), track)
         s = self.settings
         options = Options(track=track, max_time_offset_s=s.max_time_offset_s,
-                          inlier_px=s.inlier_px, max_mean_error_px=s.max_mean_error_px)
+                          inlier_px=s.inlier_px, max_mean_error_px=s.max_mean_error_px,
+                          picture_px=c.picture_px)
         try:
             fit, first, not_drawn = in_worker(solve_zooms_and_plot, by_zoom, options,
                                               self.store.camera_dir(self.camera) / "lens.png")
@@ -211,7 +214,8 @@ class Session:
         used = sum(len(k) for k in fit.inliers)
         pose = m.CameraPose(
             measured_s=time.time(), camera=self.camera, **mount.fields(),
-            focal_px=fit.focals_px[0], mean_error_px=fit.mean_error_px(), passpoints=used,
+            focal_px=fit.focals_px[0], width_px=fit.picture_px[0], height_px=fit.picture_px[1],
+            mean_error_px=fit.mean_error_px(), passpoints=used,
             time_offset_s=first.time_offset_s or 0.0, lens=lens)
         report = fit.report() | {"pan_deg": state.pan_deg, "tilt_deg": state.tilt_deg,
                                  "time_offset_s": round(first.time_offset_s or 0.0, 5)}

@@ -53,6 +53,8 @@ class PtzCamera(Protocol):
 
     def limits(self) -> PtzLimits: ...
 
+    def picture(self) -> tuple[int, int]: ...
+
     def snapshot(self) -> np.ndarray: ...
 
     def snapshot_jpeg(self) -> bytes: ...
@@ -98,18 +100,26 @@ class AxisPtzCamera:
     def limits(self) -> PtzLimits:
         return vapix.parse_limits(self._request(vapix.PTZ_PATH, {"query": "limits"}).text)
 
+    def picture(self) -> tuple[int, int]:
+        """Its full picture's width and height (pixels), as it lists its picture sizes."""
+        return vapix.parse_picture(self._request(
+            vapix.PARAM_PATH, {"action": "list", "group": vapix.PICTURE_SIZES}).text)
+
     def set_ir_cut_filter(self, mode: str) -> None:
         if mode not in ("on", "off", "auto"):
             raise ValueError(f"IR cut filter mode must be on, off or auto, not {mode!r}")
         self._request(vapix.PTZ_PATH, {"ircutfilter": mode})
 
-    def snapshot(self, resolution: str = "704x576") -> np.ndarray:
+    def snapshot(self, resolution: str | None = None) -> np.ndarray:
         """The current image as a gray uint8 array."""
         return decode_jpeg(self.snapshot_jpeg(resolution), self.name)
 
-    def snapshot_jpeg(self, resolution: str = "704x576") -> bytes:
-        """The current image as the camera sent it (JPEG)."""
-        reply = self._request(vapix.IMAGE_PATH, {"resolution": resolution})
+    def snapshot_jpeg(self, resolution: str | None = None) -> bytes:
+        """The current image as the camera sent it (JPEG), at ``resolution`` (VAPIX's
+        ``WIDTHxHEIGHT``; None: the camera's own default, its full picture: an AXIS 215's
+        704 × 576, a current camera's 1920 × 1080 — the picture's size comes with it)."""
+        reply = self._request(vapix.IMAGE_PATH,
+                              {} if resolution is None else {"resolution": resolution})
         if not reply.headers.get("content-type", "").startswith("image/jpeg"):
             raise PtzRejected(f"{self.name}: snapshot is not a JPEG")
         return reply.content

@@ -19,7 +19,7 @@ import numpy as np
 from common import messages as m
 from common.backoff import doubled
 from common.camera import Pose, PtzLimits
-from common.ptz_lens import PtzLens, lens_of
+from common.ptz_lens import PtzLens, lens_of, straight_line
 from services.ptz.aim import aim_error_deg
 from services.ptz.follow import Command, Follower
 from services.ptz.override import ManualOverride
@@ -95,8 +95,14 @@ class PtzControl:
         """The camera took the command."""
         self.override.commanded(now, command.pan_deg, command.tilt_deg)
 
-    def camera_limits(self, limits: PtzLimits) -> None:
+    def camera_limits(self, limits: PtzLimits, picture: tuple[int, int]) -> None:
+        """What the camera says it is: how far it turns, how large its picture is (a lens
+        not measured yet is the data sheet's straight line in that picture)."""
         self.limits = self.follower.limits = limits
+        if self.pose_msg is None or not self.pose_msg.lens:
+            width, height = picture
+            self.follower.lens = PtzLens(straight_line(width), width_px=width,
+                                         height_px=height)
 
     # --- the camera's health ------------------------------------------------------------------
 

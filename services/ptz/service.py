@@ -29,15 +29,17 @@ from common.bus import Bus
 from common.camera import Intrinsics, PtzLimits
 from common.markers import kernel_origin, warm_up
 from common.node import Node, run_every
+from common.ptz_lens import AXIS_215_PICTURE_PX
 from common.ptz_settings import PtzSettings
 from services.ptz.calibration import CalibrationHold
-from services.ptz.camera import AxisPtzCamera, PtzCamera, PtzError, http_client
+from services.ptz.camera import AxisPtzCamera, PtzCamera, PtzError, PtzRejected, http_client
 from services.ptz.control import HAND_MOVES, PtzControl
 from services.ptz.follow import Follower
 from services.ptz.override import ManualOverride
 from services.ptz.pointing import InfraredSchedule, PointingCheck
 from services.ptz.pose_source import PoseAsking, choose
 from services.ptz.preview import PreviewLoop
+from services.ptz.vapix import VapixReplyError
 
 log = logging.getLogger(__name__)
 ASK_TICK_S = 0.1  # how often the pose asker looks whether asking is due
@@ -275,13 +277,23 @@ class PtzLoop:
         self.calibration.cycle()
         return True
 
+    def _picture(self) -> tuple[int, int]:
+        """The camera's full picture as it lists it; the AXIS 215's when it lists none."""
+        try:
+            return self.queries.picture()
+        except (PtzRejected, VapixReplyError) as err:
+            log.warning("camera %s does not list its picture sizes (%s): taken to be the AXIS "
+                        "215's %d × %d", self.camera.name, err, *AXIS_215_PICTURE_PX)
+            return AXIS_215_PICTURE_PX
+
     def _report(self, now: float) -> None:
         """Query the camera (without the lock) and publish its state."""
         if self.control.limits is None:
-            limits = self.queries.limits()
+            limits, picture = self.queries.limits(), self._picture()
             with self.lock:
-                self.control.camera_limits(limits)
-            log.info("camera %s limits: %s", self.camera.name, limits)
+                self.control.camera_limits(limits, picture)
+            log.info("camera %s limits: %s; picture %d × %d", self.camera.name, limits,
+                     *picture)
         if now >= self.presets_due:
             self.presets, self.presets_due = self.queries.presets()[:64], now + PRESETS_EVERY_S
         position = self.queries.position()

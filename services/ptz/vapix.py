@@ -12,6 +12,8 @@ from common.camera import PtzLimits
 
 PTZ_PATH = "/axis-cgi/com/ptz.cgi"
 IMAGE_PATH = "/axis-cgi/jpg/image.cgi"
+PARAM_PATH = "/axis-cgi/param.cgi"
+PICTURE_SIZES = "root.Properties.Image.Resolution"  # its sizes, the full picture first
 _RANGES = {"pan": (-180.0, 180.0), "tilt": (-180.0, 180.0), "zoom": (1, 9999),
            "speed": (1, 100)}
 
@@ -90,6 +92,17 @@ def parse_limits(body: str) -> PtzLimits:
                       int(float(values.get("MaxZoom", "9999"))))
     except (KeyError, ValueError) as err:
         raise VapixReplyError(f"not a limits reply: {body[:80]!r}") from err
+
+
+def parse_picture(body: str) -> tuple[int, int]:
+    """The camera's full picture (width, height) from ``param.cgi``'s list of its picture
+    sizes (``root.Properties.Image.Resolution=1920x1080,1280x720,…``: the first)."""
+    sizes = parse_values(body).get(PICTURE_SIZES, "")
+    width, _, height = sizes.split(",")[0].strip().lower().partition("x")
+    if not (width.isdigit() and height.isdigit() and 0 < int(width) <= 8192
+            and 0 < int(height) <= 8192):
+        raise VapixReplyError(f"no picture size in {body[:80]!r}")
+    return int(width), int(height)
 
 
 def parse_presets(body: str) -> list[str]:

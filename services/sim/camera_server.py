@@ -111,7 +111,7 @@ class SimCamera:
 
     @property
     def device(self) -> Device:
-        return Device(self.name, self.head, self.memory, self.user)
+        return Device(self.name, self.head, self.memory, self.user, self.resolutions)
 
 
 def digest_challenge(secret: bytes, now: float) -> str:

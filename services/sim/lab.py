@@ -46,7 +46,6 @@ log = logging.getLogger(__name__)
 
 LOOP_PAUSE_S = 5.0
 WAND_LABEL = "wand"
-PICTURE_PX = (704, 576)  # the PTZ cameras' full picture (VAPIX 704x576), where the wand is aimed
 """The calibration marker on a pole: its own labelled marker, moving while the robot waits."""
 OCCLUSION_WINDOW_S = 2.0
 
@@ -81,7 +80,7 @@ def calibration_views(heads: dict[str, PtzHead], t: float) -> list[View]:
     views = []
     for head in heads.values():
         if head.ir_cut_filter == "off" and not head.state(t)[3]:
-            views.append((head.pose(t), head.intrinsics(t, *PICTURE_PX)))
+            views.append((head.pose(t), head.intrinsics(t)))
     return views
 
 

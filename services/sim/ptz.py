@@ -114,8 +114,10 @@ class PtzHead:
         """Its focal length at the zoom of ``now``, in pixels of its own picture."""
         return self.lens.focal_px(self.state(now)[2])
 
-    def intrinsics(self, now: float, width_px: int, height_px: int) -> Intrinsics:
-        """Its lens at the zoom of ``now``, for a picture of this size."""
+    def intrinsics(self, now: float, width_px: int | None = None, height_px: int | None = None
+                   ) -> Intrinsics:
+        """Its lens at the zoom of ``now``, for a picture of this size (default its full
+        picture)."""
         return self.lens.intrinsics(self.state(now)[2], width_px, height_px)
 
     def advance_to(self, now: float) -> None:

@@ -117,7 +117,8 @@ def start_cameras(lab: Lab, settings: SimSettings, clock: Clock) -> list[CameraS
                                lab.ptz_glints, clock, np.random.default_rng((settings.seed, 3, i)),
                                cam.user, cam.password, cam.auth, mjpeg_fps=cam.mjpeg_fps,
                                ground=GroundView.of(lab.crater, settings.seed),
-                               robots=lambda: [lab.robot_pose(clock())])
+                               robots=lambda: [lab.robot_pose(clock())],
+                               resolutions=cam.resolutions())
         try:
             servers.append(CameraServer(sim_camera, settings.host_of(cam.host), cam.port).start())
         except OSError as err:

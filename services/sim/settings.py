@@ -66,6 +66,16 @@ class PtzCameraSettings(PoseFields, _Section):
         max_length=64, description="the lens's truth: [zoom step, focal length mm] points, "
         "interpolated monotonically (PCHIP); default the AXIS 215's 3.8–46 mm spread evenly "
         "over steps 1–9999")
+    picture_px: tuple[int, int] = Field(
+        AXIS_215_PICTURE_PX, description="its full picture, width and height in pixels "
+        "(image.cgi's default; half and a quarter of it offered too); default the AXIS 215's "
+        "704 × 576, a current PTZ camera's is 1920 × 1080")
+    chip_mm: tuple[float, float] = Field(
+        AXIS_215_CHIP_MM, description="the chip the focal lengths of zoom_focal_mm are on: its "
+        "width and height in mm (with picture_px, the pixels' size and aspect)")
+    principal_offset_px: tuple[float, float] = Field(
+        (0.0, 0.0), description="the lens's principal point from the picture's centre, "
+        "pixels (right, down); 0: centred")
     distortion: tuple[float, float, float, float, float] = Field(
         NO_DISTORTION, description="OpenCV's k1, k2, p1, p2, k3 at the shortest focal length")
     distortion_long: tuple[float, float, float, float, float] | None = Field(
@@ -87,6 +97,28 @@ class PtzCameraSettings(PoseFields, _Section):
             raise ValueError(f"{list(offset)}: a PTZ head's offsets are within 500 mm")
         return offset
 
+    @field_validator("picture_px")
+    @classmethod
+    def _a_picture(cls, size: tuple[int, int]) -> tuple[int, int]:
+        if not (16 <= size[0] <= 8192 and 16 <= size[1] <= 8192 and size[0] % 4 == 0
+                and size[1] % 4 == 0):
+            raise ValueError(f"{list(size)}: a picture is 16–8192 pixels wide and high, in "
+                             "multiples of 4 (its half and quarter are offered too)")
+        return size
+
+    @field_validator("chip_mm")
+    @classmethod
+    def _a_chip(cls, chip: tuple[float, float]) -> tuple[float, float]:
+        if not (0 < chip[0] <= 50 and 0 < chip[1] <= 50):
+            raise ValueError(f"{list(chip)}: a chip's width and height are 0–50 mm")
+        return chip
+
+    def resolutions(self) -> dict[str, tuple[int, int]]:
+        """The picture sizes its VAPIX server offers: the full picture first (the default),
+        then its half and its quarter."""
+        width, height = self.picture_px
+        return {f"{width // k}x{height // k}": (width // k, height // k) for k in (1, 2, 4)}
+
     @field_validator("zoom_focal_mm")
     @classmethod
     def _a_zoom_curve(cls, points: list[tuple[float, float]]) -> list[tuple[float, float]]:
@@ -96,13 +128,15 @@ class PtzCameraSettings(PoseFields, _Section):
     def lens(self) -> PtzLens:
         """The camera's true lens in pixels of its picture (only the sim knows it:
         calibration measures it), from its focal lengths in mm on its chip."""
-        width, height = AXIS_215_PICTURE_PX
-        chip_w, chip_h = AXIS_215_CHIP_MM
+        width, height = self.picture_px
+        chip_w, chip_h = self.chip_mm
         curve = ZoomCurve.of(self.zoom_focal_mm).scaled(width / chip_w)
         bent = any(self.distortion) or any(self.distortion_long or ())
+        dx, dy = self.principal_offset_px
         return PtzLens(curve, (curve.focals[0], curve.focals[-1]) if bent else (),
                        (self.distortion, self.distortion_long or self.distortion) if bent
-                       else (), width, height, (height / chip_h) / (width / chip_w))
+                       else (), width, height, (height / chip_h) / (width / chip_w),
+                       (width / 2 + dx, height / 2 + dy) if dx or dy else None)
 
 
 def _default_cameras() -> list[PtzCameraSettings]:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from services.sim.ptz import PtzHead
 from services.sim.vapix import JSON, RESOLUTIONS, TEXT, Reply, error, text
@@ -45,6 +45,8 @@ class Device:
     head: PtzHead
     memory: CameraMemory
     user: str
+    resolutions: Mapping[str, tuple[int, int]] = field(default_factory=lambda: RESOLUTIONS)
+    """the picture sizes it offers, its full picture first"""
 
     @property
     def serial(self) -> str:
@@ -53,7 +55,7 @@ class Device:
     def parameters(self, now: float) -> list[tuple[str, str]]:
         """Every parameter as ``("root.Group.Key", value)``, in the cameras' order."""
         return [*self._brand(), *self._image_source(), *_io_ports(), *self._properties(),
-                *self._ptz(now), *_stream_profiles()]
+                *self._ptz(now), *_stream_profiles(list(self.resolutions))]
 
     def _brand(self) -> list[tuple[str, str]]:
         return [(f"root.Brand.{k}", v) for k, v in BRAND.items()]
@@ -70,7 +72,7 @@ class Device:
                 (f"{p}.ApiDiscovery.ApiDiscovery", "yes"),
                 *((f"{p}.Firmware.{k}", v) for k, v in FIRMWARE.items()),
                 (f"{p}.Image.Format", "jpeg,mjpeg"), (f"{p}.Image.NbrOfViews", "1"),
-                (f"{p}.Image.Resolution", ",".join(RESOLUTIONS)),
+                (f"{p}.Image.Resolution", ",".join(self.resolutions)),
                 (f"{p}.Image.Rotation", "0,180"),
                 (f"{p}.Image.ShowSuboptimalResolutions", "false"),
                 (f"{p}.PTZ.PTZ", "yes"), (f"{p}.PTZ.DigitalPTZ", "no"),
@@ -187,14 +189,15 @@ def _io_ports() -> list[tuple[str, str]]:
             ("root.IOPort.I1.Output.Active", "closed")]
 
 
-def _stream_profiles() -> list[tuple[str, str]]:
+def _stream_profiles(sizes: list[str]) -> list[tuple[str, str]]:
     return [("root.StreamProfile.MaxGroups", "26"),
             ("root.StreamProfile.S0.Description", "MJPEG, full resolution"),
             ("root.StreamProfile.S0.Name", "Quality"),
-            ("root.StreamProfile.S0.Parameters", "resolution=704x576&compression=10"),
+            ("root.StreamProfile.S0.Parameters", f"resolution={sizes[0]}&compression=10"),
             ("root.StreamProfile.S1.Description", "MJPEG, quarter resolution"),
             ("root.StreamProfile.S1.Name", "Bandwidth"),
-            ("root.StreamProfile.S1.Parameters", "resolution=352x288&compression=40")]
+            ("root.StreamProfile.S1.Parameters", f"resolution={sizes[-1 if len(sizes) < 2 else 1]}"
+             "&compression=40")]
 
 
 def api_discovery(body: bytes) -> Reply:

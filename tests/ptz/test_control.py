@@ -33,7 +33,7 @@ def _robot(t: float, x: float = 0.0) -> m.RobotPosition:
 def _following(now: float = 200.0) -> PtzControl:
     control = _control()
     assert control.take_pose(_pose(), now) == "taken"
-    control.camera_limits(PtzLimits())
+    control.camera_limits(PtzLimits(), (704, 576))
     return control
 
 
@@ -65,11 +65,11 @@ def test_no_command_without_a_pose_or_limits_while_failing_or_calibrating() -> N
     assert control.command(_robot(200.0), 200.0, calibrating=False) is None  # no pose
     control.take_pose(_pose(), 200.0)
     assert control.command(_robot(200.0), 200.0, calibrating=False) is None  # no limits
-    control.camera_limits(PtzLimits())
+    control.camera_limits(PtzLimits(), (704, 576))
     assert control.command(_robot(200.0), 200.0, calibrating=True) is None
     control.failed(200.0)
     assert control.limits is None, "asked again after a failure"
-    control.camera_limits(PtzLimits())
+    control.camera_limits(PtzLimits(), (704, 576))
     assert control.command(_robot(200.2), 200.2, calibrating=False) is None  # waiting
     command = control.command(_robot(200.6), 200.6, calibrating=False)
     assert command is not None and command.measured_s == 200.6
@@ -103,7 +103,7 @@ def test_the_status_of_each_state() -> None:
     assert (state.status, state.health) == ("waiting_for_pose", "degraded")
     assert "pose" in state.health_why
     control.take_pose(_pose(), 200.0)
-    control.camera_limits(PtzLimits())
+    control.camera_limits(PtzLimits(), (704, 576))
     assert control.status(200.5, 0.0, 0.0, calibrating=False).status == "idle"
     control.command(_robot(201.0), 201.0, calibrating=False)
     tracking = control.status(201.0, 0.0, 0.0, calibrating=False)
@@ -180,3 +180,20 @@ def test_no_move_by_hand_while_the_camera_calibrates(action: m.HandAction) -> No
 def test_a_position_beyond_the_messages_ranges_is_shown_at_their_edge() -> None:
     assert PtzControl.on_the_wire(181.0, -95.0, 0) == (180.0, -90.0, 1)
     assert PtzControl.on_the_wire(-35.5, 12.0, 500) == (-35.5, 12.0, 500)
+
+
+def test_a_camera_of_another_picture_starts_on_the_data_sheets_line_in_that_picture() -> None:
+    """A 1920 × 1080 camera before its lens is measured: the straight line scaled to its
+    picture (the same field of view as the AXIS 215's 704 px wide one), square pixels; a
+    measured lens, once a pose brings one, is kept whatever the camera says after."""
+    control = _control()
+    control.camera_limits(PtzLimits(), (1920, 1080))
+    wide = control.lens.intrinsics(1)
+    assert (wide.width_px, wide.height_px) == (1920, 1080)
+    assert wide.fy_px == pytest.approx(3.8 * 1920 / 3.6) and wide.fz_px == wide.fy_px
+    lens = [m.LensAtZoom(zoom=z, focal_px=f, distortion=[0.0] * 5, passpoints=30,
+                         mean_error_px=0.4) for z, f in ((1, 1900.0), (9999, 22000.0))]
+    assert control.take_pose(_pose().model_copy(update={"lens": lens, "width_px": 1920,
+                                                        "height_px": 1080}), 200.0) == "taken"
+    control.camera_limits(PtzLimits(), (1920, 1080))
+    assert control.lens.focal_px(9999) == 22000.0 and control.lens.width_px == 1920
