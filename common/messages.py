@@ -246,6 +246,10 @@ class CameraPose(PoseFields, Message):
     width_px: int = Field(704, gt=0, le=8192, description="the picture the pose and the lens "
                           "were measured in (the AXIS 215's 704 × 576 by default)")
     height_px: int = Field(576, gt=0, le=8192)
+    principal_u_px: float | None = Field(None, ge=0, le=8192, description="the lens's "
+                                         "principal point as a multi-zoom calibration "
+                                         "measured it; None: the picture's centre")
+    principal_v_px: float | None = Field(None, ge=0, le=8192)
     mean_error_px: float = Field(ge=0, description="mean reprojection error over the inliers")
     passpoints: int = Field(ge=0, description="passpoints used (inliers)")
     time_offset_s: float = Field(0.0, description="mocap clock minus camera clock (add it to a "

@@ -218,7 +218,15 @@ def lens_of(pose: CameraPose) -> PtzLens:
     """The lens a calibrated pose carries, in the pose's picture: measured at two or more zoom
     steps, or (calibrated at one zoom) the data sheet's straight line."""
     return measured_lens([(p.zoom, p.focal_px, p.distortion) for p in pose.lens],
-                         width_px=pose.width_px, height_px=pose.height_px)
+                         width_px=pose.width_px, height_px=pose.height_px,
+                         principal_px=principal_of(pose))
+
+
+def principal_of(pose: CameraPose) -> tuple[float, float] | None:
+    """The principal point a pose carries (None: the picture's centre)."""
+    if pose.principal_u_px is None or pose.principal_v_px is None:
+        return None
+    return pose.principal_u_px, pose.principal_v_px
 
 
 def intrinsics_of(pose: CameraPose, zoom: float) -> Intrinsics:
@@ -226,4 +234,5 @@ def intrinsics_of(pose: CameraPose, zoom: float) -> Intrinsics:
     at the focal length the pose was fitted with."""
     if pose.lens:
         return lens_of(pose).intrinsics(zoom)
-    return Intrinsics(pose.focal_px, pose.width_px, pose.height_px)
+    return Intrinsics(pose.focal_px, pose.width_px, pose.height_px,
+                      principal_px=principal_of(pose))

@@ -215,6 +215,8 @@ class Session:
         pose = m.CameraPose(
             measured_s=time.time(), camera=self.camera, **mount.fields(),
             focal_px=fit.focals_px[0], width_px=fit.picture_px[0], height_px=fit.picture_px[1],
+            principal_u_px=None if fit.principal_px is None else fit.principal_px[0],
+            principal_v_px=None if fit.principal_px is None else fit.principal_px[1],
             mean_error_px=fit.mean_error_px(), passpoints=used,
             time_offset_s=first.time_offset_s or 0.0, lens=lens)
         report = fit.report() | {"pan_deg": state.pan_deg, "tilt_deg": state.tilt_deg,

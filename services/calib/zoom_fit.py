@@ -27,7 +27,10 @@ from services.calib.solve import Options, Solution, solve
 PRIOR_PX = np.array([0.5, 0.5, 0.5, 0.5, 5.0])
 ROUNDS = 3
 MIN_PER_ZOOM = 6
-POSE_PARAMS, LENS_PARAMS = 6, 6  # rotation vector + position; focal + five coefficients
+POSE_PARAMS, LENS_PARAMS = 8, 6  # rotation vector, position, principal point (u, v); focal +
+                                 # five coefficients per zoom
+PRINCIPAL_PRIOR = 0.02  # px of residual per px of the principal point from the centre: it is
+                        # the zooms that place it (pixels move away from it as the focal grows)
 
 
 @dataclass(frozen=True)
@@ -40,11 +43,12 @@ class ZoomFit:
     inliers: tuple[np.ndarray, ...]  # indices per zoom
     evaluations: int
     picture_px: tuple[int, int] = AXIS_215_PICTURE_PX
+    principal_px: tuple[float, float] | None = None  # None: the picture's centre
 
     def lens(self) -> PtzLens:
         return measured_lens(list(zip(self.zooms, self.focals_px, self.distortions,
                                       strict=True)), width_px=self.picture_px[0],
-                             height_px=self.picture_px[1])
+                             height_px=self.picture_px[1], principal_px=self.principal_px)
 
     def at_zoom(self) -> list[dict]:
         """Per zoom: the step, focal length, distortion, inliers and their mean error."""
@@ -61,6 +65,9 @@ class ZoomFit:
                                                           self.pose.rz_deg)],
                 "mean_error_px": round(self.mean_error_px(), 4), "method": "zooms",
                 "evaluations": self.evaluations, "lens": self.at_zoom(),
+                "picture_px": list(self.picture_px),
+                "principal_px": None if self.principal_px is None else [
+                    round(c, 2) for c in self.principal_px],
                 "residuals_px": {str(z): [round(float(r), 3) for r in self.residuals_px[i]]
                                  for i, z in enumerate(self.zooms)}}
 
@@ -88,8 +95,8 @@ def closed_form_focal_px(pose: Pose, world_mm: np.ndarray, pixels: np.ndarray,
 
 
 def fit_zooms(sets: list[AtZoom], pose: Pose, focals_px: list[float], *,
-              picture_px: tuple[int, int] = AXIS_215_PICTURE_PX, inlier_px: float = 10.0
-              ) -> ZoomFit:
+              picture_px: tuple[int, int] = AXIS_215_PICTURE_PX, inlier_px: float = 10.0,
+              fit_principal: bool = True) -> ZoomFit:
     """The joint fit, from a start ``pose`` and a focal length per set (pixels of a
     ``picture_px`` picture)."""
     from scipy.optimize import least_squares  # only to fit
@@ -102,18 +109,20 @@ def fit_zooms(sets: list[AtZoom], pose: Pose, focals_px: list[float], *,
         if len(s.pixels) < MIN_PER_ZOOM:
             raise CalibrationError(f"zoom {s.zoom}: {len(s.pixels)} passpoints, at least "
                                    f"{MIN_PER_ZOOM} needed")
+    centre = np.array(picture_px, dtype=float) / 2
     start = np.concatenate([Rotation.from_matrix(pose.rotation).as_rotvec(), pose.position,
-                            *[[f, *NO_DISTORTION] for f in focals_px]])
-    scale = np.concatenate([[0.01] * 3, [10.0] * 3,
+                            centre, *[[f, *NO_DISTORTION] for f in focals_px]])
+    scale = np.concatenate([[0.01] * 3, [10.0] * 3, [2.0, 2.0],
                             *[[0.05 * f, 0.01, 0.01, 0.001, 0.001, 0.01] for f in focals_px]])
     kept = [np.arange(len(s.pixels)) for s in sets]
 
     def unpack(p: np.ndarray) -> tuple[Pose, list[Intrinsics]]:
         fitted = Pose.from_matrix(Rotation.from_rotvec(p[0:3]).as_matrix(), p[3:6])
+        principal = (float(p[6]), float(p[7])) if fit_principal else None
         lenses = []
         for i in range(len(sets)):
             f, *d = p[POSE_PARAMS + LENS_PARAMS * i: POSE_PARAMS + LENS_PARAMS * (i + 1)]
-            lenses.append(Intrinsics(float(f), *picture_px,
+            lenses.append(Intrinsics(float(f), *picture_px, principal_px=principal,
                                      distortion=(d[0], d[1], d[2], d[3], d[4])))
         return fitted, lenses
 
@@ -123,6 +132,7 @@ def fit_zooms(sets: list[AtZoom], pose: Pose, focals_px: list[float], *,
                                nan=1e3).ravel()
                  for s, intr, k in zip(sets, lenses, kept, strict=True)]
         prior = [PRIOR_PX * np.asarray(intr.distortion) for intr in lenses]
+        prior.append(PRINCIPAL_PRIOR * (p[6:8] - centre))
         return np.concatenate(parts + prior)
 
     evaluations = 0
@@ -149,7 +159,7 @@ def fit_zooms(sets: list[AtZoom], pose: Pose, focals_px: list[float], *,
                    tuple(lenses[i].focal_px for i in order),
                    tuple(lenses[i].distortion for i in order),
                    tuple(errors[i] for i in order), tuple(kept[i] for i in order), evaluations,
-                   picture_px)
+                   picture_px, lenses[0].principal_px)
 
 
 def solve_zooms(by_zoom: dict[int, Passpoints], options: Options) -> tuple[ZoomFit, Solution]:

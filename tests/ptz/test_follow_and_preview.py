@@ -90,7 +90,8 @@ def test_a_preview_says_how_large_the_robot_marker_appears() -> None:
     fy = axis_215(3.8).fy_px
     radius = robot_view(MOUNT, _robot(100.0), pan, tilt, WIDE, 100.0, 19.0)[1]
     assert radius is not None and radius == pytest.approx(fy * 9.5 / distance, abs=0.01)
-    twice = robot_view(MOUNT, _robot(100.0), pan, tilt, WIDE.with_focal(2 * WIDE.focal_px), 100.0, 19.0)[1]
+    twice = robot_view(MOUNT, _robot(100.0), pan, tilt, WIDE.with_focal(2 * WIDE.focal_px),
+                       100.0, 19.0)[1]
     assert twice == pytest.approx(2 * radius, abs=0.02)
     assert robot_view(None, _robot(1.0), pan, tilt, WIDE, 1.0, 19.0)[1] is None
     assert robot_view(MOUNT, _robot(1.0), pan + 180.0, tilt, WIDE, 1.0, 19.0)[1] is None
