@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from common.camera import Pose, rot_z
+from common.camera import rot_z
 from common.crane_frame import CraneFrame
 from common.tracking_camera import TrackingCameraModel
 from services.sim.bodies import (
@@ -117,12 +117,7 @@ class Lab:
         trajectory = make_trajectory(settings.scenario, crater, rng,
                                      railway=settings.locomotive.railway(),
                                      walk=settings.walker.walk())
-        heads = {cam.name: PtzHead(Pose.of(cam), lens=cam.lens(), latency_s=cam.latency_s,
-                                   pan_speed_deg_s=cam.pan_speed_deg_s,
-                                   tilt_speed_deg_s=cam.tilt_speed_deg_s,
-                                   tilt_axis_mm=cam.tilt_axis_mm,
-                                   optical_centre_mm=cam.optical_centre_mm)
-                 for cam in settings.cameras}
+        heads = {cam.name: cam.head() for cam in settings.cameras}
         wand_rng = np.random.default_rng((settings.seed, 11))
         wand = WandCarrier(wand_rng, lambda r: wand_point(crater, r),
                            lambda t: calibration_views(heads, t),

@@ -11,6 +11,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from common.camera import Pose
 from common.crane_frame import CraneFrame
 from common.crane_registers import RegisterMap
 from common.lab_paths import SIM_CRATER_FILE
@@ -21,6 +22,7 @@ from common.settings import NAME_PATTERN, ServiceSettings, above_its_minimum
 from common.tracking_camera import TrackingCameraModel
 from services.sim.crane import CraneParams
 from services.sim.crane_server import ESTOP_REGISTER
+from services.sim.ptz import PtzHead
 from services.sim.robots import Railway, Walk
 from services.sim.scenarios import Scenario
 
@@ -124,6 +126,13 @@ class PtzCameraSettings(PoseFields, _Section):
     def _a_zoom_curve(cls, points: list[tuple[float, float]]) -> list[tuple[float, float]]:
         ZoomCurve.of(points)  # raises, naming the points, when they do not make a curve
         return points
+
+    def head(self) -> PtzHead:
+        """The camera's true head, standing at home: its mount, lens, speeds and offsets."""
+        return PtzHead(Pose.of(self), lens=self.lens(), latency_s=self.latency_s,
+                       pan_speed_deg_s=self.pan_speed_deg_s,
+                       tilt_speed_deg_s=self.tilt_speed_deg_s, tilt_axis_mm=self.tilt_axis_mm,
+                       optical_centre_mm=self.optical_centre_mm)
 
     def lens(self) -> PtzLens:
         """The camera's true lens in pixels of its picture (only the sim knows it:
