@@ -39,6 +39,7 @@ from common.ptz_lens import lens_of
 from services.sim.settings import PtzCameraSettings
 from tests.calib.test_collect_e2e import calibration_lab
 from tests.calib.test_zoom_collect_e2e import (
+    PTZ1_MOUNT,
     ZOOMS,
     central_share,
     collect,
@@ -61,7 +62,7 @@ def _offsets_px(following: list, camera: PtzCameraSettings) -> np.ndarray:
 
 
 def run(model: str, fields: dict, seconds: float, count: int) -> dict:
-    camera = sim_camera(fields)
+    camera = sim_camera(fields, PTZ1_MOUNT)
     truth = camera.lens()
     with tempfile.TemporaryDirectory(prefix=f"stb-long-zoom-{model}-") as folder:
         lab, endpoint = _lab_for_up(Path(folder))

@@ -166,10 +166,10 @@ class Session:
             points, track = c.collector.passpoints(), c.collector.track()
         self.store.save_inputs(self.camera, points, track)
         s = self.settings
-        options = Options(focal_px=state.focal_px, fit_focal=s.fit_focal, track=track,
-                          picture_px=c.picture_px,
-                          max_time_offset_s=s.max_time_offset_s, inlier_px=s.inlier_px,
-                          max_mean_error_px=s.max_mean_error_px)
+        options = Options.in_picture(
+            c.picture_px, inlier_px=s.inlier_px, max_mean_error_px=s.max_mean_error_px,
+            focal_px=state.focal_px, fit_focal=s.fit_focal, track=track,
+            max_time_offset_s=s.max_time_offset_s)
         try:
             solution = in_worker(solve_one_zoom, points, options)
         except CalibrationError as err:
@@ -198,9 +198,9 @@ class Session:
             track = c.collector.track()
         self.store.save_inputs(self.camera, Passpoints.joined(by_zoom), track)
         s = self.settings
-        options = Options(track=track, max_time_offset_s=s.max_time_offset_s,
-                          inlier_px=s.inlier_px, max_mean_error_px=s.max_mean_error_px,
-                          picture_px=c.picture_px)
+        options = Options.in_picture(
+            c.picture_px, inlier_px=s.inlier_px, max_mean_error_px=s.max_mean_error_px,
+            track=track, max_time_offset_s=s.max_time_offset_s)
         try:
             fit, first, not_drawn = in_worker(solve_zooms_and_plot, by_zoom, options,
                                               self.store.camera_dir(self.camera) / "lens.png")

@@ -49,9 +49,12 @@ class CalibSettings(ServiceSettings):
     hold: dict[str, Hold] = Field(default_factory=dict, description="per camera: pan, tilt, "
                                   "zoom during collection")
     fit_focal: bool = False
-    inlier_px: float = Field(10.0, gt=0)
+    inlier_px: float = Field(10.0, gt=0, description="passpoints farther than this from the "
+                             "fit are rejected: pixels of a 704-wide picture, scaled with the "
+                             "camera's (27 px at 1920)")
     max_time_offset_s: float = Field(0.5, ge=0, le=5)
-    max_mean_error_px: float = Field(20.0, gt=0)
+    max_mean_error_px: float = Field(20.0, gt=0, description="a pose with a larger mean "
+                                     "error is refused (scaled as inlier_px)")
     lease_s: float = Field(3.0, gt=0, le=60, description="calibration mode lease on a camera")
     review_s: float = Field(600.0, gt=0, le=86_400, description="a solved pose held for an "
                             "operator's review (from the page) is discarded after this long")

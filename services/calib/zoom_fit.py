@@ -24,7 +24,7 @@ from common.passpoints import AtZoom, CalibrationError, Passpoints
 from common.ptz_lens import AXIS_215_PICTURE_PX, Distortion, PtzLens, measured_lens
 from services.calib.solve import Options, Solution, solve
 
-PRIOR_PX = np.array([0.5, 0.5, 0.5, 0.5, 5.0])
+PRIOR_PX = np.array([0.5, 0.5, 0.5, 0.5, 5.0])  # in a 704-wide picture: scaled with the width
 ROUNDS = 3
 MIN_PER_ZOOM = 6
 POSE_PARAMS, LENS_PARAMS = 8, 6  # rotation vector, position, principal point (u, v); focal +
@@ -110,6 +110,7 @@ def fit_zooms(sets: list[AtZoom], pose: Pose, focals_px: list[float], *,
             raise CalibrationError(f"zoom {s.zoom}: {len(s.pixels)} passpoints, at least "
                                    f"{MIN_PER_ZOOM} needed")
     centre = np.array(picture_px, dtype=float) / 2
+    scale_px = picture_px[0] / AXIS_215_PICTURE_PX[0]  # the prior in the same angles
     start = np.concatenate([Rotation.from_matrix(pose.rotation).as_rotvec(), pose.position,
                             centre, *[[f, *NO_DISTORTION] for f in focals_px]])
     scale = np.concatenate([[0.01] * 3, [10.0] * 3, [2.0, 2.0],
@@ -131,7 +132,7 @@ def fit_zooms(sets: list[AtZoom], pose: Pose, focals_px: list[float], *,
         parts = [np.nan_to_num(project(s.world_mm[k], fitted, intr) - s.pixels[k],
                                nan=1e3).ravel()
                  for s, intr, k in zip(sets, lenses, kept, strict=True)]
-        prior = [PRIOR_PX * np.asarray(intr.distortion) for intr in lenses]
+        prior = [PRIOR_PX * scale_px * np.asarray(intr.distortion) for intr in lenses]
         prior.append(PRINCIPAL_PRIOR * (p[6:8] - centre))
         return np.concatenate(parts + prior)
 

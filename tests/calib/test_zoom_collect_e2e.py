@@ -25,7 +25,14 @@ from common.ptz_lens import PtzLens, axis_215_px, lens_of
 from services.sim.settings import PtzCameraSettings
 from tests.calib.test_collect_e2e import calibration_lab
 from tests.calib.test_solve import errors
-from tests.calib.test_zoom_fit import EDGE_BAND, STEPS, ZOOMS, distortion_error_px, drawn_lens
+from tests.calib.test_zoom_fit import (
+    EDGE_BAND,
+    STEPS,
+    ZOOMS,
+    distortion_error_px,
+    drawn_camera,
+    sim_camera,
+)
 from tests.conftest import ROOT, ahead_of_other_work, wait_for
 from tests.services.test_processes import _lab_for_up
 
@@ -41,30 +48,6 @@ def lens_fields(lens: PtzLens) -> dict[str, Any]:
     wide, long = lens.distortions
     return {"zoom_focal_mm": [[z, f] for z, f in in_mm.points()], "distortion": list(wide),
             "distortion_long": list(long)}
-
-
-def drawn_camera(rng: np.random.Generator) -> dict[str, Any]:
-    """A current 16:9 PTZ camera as ``[[sim.cameras]]`` fields, every truth drawn: after the
-    AXIS M5525-E's data sheet (1920 × 1080, a 1/2.8-inch chip, 4.7–47 mm, 10×), a chip
-    5.0–5.8 mm wide, a wide end of 4.4–5.0 mm, 9–11× to the long end along a bent curve, the
-    drawn lens's distortion, a principal point up to 25 px off the centre, and a head whose
-    tilt axis and lens sit up to 20 mm off the pan axis."""
-    chip_w = rng.uniform(5.0, 5.8)
-    zooms = np.round(np.linspace(1, 9999, 12))
-    wide_mm, ratio, bend = rng.uniform(4.4, 5.0), rng.uniform(9.0, 11.0), rng.uniform(1.5, 3.0)
-    focal = wide_mm * ratio ** ((zooms / 9999) ** bend)
-    distortions = drawn_lens(rng).distortions
-    return {"picture_px": [1920, 1080], "chip_mm": [chip_w, chip_w * 9 / 16],
-            "zoom_focal_mm": [[float(z), float(f)] for z, f in zip(zooms, focal, strict=True)],
-            "distortion": list(distortions[0]), "distortion_long": list(distortions[1]),
-            "principal_offset_px": [float(v) for v in rng.uniform(-25.0, 25.0, 2)],
-            "tilt_axis_mm": [float(v) for v in rng.uniform(-20.0, 20.0, 3)],
-            "optical_centre_mm": [float(v) for v in rng.uniform(-20.0, 20.0, 3)]}
-
-
-def sim_camera(fields: dict[str, Any]) -> PtzCameraSettings:
-    """ptz1 as the sim holds it with these fields: its truth (lens, head)."""
-    return PtzCameraSettings(name="ptz1", port=0, **PTZ1_MOUNT.fields(), **fields)
 
 
 def with_camera(lab: Path, fields: dict[str, Any]) -> None:
@@ -153,7 +136,7 @@ def test_collect_at_several_zooms_measures_a_16_9_cameras_lens(tmp_path: Path,
     """A current camera: 1920 × 1080, its own chip and zoom range, the principal point off
     the centre and a head whose axes do not meet at the lens, all drawn; the services know
     none of it but what the camera's VAPIX says (its picture sizes)."""
-    camera = sim_camera(drawn_camera(np.random.default_rng(seed)))
+    camera = sim_camera(drawn_camera(np.random.default_rng(seed)), PTZ1_MOUNT)
     truth = camera.lens()
     lab, endpoint = _lab_for_up(tmp_path)
     with_camera(lab, camera.model_dump(include=set(drawn_camera(np.random.default_rng(0)))))

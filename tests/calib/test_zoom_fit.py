@@ -5,16 +5,25 @@ end fading towards the long end, in the sim's terms — fitted jointly with one 
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pytest
 
-from common.camera import Intrinsics, pose_distance, project_camera, undistort_pixels
+from common.camera import (
+    Intrinsics,
+    Pose,
+    picture_pixel_aspect,
+    pose_distance,
+    project_camera,
+    undistort_pixels,
+)
 from common.passpoints import CalibrationError, Passpoints
 from common.ptz_lens import PtzLens, ZoomCurve, axis_215_px
 from services.calib.solve import Options, solve
 from services.calib.synthetic import PAPER_POSE, zoom_passpoints
 from services.calib.zoom_fit import solve_zooms
+from services.sim.settings import PtzCameraSettings
 
 ZOOMS = [1, 1500, 3500, 5500, 7000, 8000, 9000, 9999]  # benchmarks.zoom_plan chose them
 STEPS = [float(z) for z in range(1, 10000, 7)]  # every 7th zoom step, as the camera counts
@@ -35,6 +44,34 @@ def drawn_lens(rng: np.random.Generator) -> PtzLens:
     return PtzLens(ZoomCurve(tuple(float(z) for z in zooms), tuple(float(f) for f in focal)),
                    (float(focal[0]), float(focal[-1])),
                    (wide, (long[0], long[1], long[2], long[3], long[4])))
+
+
+def drawn_camera(rng: np.random.Generator, picture: tuple[int, int] = (1920, 1080)
+                 ) -> dict[str, Any]:
+    """A current PTZ camera as ``[[sim.cameras]]`` fields, every truth drawn: after the AXIS
+    M5525-E's data sheet (1920 × 1080, a 1/2.8-inch chip, 4.7–47 mm, 10×), a chip 5.0–5.8 mm
+    wide (its height as the picture's aspect has it: square pixels, or PAL's of a 4:3 chip in
+    704 × 576), a wide end of 4.4–5.0 mm, 9–11× to the long end along
+    a bent curve, the drawn lens's distortion, a principal point up to 25 px (in 1920) off the
+    centre, and a head whose tilt axis and lens sit up to 20 mm off the pan axis."""
+    chip_w = rng.uniform(5.0, 5.8)
+    width, height = picture
+    zooms = np.round(np.linspace(1, 9999, 12))
+    wide_mm, ratio, bend = rng.uniform(4.4, 5.0), rng.uniform(9.0, 11.0), rng.uniform(1.5, 3.0)
+    focal = wide_mm * ratio ** ((zooms / 9999) ** bend)
+    distortions = drawn_lens(rng).distortions
+    chip_h = chip_w * height / width / picture_pixel_aspect(width, height)  # f_v / f_u
+    return {"picture_px": [width, height], "chip_mm": [chip_w, chip_h],
+            "zoom_focal_mm": [[float(z), float(f)] for z, f in zip(zooms, focal, strict=True)],
+            "distortion": list(distortions[0]), "distortion_long": list(distortions[1]),
+            "principal_offset_px": [float(v) for v in rng.uniform(-25.0, 25.0, 2) * width / 1920],
+            "tilt_axis_mm": [float(v) for v in rng.uniform(-20.0, 20.0, 3)],
+            "optical_centre_mm": [float(v) for v in rng.uniform(-20.0, 20.0, 3)]}
+
+
+def sim_camera(fields: dict[str, Any], mount: Pose = PAPER_POSE) -> PtzCameraSettings:
+    """ptz1 as the sim holds it with these fields, on ``mount``: its truth (lens, head)."""
+    return PtzCameraSettings(name="ptz1", port=0, **mount.fields(), **fields)
 
 
 def _as_passpoints(sets: list) -> dict[int, Passpoints]:
@@ -82,6 +119,34 @@ def test_focal_within_2_percent_everywhere_and_distortion_within_1_px(seed: int)
     single_position, single_angle = pose_distance(single.pose, PAPER_POSE)
     assert position <= max(2 * single_position, 2.0) and angle <= max(2 * single_angle, 0.02)
     assert fit.mean_error_px() < 0.6  # 0.3 px noise per axis: ≈ 0.38 px
+
+
+PICTURES = [(1920, 1080), (1280, 720), (2560, 1440), (3840, 2160), (704, 576)]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_camera_of_any_picture_is_measured_with_its_principal_point(seed: int) -> None:
+    """A camera drawn with its picture (16:9 sizes up to 4K, or the AXIS 215's PAL one), chip,
+    zoom range, distortion and principal point: the same bounds, the principal point within a
+    pixel, from passpoints in that picture and nothing else."""
+    rng = np.random.default_rng(100 + seed)
+    picture = PICTURES[int(rng.integers(len(PICTURES)))]
+    truth = sim_camera(drawn_camera(rng, picture)).lens()
+    sets = zoom_passpoints(PAPER_POSE, truth, ZOOMS, rng, count=100,
+                           noise_px=0.3 * picture[0] / 704)
+    fit, _ = solve_zooms(_as_passpoints(sets), Options.in_picture(picture))
+    lens = fit.lens()
+    assert (lens.width_px, lens.height_px) == picture
+    focal_error = max(abs(lens.focal_px(z) / truth.focal_px(z) - 1) for z in STEPS)
+    assert focal_error < 0.02, f"{picture}: {100 * focal_error:.2f} %"
+    scale = picture[0] / 704  # the same angles at more pixels; the bounds of the system test
+    assert distortion_error_px(lens.intrinsics(1), truth.intrinsics(1), EDGE_BAND) <= scale
+    assert distortion_error_px(lens.intrinsics(1), truth.intrinsics(1)) <= 2 * scale
+    wide = truth.intrinsics(1)
+    assert fit.principal_px is not None
+    assert np.hypot(fit.principal_px[0] - wide.cy_px, fit.principal_px[1] - wide.cz_px) <= scale
+    position, angle = pose_distance(fit.pose, PAPER_POSE)
+    assert position < 5.0 and angle < 0.05, (position, angle)
 
 
 def test_the_straight_line_is_far_off_such_a_lens() -> None:
