@@ -16,10 +16,9 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from common.data_sheet import AXIS_215_PX_PER_MM
 from common.names import AlgorithmName, GantryCommandName, GantryMode
 from common.pose_fields import PoseFields
-
-AXIS_215_PX_PER_MM = 704 / 3.6  # its picture's width over its chip's (Table 1)
 
 NAME_CHARS, WHO_CHARS, TEXT_CHARS = 64, 128, 500
 Name = Annotated[str, Field(min_length=1, max_length=NAME_CHARS, pattern=r"^[A-Za-z0-9_.-]+$")]

@@ -114,12 +114,13 @@ class MjpegParts:
 
 class CameraVideo:
     """One camera's MJPEG stream on a thread of its own: ``on_frame(camera, jpeg, received_s)``
-    for every JPEG; ``stop()`` ends it."""
+    for every JPEG; ``stop()`` ends it. ``resolution``: VAPIX's ``WIDTHxHEIGHT``, or "" for the
+    camera's own default (its full picture)."""
 
     def __init__(self, name: str, connection: CameraConnection, fps: float, resolution: str,
                  on_frame: Callable[[str, bytes, float], None], timeout_s: float = 5.0) -> None:
         self.name, self.connection, self.on_frame = name, connection, on_frame
-        self.params = {"fps": f"{fps:g}", "resolution": resolution}
+        self.params = {"fps": f"{fps:g}"} | ({"resolution": resolution} if resolution else {})
         self.timeout_s = timeout_s
         self.frames = 0
         self.problem = ""

@@ -27,13 +27,16 @@ from typing import Any
 import numpy as np
 
 from common.camera import Intrinsics
+from common.data_sheet import (
+    AXIS_215_CHIP_MM,
+    AXIS_215_FOCAL_MM,
+    AXIS_215_PICTURE_PX,
+    AXIS_215_PX_PER_MM,
+    AXIS_215_ZOOM_STEPS,
+)
 from common.lens import NO_DISTORTION
-from common.messages import AXIS_215_PX_PER_MM, CameraPose
+from common.messages import CameraPose
 
-AXIS_215_FOCAL_MM = (3.8, 46.0)
-AXIS_215_ZOOM_STEPS = (1, 9999)
-AXIS_215_CHIP_MM = (3.6, 2.7)
-AXIS_215_PICTURE_PX = (704, 576)  # 704 px over its chip's 3.6 mm: AXIS_215_PX_PER_MM
 Distortion = tuple[float, float, float, float, float]
 
 

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from common import messages as m
+from common.data_sheet import AXIS_215_PICTURE_PX
 from common.passpoint_collector import Collector
-from common.ptz_lens import AXIS_215_PICTURE_PX
 from services.calib.settings import CalibSettings
 
 log = logging.getLogger(__name__)

@@ -7,8 +7,9 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 from common.camera import Intrinsics, Pose
+from common.data_sheet import AXIS_215_PICTURE_PX
 from common.passpoints import Track
-from common.ptz_lens import AXIS_215_PICTURE_PX, axis_215_px
+from common.ptz_lens import axis_215_px
 
 Method = Literal["auto", "cmaes", "simplex"]
 

@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from common.camera import Intrinsics, Pose, reprojection_px
+from common.data_sheet import AXIS_215_PICTURE_PX
 from common.passpoints import CalibrationError, Passpoints, Track
-from common.ptz_lens import AXIS_215_PICTURE_PX
 from services.calib.cost import Fitness
 from services.calib.joint import best_offset_on_grid, refine_jointly
 from services.calib.options import Options

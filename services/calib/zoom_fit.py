@@ -19,9 +19,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from common.camera import Intrinsics, Pose, project
+from common.data_sheet import AXIS_215_PICTURE_PX
 from common.lens import NO_DISTORTION
 from common.passpoints import AtZoom, CalibrationError, Passpoints
-from common.ptz_lens import AXIS_215_PICTURE_PX, Distortion, PtzLens, measured_lens
+from common.ptz_lens import Distortion, PtzLens, measured_lens
 from services.calib.solve import Options, Solution, solve
 
 PRIOR_PX = np.array([0.5, 0.5, 0.5, 0.5, 5.0])  # in a 704-wide picture: scaled with the width

@@ -27,9 +27,9 @@ from common import codec, keys
 from common import messages as m
 from common.bus import Bus
 from common.camera import Intrinsics, PtzLimits
+from common.data_sheet import AXIS_215_PICTURE_PX
 from common.markers import kernel_origin, warm_up
 from common.node import Node, run_every
-from common.ptz_lens import AXIS_215_PICTURE_PX
 from common.ptz_settings import PtzSettings
 from services.ptz.calibration import CalibrationHold
 from services.ptz.camera import AxisPtzCamera, PtzCamera, PtzError, PtzRejected, http_client

@@ -65,8 +65,10 @@ class RecordSettings(ServiceSettings):
     video: list[str] = Field(default_factory=list, description="cameras of [ptz.cameras] whose "
                              "video (VAPIX MJPEG) goes into the recording on video/<camera>")
     video_fps: float = Field(5.0, gt=0, le=30, description="video frames a second per camera")
-    video_resolution: str = Field("704x576", pattern=r"^[1-9][0-9]{1,4}x[1-9][0-9]{1,4}$",
-                                  description="the video's size, as VAPIX names it")
+    video_resolution: str = Field("", pattern=r"^([1-9][0-9]{1,4}x[1-9][0-9]{1,4})?$",
+                                  description="the video's size, as VAPIX names it (one the "
+                                  "camera lists); empty: the camera's own, its full picture "
+                                  "(an AXIS 215's 704x576)")
     min_free_mb: float = Field(64.0, ge=0, description="the recording stops (exit 5) when the "
                                "disk has less free than this, while the file can still be "
                                "finished with its summary")

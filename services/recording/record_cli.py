@@ -10,7 +10,8 @@ are recorded too (as bytes, without a JSON copy) and counted. Ctrl-C, SIGTERM or
 ``--duration`` end the recording cleanly.
 
 ``--video ptz1 --video ptz2`` takes each camera's video straight from the camera (VAPIX
-``mjpg/video.cgi`` at ``--video-fps``, 5 by default, 704x576), stamped when each frame arrived,
+``mjpg/video.cgi`` at ``--video-fps``, 5 by default, at the camera's own size unless
+``[record] video_resolution`` names one), stamped when each frame arrived,
 into ``video/<camera>`` — beside the mocap and gantry channels on the same clock; replay puts
 it on the bus, Foxglove shows it on ``/<camera>/video``.
 

@@ -14,10 +14,11 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from common.camera import Pose
 from common.crane_frame import CraneFrame
 from common.crane_registers import RegisterMap
+from common.data_sheet import AXIS_215_CHIP_MM, AXIS_215_PICTURE_PX
 from common.lab_paths import SIM_CRATER_FILE
 from common.lens import NO_DISTORTION
 from common.pose_fields import PoseFields
-from common.ptz_lens import AXIS_215_CHIP_MM, AXIS_215_PICTURE_PX, DATA_SHEET_MM, PtzLens, ZoomCurve
+from common.ptz_lens import DATA_SHEET_MM, PtzLens, ZoomCurve
 from common.settings import NAME_PATTERN, ServiceSettings, above_its_minimum
 from common.tracking_camera import TrackingCameraModel
 from services.sim.crane import CraneParams

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import replace
 
 import cv2
 import httpx
@@ -290,3 +291,42 @@ def test_a_lens_table_that_is_no_curve_stops_the_lab_file_naming_the_field() -> 
     with pytest.raises(ValidationError, match="zoom_focal_mm"):
         PtzCameraSettings(name="ptz1", port=0, x_mm=0, y_mm=0, z_mm=0, rx_deg=0, ry_deg=0,
                           rz_deg=0, zoom_focal_mm=[(1, 3.8), (5000, 3.0), (9999, 46.0)])
+
+
+def test_a_16_9_camera_says_its_picture_and_draws_through_its_principal_point() -> None:
+    """A current camera (1920 × 1080, its own chip, the principal point off the centre) over
+    real HTTP: our VAPIX client reads its picture size from ``param.cgi``, a snapshot without a
+    resolution is its full picture, its half is offered and the AXIS 215's size refused; the
+    markers land where its true lens — principal point included — puts them."""
+    from services.ptz.camera import AxisPtzCamera
+
+    settings = PtzCameraSettings(name="ptz1", port=0, x_mm=0, y_mm=0, z_mm=2000, rx_deg=180,
+                                 ry_deg=30, rz_deg=0, picture_px=(1920, 1080),
+                                 chip_mm=(5.6, 3.15), principal_offset_px=(21.0, -13.0))
+    head = settings.head()
+    head.ir_cut_filter = "off"
+    truth = head.intrinsics(10.0)
+    assert (truth.cy_px, truth.cz_px) == (981.0, 527.0) and truth.fz_px == truth.fy_px
+    points = _grid_in_view(head.pose(10.0), truth.pinhole(), 3000.0)
+    sim = SimCamera("ptz1", head, lambda: points, [], lambda: 10.0, np.random.default_rng(4),
+                    resolutions=settings.resolutions())
+    server = CameraServer(sim, "127.0.0.1", 0).start()
+    try:
+        with httpx.Client(base_url=f"http://127.0.0.1:{server.port}", timeout=3,
+                          auth=httpx.DigestAuth("root", "pass")) as client:
+            assert AxisPtzCamera(client, "ptz1").picture() == (1920, 1080)
+            image = AxisPtzCamera(client, "ptz1").snapshot()
+            assert image.shape == (1080, 1920)
+            assert _snapshot(client, resolution="960x540").shape == (540, 960)
+            assert "Error" in client.get(IMAGE, params={"resolution": "704x576"}).text
+    finally:
+        server.close()
+    expected = project(points, head.pose(10.0), truth)
+    centred = project(points, head.pose(10.0), replace(truth, principal_px=None))
+    spots = _bright_spots(image)
+    inside = [(u, v) for u, v in expected if 6 < u < 1914 and 6 < v < 1074]
+    assert len(inside) >= 20
+    for u, v in inside:
+        nearest = min(spots, key=lambda s: np.hypot(s[0] - u, s[1] - v))
+        assert np.hypot(nearest[0] - u, nearest[1] - v) < 0.5
+    assert np.allclose(expected - centred, [21.0, -13.0])
