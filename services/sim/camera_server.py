@@ -29,7 +29,7 @@ from common.trace import TRACE_HEADER
 from services.sim import vapix
 from services.sim.arrival import StampedReader
 from services.sim.ptz import PtzHead
-from services.sim.render import Glint, draw, glint_blobs, marker_blobs
+from services.sim.render import Glint, NoiseBank, draw, glint_blobs, marker_blobs
 from services.sim.scene import DAY, INFRARED, GroundView, chassis_outline, compose
 from services.sim.vapix_device import Device, api_discovery
 from services.sim.vapix_ptz import CameraMemory, handle_ptz
@@ -83,6 +83,8 @@ class SimCamera:
     """(marker position, heading, ground height) of each robot now: their chassis are drawn"""
     memory: CameraMemory = field(default_factory=CameraMemory)
     resolutions: dict[str, tuple[int, int]] = field(default_factory=lambda: vapix.RESOLUTIONS)
+    noise: dict[tuple[int, int], NoiseBank] = field(default_factory=dict)
+    """the sensor's noise per picture size, drawn at the first picture of that size"""
     commands: deque[tuple[float, float]] = field(default_factory=lambda: deque(maxlen=100_000))
     """(arrival wall time, X-STB-Measured) of every traced PTZ command: latency figures. The
     arrival is the kernel's receive time of the bytes carrying the request line."""
@@ -107,7 +109,11 @@ class SimCamera:
         blobs = marker_blobs(self.scene(), pose, intr, peak=peak)
         if ir_visible:
             blobs += glint_blobs(self.glints, pose, intr)
-        return draw(blobs, width, height, self.rng, background=background)
+        noise = self.noise.get((width, height))
+        if noise is None:  # 2.5 gray levels (draw's own), whole levels: a quarter the bytes
+            noise = self.noise[(width, height)] = NoiseBank(2.5, width, height, self.rng,
+                                                            whole=True)
+        return draw(blobs, width, height, self.rng, background=background, noise=noise)
 
     @property
     def device(self) -> Device:

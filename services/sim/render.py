@@ -53,8 +53,12 @@ class NoiseBank:
     patches."""
 
     def __init__(self, sigma: float, width: int, height: int, rng: np.random.Generator,
-                 fields: int = 8) -> None:
-        self._draw = lambda: rng.normal(0.0, sigma, (fields, height, width)).astype(np.float32)
+                 fields: int = 8, whole: bool = False) -> None:
+        """``whole``: the deviates rounded to whole gray levels and kept as bytes (a quarter
+        of the memory: for large pictures that are rounded to 8 bits anyway)."""
+        self._draw = (lambda: np.clip(np.rint(rng.normal(0.0, sigma, (fields, height, width))),
+                                      -127, 127).astype(np.int8)) if whole else (
+            lambda: rng.normal(0.0, sigma, (fields, height, width)).astype(np.float32))
         self._fields: np.ndarray | None = None
         self._baked: dict[tuple[int, float], np.ndarray] = {}
         self._next = 0
