@@ -166,8 +166,13 @@ def test_collect_at_several_zooms_measures_a_16_9_cameras_lens(tmp_path: Path,
           f"within {covered_px:.2f} px at zoom 1 ({distortion_px:.2f} px at the very edge), "
           f"principal point {principal_px:.2f} px off, pose {position:.1f} mm / {angle:.3f}°, "
           f"{pose.mean_error_px:.2f} px over {pose.passpoints} passpoints")
+    # the AXIS 215's bounds in its 704-wide picture, as the same angles in this one's pixels:
+    # the passpoints' noise is the motion capture's and the snapshots' timing, in angle
+    scale = pose.width_px / 704
+    print(f"in the AXIS 215's pixels: distortion {covered_px / scale:.2f} px "
+          f"({distortion_px / scale:.2f} px at the very edge)")
     assert focal_error < 0.02
-    assert covered_px <= 1.0 and distortion_px <= 2.0
+    assert covered_px <= 1.0 * scale and distortion_px <= 2.0 * scale
     assert principal_px <= 2.0
     assert position < 10.0 and angle < 0.2  # as the single-zoom collection (test_collect_e2e)
     share = central_share(following, camera)
