@@ -330,3 +330,14 @@ def test_a_16_9_camera_says_its_picture_and_draws_through_its_principal_point() 
         nearest = min(spots, key=lambda s: np.hypot(s[0] - u, s[1] - v))
         assert np.hypot(nearest[0] - u, nearest[1] - v) < 0.5
     assert np.allclose(expected - centred, [21.0, -13.0])
+
+
+def test_a_picture_or_chip_that_cannot_be_stops_the_lab_file_naming_the_field() -> None:
+    pose = {"x_mm": 0, "y_mm": 0, "z_mm": 0, "rx_deg": 0, "ry_deg": 0, "rz_deg": 0}
+    with pytest.raises(ValidationError, match="picture_px"):
+        PtzCameraSettings(name="ptz1", port=0, **pose, picture_px=(1919, 1080))
+    with pytest.raises(ValidationError, match="chip_mm"):
+        PtzCameraSettings(name="ptz1", port=0, **pose, chip_mm=(0.0, 3.0))
+    assert PtzCameraSettings(name="ptz1", port=0, **pose, picture_px=(1920, 1080)
+                             ).resolutions() == {"1920x1080": (1920, 1080),
+                                                 "960x540": (960, 540), "480x270": (480, 270)}
