@@ -96,8 +96,8 @@ def closed_form_focal_px(pose: Pose, world_mm: np.ndarray, pixels: np.ndarray,
 
 
 def fit_zooms(sets: list[AtZoom], pose: Pose, focals_px: list[float], *,
-              picture_px: tuple[int, int] = AXIS_215_PICTURE_PX, inlier_px: float = 10.0,
-              fit_principal: bool = True) -> ZoomFit:
+              picture_px: tuple[int, int] = AXIS_215_PICTURE_PX, inlier_px: float = 10.0
+              ) -> ZoomFit:
     """The joint fit, from a start ``pose`` and a focal length per set (pixels of a
     ``picture_px`` picture)."""
     from scipy.optimize import least_squares  # only to fit
@@ -120,7 +120,7 @@ def fit_zooms(sets: list[AtZoom], pose: Pose, focals_px: list[float], *,
 
     def unpack(p: np.ndarray) -> tuple[Pose, list[Intrinsics]]:
         fitted = Pose.from_matrix(Rotation.from_rotvec(p[0:3]).as_matrix(), p[3:6])
-        principal = (float(p[6]), float(p[7])) if fit_principal else None
+        principal = (float(p[6]), float(p[7]))
         lenses = []
         for i in range(len(sets)):
             f, *d = p[POSE_PARAMS + LENS_PARAMS * i: POSE_PARAMS + LENS_PARAMS * (i + 1)]
