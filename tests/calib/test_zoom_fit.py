@@ -74,7 +74,7 @@ def sim_camera(fields: dict[str, Any], mount: Pose = PAPER_POSE) -> PtzCameraSet
     return PtzCameraSettings(name="ptz1", port=0, **mount.fields(), **fields)
 
 
-def _as_passpoints(sets: list) -> dict[int, Passpoints]:
+def as_passpoints(sets: list) -> dict[int, Passpoints]:
     return {s.zoom: Passpoints(s.world_mm, s.pixels) for s in sets}
 
 
@@ -106,7 +106,7 @@ def test_focal_within_2_percent_everywhere_and_distortion_within_1_px(seed: int)
     rng = np.random.default_rng(seed)
     truth = drawn_lens(rng)
     sets = zoom_passpoints(PAPER_POSE, truth, ZOOMS, rng, count=100)
-    fit, _ = solve_zooms(_as_passpoints(sets), Options())
+    fit, _ = solve_zooms(as_passpoints(sets), Options())
     lens = fit.lens()
     focal_error = max(abs(lens.focal_px(z) / truth.focal_px(z) - 1) for z in STEPS)
     assert focal_error < 0.02, f"{100 * focal_error:.2f} %"
@@ -114,7 +114,7 @@ def test_focal_within_2_percent_everywhere_and_distortion_within_1_px(seed: int)
     position, angle = pose_distance(fit.pose, PAPER_POSE)
     # as accurate as a single-zoom calibration of a lens without distortion, same passpoints
     plain = PtzLens(truth.curve)
-    single = solve(_as_passpoints(zoom_passpoints(PAPER_POSE, plain, [1], rng, 100))[1],
+    single = solve(as_passpoints(zoom_passpoints(PAPER_POSE, plain, [1], rng, 100))[1],
                    Options(fit_focal=True))
     single_position, single_angle = pose_distance(single.pose, PAPER_POSE)
     assert position <= max(2 * single_position, 2.0) and angle <= max(2 * single_angle, 0.02)
@@ -134,7 +134,7 @@ def test_a_camera_of_any_picture_is_measured_with_its_principal_point(seed: int)
     truth = sim_camera(drawn_camera(rng, picture)).lens()
     sets = zoom_passpoints(PAPER_POSE, truth, ZOOMS, rng, count=100,
                            noise_px=0.3 * picture[0] / 704)
-    fit, _ = solve_zooms(_as_passpoints(sets), Options.in_picture(picture))
+    fit, _ = solve_zooms(as_passpoints(sets), Options.in_picture(picture))
     lens = fit.lens()
     assert (lens.width_px, lens.height_px) == picture
     focal_error = max(abs(lens.focal_px(z) / truth.focal_px(z) - 1) for z in STEPS)
@@ -159,7 +159,7 @@ def test_the_straight_line_is_far_off_such_a_lens() -> None:
 def test_one_zoom_or_too_few_passpoints_at_one_is_refused_saying_why() -> None:
     rng = np.random.default_rng(5)
     truth = drawn_lens(rng)
-    sets = _as_passpoints(zoom_passpoints(PAPER_POSE, truth, [1, 9999], rng, count=40))
+    sets = as_passpoints(zoom_passpoints(PAPER_POSE, truth, [1, 9999], rng, count=40))
     with pytest.raises(CalibrationError, match="two or more zoom steps"):
         solve_zooms({1: sets[1]}, Options())
     few = {1: sets[1], 9999: Passpoints(sets[9999].world_mm[:4], sets[9999].pixels[:4])}
@@ -174,7 +174,7 @@ def test_geometry_driven_zoom_keeps_the_robots_size_with_the_measured_lens() -> 
 
     rng = np.random.default_rng(21)
     truth = drawn_lens(rng)
-    fit, _ = solve_zooms(_as_passpoints(zoom_passpoints(PAPER_POSE, truth, ZOOMS, rng, 60)),
+    fit, _ = solve_zooms(as_passpoints(zoom_passpoints(PAPER_POSE, truth, ZOOMS, rng, 60)),
                          Options())
     worst = {"measured": 0.0, "straight line": 0.0}
     for distance in np.linspace(2500.0, 6000.0, 30):
