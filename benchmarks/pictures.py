@@ -40,10 +40,10 @@ def _serve(lab: Lab, picture: bool) -> CameraServer:
     def clock() -> float:
         return time.monotonic() - t0
 
-    sim = SimCamera(cam.name, lab.heads[cam.name], lambda: lab.bright_points(clock()),
+    sim = SimCamera(cam.name, lab.heads[cam.name], lab.bright_points,
                     lab.ptz_glints, clock, np.random.default_rng(0), cam.user, cam.password,
                     ground=GroundView.of(lab.crater, lab.settings.seed) if picture else None,
-                    robots=lambda: [lab.robot_pose(clock())])
+                    robots=lambda t: [lab.robot_pose(t)])
     return CameraServer(sim, "127.0.0.1", 0).start()
 
 

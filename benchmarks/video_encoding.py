@@ -57,9 +57,9 @@ def streams(lab: Lab, settings: SimSettings, seconds: float
                                       data=image.tobytes()))
     out["tracking camera, 640×480 grey"] = (keys.GANTRY_FRAME, 25.0, tracking)
     for cam in settings.cameras:
-        sim = SimCamera(cam.name, lab.heads[cam.name], lambda: lab.bright_points(t[0]),
+        sim = SimCamera(cam.name, lab.heads[cam.name], lab.bright_points,
                         lab.ptz_glints, lambda: t[0], np.random.default_rng(1),
-                        ground=GroundView.of(lab.crater), robots=lambda: [lab.robot_pose(t[0])])
+                        ground=GroundView.of(lab.crater), robots=lambda at: [lab.robot_pose(at)])
         frames = []
         for i in range(int(5 * seconds)):
             t[0] = 10.0 + i / 5

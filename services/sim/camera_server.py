@@ -39,6 +39,7 @@ log = logging.getLogger(__name__)
 REALM = "AXIS_ACCC8E5A0215"
 BOUNDARY = "myboundary"  # what AXIS cameras put between the JPEGs of video.cgi
 NONCE_LIFETIME_S = 300.0
+MAX_WAIT_S = 1.0  # a picture is of at most this long before its request was handled
 
 
 class StampedHandler(BaseHTTPRequestHandler):
@@ -60,7 +61,9 @@ class ServedCamera(Protocol):
     mjpeg_fps: float
     resolutions: dict[str, tuple[int, int]]
 
-    def snapshot(self, width: int, height: int) -> np.ndarray: ...
+    def snapshot(self, width: int, height: int, waited_s: float = 0.0) -> np.ndarray:
+        """The picture of ``waited_s`` ago (when the request reached the camera)."""
+        ...
 
 
 @dataclass
@@ -69,7 +72,7 @@ class SimCamera:
 
     name: str
     head: PtzHead
-    scene: Callable[[], np.ndarray]  # marker world points (N, 3) now
+    scene: Callable[[float], np.ndarray]  # marker world points (N, 3) at a sim time
     glints: list[Glint]
     clock: Callable[[], float]
     rng: np.random.Generator
@@ -79,8 +82,9 @@ class SimCamera:
     jpeg_quality: int = 90
     mjpeg_fps: float = 2.0  # video.cgi's rate when the request names none
     ground: GroundView | None = None  # the crater as this camera sees it; None: a plain field
-    robots: Callable[[], list[tuple[np.ndarray, float, float]]] = lambda: []
-    """(marker position, heading, ground height) of each robot now: their chassis are drawn"""
+    robots: Callable[[float], list[tuple[np.ndarray, float, float]]] = lambda _t: []
+    """(marker position, heading, ground height) of each robot at a sim time: their chassis
+    are drawn"""
     memory: CameraMemory = field(default_factory=CameraMemory)
     resolutions: dict[str, tuple[int, int]] = field(default_factory=lambda: vapix.RESOLUTIONS)
     noise: dict[tuple[int, int], NoiseBank] = field(default_factory=dict)
@@ -89,24 +93,29 @@ class SimCamera:
     """(arrival wall time, X-STB-Measured) of every traced PTZ command: latency figures. The
     arrival is the kernel's receive time of the bytes carrying the request line."""
 
-    def snapshot(self, width: int, height: int) -> np.ndarray:
-        """What the camera sees now: the crater and the robots (with a ``ground``; else a
-        plain field), the markers — bright with the IR cut filter off — and the reflections."""
+    def snapshot(self, width: int, height: int, waited_s: float = 0.0) -> np.ndarray:
+        """What the camera saw ``waited_s`` ago, when the request reached it: the crater and
+        the robots (with a ``ground``; else a plain field), the markers — bright with the IR
+        cut filter off — and the reflections. A real camera's sensor does not wait for its
+        CPU; the sim's thread may wait for the sim's other work (on a busy machine tens of
+        milliseconds), and the wand would be drawn where it was that much later. The head is
+        drawn as it is now (it has no past; at rest while a picture is measured)."""
         now = self.clock()
+        taken = now - min(max(waited_s, 0.0), MAX_WAIT_S)
         pose = self.head.pose(now)
         intr = self.head.intrinsics(now, width, height)
         ir_visible = self.head.ir_cut_filter == "off"
         background: float | np.ndarray
         if self.ground is not None:
             look = INFRARED if ir_visible else DAY
-            chassis = [hull for marker, heading, ground in self.robots()
+            chassis = [hull for marker, heading, ground in self.robots(taken)
                        if (hull := chassis_outline(marker, heading, ground, pose, intr))
                        is not None]
             background = compose(self.ground.brightness(pose, intr), look, chassis)
             peak = look.marker_peak
         else:
             peak, background = (255.0, 16.0) if ir_visible else (70.0, 55.0)
-        blobs = marker_blobs(self.scene(), pose, intr, peak=peak)
+        blobs = marker_blobs(self.scene(taken), pose, intr, peak=peak)
         if ir_visible:
             blobs += glint_blobs(self.glints, pose, intr)
         noise = self.noise.get((width, height))
@@ -187,7 +196,9 @@ def answer(cam: ServedCamera, path: str, args: dict[str, str], body: bytes,
     camera (wall time)."""
     if path == vapix.IMAGE_PATH:
         size = vapix.image_size(args, cam.resolutions)
-        return size if isinstance(size, vapix.Reply) else jpeg_reply(cam, size, args)
+        if isinstance(size, vapix.Reply):
+            return size
+        return jpeg_reply(cam, size, args, waited_s=time.time() - arrived)
     if not isinstance(cam, SimCamera):  # a fixed camera: pictures only
         return vapix.not_found()
     now = cam.clock()
@@ -209,10 +220,11 @@ def answer(cam: ServedCamera, path: str, args: dict[str, str], body: bytes,
     return vapix.not_found()
 
 
-def jpeg_reply(cam: ServedCamera, size: tuple[int, int], args: dict[str, str]) -> vapix.Reply:
-    """A snapshot of what the camera sees now, at its JPEG quality or the request's
-    ``compression``."""
-    image = cam.snapshot(*size)
+def jpeg_reply(cam: ServedCamera, size: tuple[int, int], args: dict[str, str],
+               waited_s: float = 0.0) -> vapix.Reply:
+    """A snapshot of what the camera saw when the request reached it (``waited_s`` ago), at
+    its JPEG quality or the request's ``compression``."""
+    image = cam.snapshot(*size, waited_s=waited_s)
     quality = cam.jpeg_quality
     if "compression" in args and args["compression"].isdigit():
         quality = max(5, 100 - int(args["compression"]))

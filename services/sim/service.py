@@ -113,11 +113,11 @@ def start_cameras(lab: Lab, settings: SimSettings, clock: Clock) -> list[CameraS
     """The PTZ cameras' servers (the observation camera's runs in a process of its own)."""
     servers: list[CameraServer] = []
     for i, cam in enumerate(settings.cameras):
-        sim_camera = SimCamera(cam.name, lab.heads[cam.name], lambda: lab.bright_points(clock()),
+        sim_camera = SimCamera(cam.name, lab.heads[cam.name], lab.bright_points,
                                lab.ptz_glints, clock, np.random.default_rng((settings.seed, 3, i)),
                                cam.user, cam.password, cam.auth, mjpeg_fps=cam.mjpeg_fps,
                                ground=GroundView.of(lab.crater, settings.seed),
-                               robots=lambda: [lab.robot_pose(clock())],
+                               robots=lambda t: [lab.robot_pose(t)],
                                resolutions=cam.resolutions())
         try:
             servers.append(CameraServer(sim_camera, settings.host_of(cam.host), cam.port).start())

@@ -12,6 +12,7 @@ service's). Only the wires are left out: HTTP and the bus are tested in ``test_s
 from __future__ import annotations
 
 import heapq
+import time
 from collections.abc import Callable
 from typing import Any, cast
 
@@ -42,7 +43,8 @@ Robot = Callable[[float], np.ndarray | None]  # where the robot is (None: no sam
 
 class InProcessCamera(httpx.BaseTransport):
     """httpx to the sim's camera without a socket: each request answered by the sim's
-    ``answer`` at the simulated time; ``up`` False plays a camera that is off."""
+    ``answer`` at the simulated time, as it arrives (the wall time: it waited for nothing);
+    ``up`` False plays a camera that is off."""
 
     def __init__(self, camera: SimCamera) -> None:
         self.camera, self.up = camera, True
@@ -51,7 +53,7 @@ class InProcessCamera(httpx.BaseTransport):
         if not self.up:
             raise httpx.ConnectError("the camera is off", request=request)
         reply = answer(self.camera, request.url.path, dict(request.url.params.multi_items()),
-                       request.read(), request.headers.get(TRACE_HEADER), self.camera.clock())
+                       request.read(), request.headers.get(TRACE_HEADER), time.time())
         return httpx.Response(reply.status, headers={"content-type": reply.content_type},
                               content=reply.body)
 
@@ -92,7 +94,7 @@ def sim_camera(clock: Callable[[], float], target: Callable[[], np.ndarray],
                latency_s: float = 0.05) -> SimCamera:
     """ptz1 at ``MOUNT``, its head at home, seeing the robot marker at ``target()``."""
     return SimCamera("ptz1", PtzHead(MOUNT, latency_s=latency_s),
-                     lambda: target()[None, :], [], clock, np.random.default_rng(0))
+                     lambda _t: target()[None, :], [], clock, np.random.default_rng(0))
 
 
 class SimPtz:

@@ -98,7 +98,7 @@ def _sim_camera(lab: Lab) -> tuple:
     """The lab's first camera served over VAPIX on loopback: (its settings, server, URL)."""
     cam = lab.settings.cameras[0]
     t0 = time.monotonic()
-    sim = SimCamera(cam.name, lab.heads[cam.name], lambda: lab.bright_points(0.0), [],
+    sim = SimCamera(cam.name, lab.heads[cam.name], lambda _t: lab.bright_points(0.0), [],
                     lambda: time.monotonic() - t0, np.random.default_rng(0), cam.user,
                     cam.password)
     server = CameraServer(sim, "127.0.0.1", 0).start()

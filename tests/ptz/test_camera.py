@@ -27,7 +27,7 @@ from tests.conftest import free_port, wait_for
 def server() -> Iterator[CameraServer]:
     t0 = time.monotonic()
     head = PtzHead(Pose(0, 0, 2000, 180, 30, 0))
-    sim = SimCamera("ptz1", head, lambda: np.array([[3000.0, 0.0, 0.0]]), [],
+    sim = SimCamera("ptz1", head, lambda _t: np.array([[3000.0, 0.0, 0.0]]), [],
                     lambda: time.monotonic() - t0, np.random.default_rng(0), "root", "secret")
     server = CameraServer(sim, "127.0.0.1", 0).start()
     yield server

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from dataclasses import replace
 
@@ -14,7 +15,8 @@ from pydantic import ValidationError
 from common.camera import Intrinsics, Pose, project
 from common.markers import detect
 from common.ptz_lens import PtzLens
-from services.sim.camera_server import CameraServer, SimCamera
+from services.sim import vapix
+from services.sim.camera_server import CameraServer, SimCamera, answer
 from services.sim.lab import Lab
 from services.sim.ptz import PtzHead
 from services.sim.scene import DAY, GroundView
@@ -48,9 +50,9 @@ def servers(lab: Lab, clock: Clock) -> Iterator[dict[str, tuple[CameraServer, ht
     out = {}
     for i, cam in enumerate(lab.settings.cameras):
         # A still scene (the robot at its start), so a snapshot and a prediction agree.
-        sim = SimCamera(cam.name, lab.heads[cam.name], lambda: lab.bright_points(0.0),
+        sim = SimCamera(cam.name, lab.heads[cam.name], lambda _t: lab.bright_points(0.0),
                         lab.ptz_glints, clock, np.random.default_rng(i), cam.user, cam.password,
-                        ground=GroundView.of(lab.crater), robots=lambda: [lab.robot_pose(0.0)])
+                        ground=GroundView.of(lab.crater), robots=lambda _t: [lab.robot_pose(0.0)])
         server = CameraServer(sim, "127.0.0.1", cam.port).start()
         client = httpx.Client(base_url=f"http://127.0.0.1:{server.port}", timeout=3,
                               auth=httpx.DigestAuth(cam.user, cam.password))
@@ -81,7 +83,7 @@ def test_requests_without_or_with_wrong_credentials_get_401(servers: dict) -> No
 
 
 def test_basic_auth_when_the_camera_is_set_to_it(lab: Lab) -> None:
-    sim = SimCamera("cam", lab.heads["ptz1"], lambda: lab.bright_points(0.0), [], lambda: 0.0,
+    sim = SimCamera("cam", lab.heads["ptz1"], lambda _t: lab.bright_points(0.0), [], lambda: 0.0,
                     np.random.default_rng(0), "operator", "secret", auth="basic")
     server = CameraServer(sim, "127.0.0.1", 0).start()
     try:
@@ -270,7 +272,7 @@ def test_a_sim_camera_draws_through_its_own_lens(seed: int) -> None:
     assert truth.focal_px == pytest.approx(settings.lens().focal_px(zoom))
     assert truth.fy_px == pytest.approx(settings.lens().focal_px(zoom))
     points = _grid_in_view(head.pose(10.0), truth.pinhole(), 3000.0)
-    camera = SimCamera("ptz1", head, lambda: points, [], lambda: 10.0,
+    camera = SimCamera("ptz1", head, lambda _t: points, [], lambda: 10.0,
                        np.random.default_rng(seed))
     spots = _bright_spots(camera.snapshot(704, 576))
     expected = project(points, head.pose(10.0), truth)
@@ -285,6 +287,30 @@ def test_a_sim_camera_draws_through_its_own_lens(seed: int) -> None:
         assert np.hypot(nearest[0] - u, nearest[1] - v) < 0.5
         worst_pinhole = max(worst_pinhole, float(np.hypot(us - u, vs - v)))
     assert worst_pinhole > 5.0
+
+
+def test_a_snapshot_is_of_when_its_request_reached_the_camera() -> None:
+    """A request handled 0.2 s after it arrived (the sim's thread busy with other work)
+    pictures the wand where it was when the request came, as a camera with its own sensor
+    would: not where it was 0.2 s later (1 m/s: 200 mm, tens of pixels)."""
+    head = PtzHead(Pose(0, 0, 2000, 180, 30, 0))
+    head.ir_cut_filter = "off"
+    head.absolute(0.0, 0.0, 0.0, 1)
+    start = _grid_in_view(head.pose(10.0), head.intrinsics(10.0, 704, 576), 3000.0)[17]
+
+    def wand(t: float) -> np.ndarray:  # across the picture at 1 m/s
+        return (start + np.array([0.0, 1000.0, 0.0]) * (t - 10.0))[None, :]
+
+    camera = SimCamera("ptz1", head, wand, [], lambda: 10.0, np.random.default_rng(5))
+    reply = answer(camera, vapix.IMAGE_PATH, {"resolution": "704x576"}, b"", None,
+                   time.time() - 0.2)
+    image = cv2.imdecode(np.frombuffer(reply.body, np.uint8), cv2.IMREAD_GRAYSCALE)
+    (u, v, _), = _bright_spots(image)
+    intr = head.intrinsics(10.0, 704, 576)
+    arrived = project(wand(9.8), head.pose(10.0), intr)[0]
+    handled = project(wand(10.0), head.pose(10.0), intr)[0]
+    assert np.hypot(u - arrived[0], v - arrived[1]) < 1.0
+    assert np.hypot(*(arrived - handled)) > 30.0
 
 
 def test_a_lens_table_that_is_no_curve_stops_the_lab_file_naming_the_field() -> None:
@@ -308,7 +334,7 @@ def test_a_16_9_camera_says_its_picture_and_draws_through_its_principal_point() 
     truth = head.intrinsics(10.0)
     assert (truth.cy_px, truth.cz_px) == (981.0, 527.0) and truth.fz_px == truth.fy_px
     points = _grid_in_view(head.pose(10.0), truth.pinhole(), 3000.0)
-    sim = SimCamera("ptz1", head, lambda: points, [], lambda: 10.0, np.random.default_rng(4),
+    sim = SimCamera("ptz1", head, lambda _t: points, [], lambda: 10.0, np.random.default_rng(4),
                     resolutions=settings.resolutions())
     server = CameraServer(sim, "127.0.0.1", 0).start()
     try:

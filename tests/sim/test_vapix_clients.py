@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[2]
 @pytest.fixture
 def camera(lab: Lab) -> Iterator[tuple[CameraServer, httpx.Client]]:
     cam, t0 = lab.settings.cameras[0], time.monotonic()
-    sim = SimCamera(cam.name, lab.heads[cam.name], lambda: lab.bright_points(0.0),
+    sim = SimCamera(cam.name, lab.heads[cam.name], lambda _t: lab.bright_points(0.0),
                     lab.ptz_glints, lambda: time.monotonic() - t0, np.random.default_rng(0),
                     cam.user, cam.password)
     server = CameraServer(sim, "127.0.0.1", 0).start()
