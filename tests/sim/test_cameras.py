@@ -305,6 +305,7 @@ def test_a_snapshot_is_of_when_its_request_reached_the_camera() -> None:
     reply = answer(camera, vapix.IMAGE_PATH, {"resolution": "704x576"}, b"", None,
                    time.time() - 0.2)
     image = cv2.imdecode(np.frombuffer(reply.body, np.uint8), cv2.IMREAD_GRAYSCALE)
+    assert image is not None, reply
     (u, v, _), = _bright_spots(image)
     intr = head.intrinsics(10.0, 704, 576)
     arrived = project(wand(9.8), head.pose(10.0), intr)[0]
