@@ -6,10 +6,12 @@ projected onto sines over a grid of frequencies (``low_hz``…``high_hz``); the 
 frequency is the gait's if its amplitude is at least ``min_amplitude_mm``, it stands out from
 the rest of the spectrum (``prominence`` times the median power), lies inside the band (not at
 its edge, where what is left of a curved path leaks in) and explains at least ``share`` of
-what the trend leaves. Measured again every ``every_s``; a gait once found is kept through
-``keep_s`` of
-windows that do not show it (a slide, a turn), and without one (a wheeled robot, a robot
-standing) ``omega_rad_s`` is 0.
+what the trend leaves. Measured again every ``every_s``. A gait once found is confirmed by
+its frequency alone: while it stands out there (``prominence`` times the median power, at
+least ``min_amplitude_mm``) it is kept, however much a slide or a turn adds to the window
+around it; it is kept through ``keep_s`` of windows that do not show it, and no other
+frequency replaces it before then (a slide's low frequencies can pass the test above for a
+window or two). Without one (a wheeled robot, a robot standing) ``omega_rad_s`` is 0.
 """
 
 from __future__ import annotations
@@ -54,9 +56,10 @@ class GaitMeter:
                 self._t[-1] - self._t[0] >= 0.8 * self.window_s:
             self._measured_s = t_s
             omega, self.amplitude_mm = self._measure()
-            if omega > 0:
+            lost = t_s - self._found_s > self.keep_s
+            if omega > 0 and (omega == self.omega_rad_s or self.omega_rad_s == 0 or lost):
                 self.omega_rad_s, self._found_s = omega, t_s
-            elif t_s - self._found_s > self.keep_s:
+            elif lost:
                 self.omega_rad_s = 0.0
 
     def _measure(self) -> tuple[float, float]:
@@ -69,6 +72,12 @@ class GaitMeter:
         phasors = np.exp(-2j * np.pi * np.outer(freqs, t))  # (F, N)
         amplitude = 2 * np.abs(phasors @ residual) / len(t)  # (F, 2)
         power = (amplitude ** 2).sum(axis=1)
+        if self.omega_rad_s > 0:  # the gait known: is it still there, whatever else moved?
+            near = np.abs(freqs - self.omega_rad_s / (2 * np.pi)) <= self.step_hz * 1.01
+            kept = float(np.sqrt(power[near].max()))
+            if kept >= self.min_amplitude_mm and power[near].max() >= \
+                    self.prominence * np.median(power):
+                return self.omega_rad_s, kept
         best = int(np.argmax(power))
         strongest = float(np.sqrt(power[best]))
         freq = float(freqs[best])

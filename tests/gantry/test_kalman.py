@@ -71,6 +71,28 @@ def test_the_gait_is_kept_through_a_slide() -> None:
     assert all(f > 0 for f, ti in zip(found, t, strict=True) if ti > 8), "kept, slide or not"
 
 
+def test_the_gait_is_kept_through_slide_after_slide_and_not_swapped_for_their_frequency() -> None:
+    """Slides of 12–30 cm every 3–5 s for half a minute (steep ground): each window holds a
+    slide, far more than the sway explains, but the sway still stands out at its frequency —
+    the gait is kept the whole time, and never replaced by what the slides leave at low
+    frequencies (the old rule lost it after 10 s and once took 0.44 Hz for it)."""
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 50.0, FRAME_S)
+    path = _walk(t)
+    start = 12.0
+    while start < 45.0:
+        length, speed = rng.uniform(120.0, 300.0), rng.uniform(260.0, 400.0)
+        path[:, 1] -= np.clip((t - start) * speed, 0, length)
+        start += rng.uniform(3.0, 5.0)
+    meter = GaitMeter()
+    found = []
+    for ti, zi in zip(t, path, strict=True):
+        meter.add(ti, zi)
+        if ti > 8:
+            found.append(meter.omega_rad_s / (2 * np.pi))
+    assert all(f == pytest.approx(1.3, abs=0.02) for f in found), sorted(set(found))
+
+
 def test_a_walkers_sway_is_predicted_at_its_phase() -> None:
     """0.4 s ahead of a swaying walker: with its gait the default misses by a few millimetres;
     a filter that cannot see the gait (ω fixed at 0) misses by about the sway."""
