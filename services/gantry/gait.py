@@ -74,10 +74,9 @@ class GaitMeter:
         power = (amplitude ** 2).sum(axis=1)
         if self.omega_rad_s > 0:  # the gait known: is it still there, whatever else moved?
             near = np.abs(freqs - self.omega_rad_s / (2 * np.pi)) <= self.step_hz * 1.01
-            kept = float(np.sqrt(power[near].max()))
-            if kept >= self.min_amplitude_mm and power[near].max() >= \
-                    self.prominence * np.median(power):
-                return self.omega_rad_s, kept
+            kept = float(power[near].max())
+            if self._stands_out(kept, power):
+                return self.omega_rad_s, float(np.sqrt(kept))
         best = int(np.argmax(power))
         strongest = float(np.sqrt(power[best]))
         freq = float(freqs[best])
@@ -87,7 +86,12 @@ class GaitMeter:
             if bend < 0:  # to 0.01 Hz: the filter keeps its matrices per gait
                 freq = round(freq + 0.5 * (before - after) / bend * self.step_hz, 2)
         explained = 0.5 * power[best] / max(float((residual ** 2).sum(axis=1).mean()), 1e-9)
-        if strongest < self.min_amplitude_mm or power[best] < self.prominence * np.median(power) \
-                or best in (0, len(freqs) - 1) or explained < self.share:
+        if not self._stands_out(float(power[best]), power) or best in (0, len(freqs) - 1) \
+                or explained < self.share:
             return 0.0, strongest
         return 2 * np.pi * freq, strongest
+
+    def _stands_out(self, peak_power: float, power: np.ndarray) -> bool:
+        """A sine of this power is a sway: large enough, and well above the spectrum's median."""
+        return np.sqrt(peak_power) >= self.min_amplitude_mm and \
+            peak_power >= self.prominence * float(np.median(power))

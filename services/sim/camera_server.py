@@ -101,7 +101,7 @@ class SimCamera:
         milliseconds), and the wand would be drawn where it was that much later. The head is
         drawn as it is now (it has no past; at rest while a picture is measured)."""
         now = self.clock()
-        taken = now - min(max(waited_s, 0.0), MAX_WAIT_S)
+        taken = now - waited_s
         pose = self.head.pose(now)
         intr = self.head.intrinsics(now, width, height)
         ir_visible = self.head.ir_cut_filter == "off"
@@ -198,7 +198,8 @@ def answer(cam: ServedCamera, path: str, args: dict[str, str], body: bytes,
         size = vapix.image_size(args, cam.resolutions)
         if isinstance(size, vapix.Reply):
             return size
-        return jpeg_reply(cam, size, args, waited_s=time.time() - arrived)
+        return jpeg_reply(cam, size, args,
+                          waited_s=min(max(time.time() - arrived, 0.0), MAX_WAIT_S))
     if not isinstance(cam, SimCamera):  # a fixed camera: pictures only
         return vapix.not_found()
     now = cam.clock()

@@ -23,7 +23,6 @@ import numpy as np
 
 from common.camera import Intrinsics, Pose, project, rot_z
 from common.crane_frame import CraneFrame
-from services.sim.camera_server import MAX_WAIT_S
 from services.sim.render import MARKER_RADIUS_MM
 from services.sim.scene import ROBOT_GAP_MM, ROBOT_SIZE_MM, GroundView, chassis_outline
 
@@ -114,7 +113,7 @@ class ObservationCamera:
     def snapshot(self, width: int, height: int, waited_s: float = 0.0) -> np.ndarray:
         """The picture of when its request came, ``waited_s`` ago (BGR, uint8): its own
         process renders on idle time, the scene is not drawn later for that."""
-        now = self.clock() - min(max(waited_s, 0.0), MAX_WAIT_S)
+        now = self.clock() - waited_s
         pose = self.view.pose(self.crane(now)[:2], self.frame)
         intr = self.view.intrinsics(width, height)
         image = cv2.multiply(cv2.cvtColor(self.ground.brightness(pose, intr),
