@@ -39,10 +39,16 @@ class ModelCrane(RegisterCrane):
         super().__init__(registers, frame)
         self.model, self.clock = model, clock
         self._holding = [0] * registers.holding_count
+        self._block: tuple[tuple, list[int]] | None = None  # the last state and its registers
 
     def _read_input(self) -> list[int]:
-        self.model.advance_to(self.clock())
-        return input_registers(self.model, self.registers)
+        model = self.model
+        model.advance_to(self.clock())
+        state = (model.report(), model.status(), model.faults, model.heartbeat,
+                 model.setpoints_taken)
+        if self._block is None or self._block[0] != state:
+            self._block = state, input_registers(model, self.registers)
+        return self._block[1]
 
     def _read_holding(self, start: int, count: int) -> list[int]:
         return self._holding[start:start + count]

@@ -68,6 +68,10 @@ class RegisterCrane:
         self.registers, self.frame = registers, frame
         self._beat = 0
         self.reads_back = True  # the setpoint registers, at each read
+        # the last blocks read and what they said: a controller's registers change once a
+        # cycle, and the loop reads them several times a cycle (40 a second)
+        self._decoded: tuple[tuple[int, ...], CraneReading] | None = None
+        self._read_back: tuple[tuple[int, ...], tuple[float, float]] | None = None
 
     def enable(self) -> None:
         """Enable only: a latched fault stays latched (``reset_faults`` is the operator's)."""
@@ -91,22 +95,34 @@ class RegisterCrane:
     def read(self) -> CraneReading:
         """The input registers, and the setpoint registers read back: whoever wrote them
         last, the gantry or another Modbus client."""
-        reading = reading_from(self._read_input(), self.registers.input_start, self.registers,
-                               self.frame)
+        block = tuple(self._read_input())
+        if self._decoded is None or self._decoded[0] != block:
+            self._decoded = block, reading_from(list(block), self.registers.input_start,
+                                                self.registers, self.frame)
+        reading = self._decoded[1]
         if not self.reads_back:
             return reading
         try:
-            x, y = (self.registers.read(name, self._read_holding(
-                getattr(self.registers, name), self.registers.width(name)),
-                getattr(self.registers, name)) for name in ("setpoint_x", "setpoint_y"))
+            held = tuple(word for name in ("setpoint_x", "setpoint_y") for word in
+                         self._read_holding(getattr(self.registers, name),
+                                            self.registers.width(name)))
         except CraneRejected as err:  # a controller that does not let its setpoints be read
             log.warning("the setpoint registers cannot be read back (%s): the gantry judges "
                         "only the targets the controller takes", err)
             self.reads_back = False
             return reading
+        if self._read_back is None or self._read_back[0] != held:
+            self._read_back = held, self._written(list(held))
+        x, y = self._read_back[1]
+        return dataclasses.replace(reading, written_x_mm=x, written_y_mm=y)
+
+    def _written(self, held: list[int]) -> tuple[float, float]:
+        """The setpoint registers (x's words, then y's) in the world."""
+        width = self.registers.width("setpoint_x")
+        x = self.registers.read("setpoint_x", held[:width], self.registers.setpoint_x)
+        y = self.registers.read("setpoint_y", held[width:], self.registers.setpoint_y)
         written = self.frame.to_world([x, y])
-        return dataclasses.replace(reading, written_x_mm=float(written[0]),
-                                   written_y_mm=float(written[1]))
+        return float(written[0]), float(written[1])
 
     def _write(self, address: int, values: list[int]) -> None:
         raise NotImplementedError

@@ -99,7 +99,7 @@ class FollowFilter:
     def state(self) -> np.ndarray:
         """The models' states mixed by their weights (4, axes)."""
         assert self.x is not None
-        return np.einsum("m,mka->ka", self.mu, self.x)
+        return (self.mu @ self.x.reshape(self.models, -1)).reshape(self.x.shape[1:])
 
     def _model(self, dt: float, noise_mm: float) -> _Steady:
         """The models' steady state for frames ``dt`` apart with ``noise_mm``: kept by the

@@ -100,7 +100,7 @@ class SetpointGuard:
         velocity = self._step_velocity + _limit(velocity - self._step_velocity,
                                                 self.max_accel_mm_s2 * dt)
         velocity = self._braking(velocity, target, last, dt, speed)
-        if self._last_target is not None and not np.allclose(target, self._last_target):
+        if self._last_target is not None and not _same(target, self._last_target):
             # braking for a target that moved (back toward the crane) may ask for more than
             # the crane can: the acceleration limit comes first, it overshoots a little
             # instead (towards a target that stands, the braking profile keeps to the limit)
@@ -214,3 +214,9 @@ class TargetCheck:
         return (f"the crane's target ({x:.0f}, {y:.0f}) mm{clamped} is none of the gantry's "
                 f"setpoints {self._misses} times in a row: another Modbus client writes "
                 "setpoints")
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    """``np.allclose(a, b)`` for two points, without its general machinery (each step asks)."""
+    return all(abs(float(x) - float(y)) <= 1e-8 + 1e-5 * abs(float(y))
+               for x, y in zip(a, b, strict=True))

@@ -307,6 +307,49 @@ def test_a_controller_that_hides_its_setpoints_is_judged_by_its_targets_only() -
     assert crane.read().written_x_mm is None, "asked once only"
 
 
+class _Registers(RegisterCrane):
+    """A controller's register bank in memory: what it holds is what is read."""
+
+    def __init__(self, registers: RegisterMap, frame: CraneFrame) -> None:
+        super().__init__(registers, frame)
+        self.input = [0] * registers.input_count
+        self.holding = [0] * registers.holding_count
+        self.input_reads = 0
+
+    def _read_input(self) -> list[int]:
+        self.input_reads += 1
+        return list(self.input)
+
+    def _read_holding(self, start: int, count: int) -> list[int]:
+        return self.holding[start:start + count]
+
+    def _write(self, address: int, values: list[int]) -> None:
+        self.holding[address:address + len(values)] = values
+
+
+def test_every_read_says_what_the_registers_hold_now_though_an_unchanged_block_is_decoded_once(
+        ) -> None:
+    """The loop reads the registers 40 times a second and the controller changes them once a
+    cycle: a block read before is not decoded again, and a change of any word, in the input
+    registers or in the setpoint registers read back, is read at once."""
+    regs = RegisterMap()
+    crane = _Registers(regs, CraneFrame(origin_mm=(100.0, -50.0), yaw_deg=30.0, flip_y=True))
+    crane.write_setpoint(1200.0, 800.0)
+    for x_mm in (0.0, 0.0, 250.0, 250.0, -75.0):  # whole register units
+        at = regs.actual_x - regs.input_start
+        crane.input[at:at + regs.width("actual_x")] = regs.encode("actual_x", x_mm)
+        reading = crane.read()
+        world = crane.frame.to_world([x_mm, 0.0])
+        assert (reading.x_mm, reading.y_mm) == pytest.approx(tuple(world), abs=1e-6)
+        assert (reading.written_x_mm, reading.written_y_mm) == pytest.approx((1200.0, 800.0),
+                                                                            abs=0.5)
+    crane.write_setpoint(-300.0, 40.0)  # another client may write them too: read back
+    reading = crane.read()
+    assert (reading.written_x_mm, reading.written_y_mm) == pytest.approx((-300.0, 40.0),
+                                                                        abs=0.5)
+    assert crane.input_reads == 6, "every read asks the controller"
+
+
 def test_the_default_needs_no_library_to_load_at_its_first_update() -> None:
     """An import at the first update, while the crane is armed, holds the GIL (filterpy and
     scipy took 0.8 s: the heartbeat starved and the crane's watchdog tripped): the default's
