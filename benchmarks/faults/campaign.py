@@ -112,8 +112,10 @@ def run(short: bool, per_key: int, churn: int, folder: Path,
                 "camera-reboot": campaign.camera_reboot,
                 "kill": campaign.kill_each}
             for name in only or list(steps):
+                began = time.monotonic()
                 campaign.follow()  # each fault starts from a crane that follows the robot
                 steps[name]()
+                campaign.log(f"{name}: {time.monotonic() - began:.1f} s")
             campaign.totals(started)
             return campaign.rows
         finally:
