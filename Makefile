@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-system compose-test lint setup wire-doc clean
+.PHONY: demo test test-system compose-test compose-image lint setup wire-doc clean
 
 # The project and its tools into .venv: by uv (the same packages from the same index in about a
 # fifth of pip's time, docs/benchmarks.md), by pip where uv cannot be had or fails.
@@ -46,6 +46,10 @@ test-system: $(KERNEL)
 
 ## The lab under a real Docker engine (root; installs Debian's docker.io when missing):
 ## build, docker compose up with the sim, crash, router restart, down/up (docs/deployment.md §7).
+# the compose test's engine and image made ahead (.ci/run: beside make test)
+compose-image: $(STAMP)
+	$(BIN)/python -m compose_test.prepare
+
 compose-test: $(KERNEL)
 	$(BIN)/python -m pytest -q -p no:cacheprovider compose_test --timeout 2400 --durations=15
 

@@ -6,18 +6,17 @@ the end of the run (and kept in run/compose-test/figures.json)."""
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
 import time
 from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 
 from compose_test.engine import (
+    ENGINE_HOME,
     IMAGE,
-    ROOT,
+    OUT,
     Engine,
     EngineError,
     install_when_missing,
@@ -29,8 +28,6 @@ from tests.ports import free_port
 from tests.sim.test_sim_service import write_lab
 
 UPSTREAM_ROUTER = "eclipse/zenoh:1.10.2"  # docker-compose.yml's
-OUT = ROOT / "run" / "compose-test"
-ENGINE_HOME = Path(os.environ.get("STB_ENGINE_HOME", "/var/tmp/stb-compose-engine"))
 FIGURES: dict[str, object] = {}
 FOLLOW_WINDOW_S = 30.0  # more than one lap of the locomotive's railway (about 24 s)
 MEASURED_POSES = "stb-compose-test-measured-poses"

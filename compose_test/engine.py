@@ -27,6 +27,8 @@ IMAGE = "stb-supervisor:latest"
 HOST_CA_BUNDLE = Path("/etc/ssl/certs/ca-certificates.crt")  # Debian's ca-certificates
 BUILD_CA = ROOT / "deploy" / "docker" / "build-ca" / "ca-certificates.crt"
 CAP_SYS_RESOURCE = 24
+OUT = ROOT / "run" / "compose-test"
+ENGINE_HOME = Path(os.environ.get("STB_ENGINE_HOME", "/var/tmp/stb-compose-engine"))
 
 
 class EngineError(RuntimeError):
