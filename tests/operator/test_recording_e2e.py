@@ -96,7 +96,12 @@ def test_the_recording_opens_in_foxglove_with_typed_channels(recording: Path) ->
         decoder = av.CodecContext.create("h264", "r")
         units = decoded_typed(recording, topic)
         frames = [f for u in units for f in decoder.decode(av.Packet(u.data))]
-        assert len(frames) == len(units) > 2 * VIDEO_FPS, topic
+        # the bird's-eye view is not pulled at --video-fps: it comes as the sim's observation
+        # camera renders it, on the processor time the lab leaves (SCHED_IDLE), so its count
+        # follows the machine's load (5 in 8 s in a CI run beside another lab); that every one
+        # the bus carried is recorded is test_demo_recording's
+        pulled = topic != "/observation/video"
+        assert len(frames) == len(units) > (2 * VIDEO_FPS if pulled else 0), topic
         stamps = [u.timestamp.seconds + u.timestamp.nanos * 1e-9 for u in units]
         assert stamps == sorted(stamps), f"{topic}: in time order"
     schemaless = [c.topic for c in summary.channels.values()
