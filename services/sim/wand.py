@@ -8,7 +8,8 @@ in the picture of a camera that is being calibrated — the IR-cut filter off an
 standing still, what calibration mode does to a camera — at that camera's present zoom, holds
 it still for ``dwell_s``, and on to the next; taking turns when several are. With no camera
 in calibration mode it walks to points over the crater (``wander``), as before. A share of the
-points is in the picture's corners, as lens calibration guides ask of a person.
+points is in the picture's corners, as lens calibration guides ask of a person, who goes round
+them in turn (not by dice: a corner left out for minutes held a collection up).
 
 The picture is the camera's own (its true lens, ``views``): the carrier uses the sim's truth
 only as a person uses what they see. Points are spread over the whole picture, corners
@@ -59,6 +60,7 @@ class WandCarrier:
     dwell_s: float = 0.5
     _segments: deque[_Segment] = field(default_factory=lambda: deque(maxlen=SEGMENTS_KEPT))
     _turn: int = 0
+    _corner: int = 0
     _lock: threading.Lock = field(default_factory=threading.Lock)
 
     def position(self, t: float) -> np.ndarray:
@@ -103,24 +105,28 @@ class WandCarrier:
     def in_view(self, pose: Pose, intr: Intrinsics, tries: int = 20) -> np.ndarray | None:
         """A point the camera sees at a random place in its picture, between ``NEAREST_MM``
         and the floor; None when none was found (a camera looking at the sky)."""
+        corner = self.rng.random() < CORNERS
         for _ in range(tries):
-            u, v = self._spot() * (intr.width_px, intr.height_px)
+            u, v = self._spot(corner) * (intr.width_px, intr.height_px)
             straight = undistort_pixels(np.array([[u, v]]), intr)[0]
             ray = pose.rotation @ np.array([1.0, (straight[0] - intr.cy_px) / intr.fy_px,
                                             (straight[1] - intr.cz_px) / intr.fz_px])
             ray /= np.linalg.norm(ray)
             reach = self._reach(pose.position, ray)
             if reach > NEAREST_MM:
+                self._corner += corner  # that corner done: the next one next time
                 return pose.position + ray * self.rng.uniform(NEAREST_MM, reach)
         return None
 
-    def _spot(self) -> np.ndarray:
+    def _spot(self, corner: bool) -> np.ndarray:
         """Where in the picture (fractions of its width and height): anywhere, or — as lens
-        calibration guides ask, the lens bending most there — in a corner (``CORNERS``)."""
-        if self.rng.random() >= CORNERS:
+        calibration guides ask, the lens bending most there — in a corner (``CORNERS`` of the
+        points), the four in turn."""
+        if not corner:
             return self.rng.uniform(EDGE_MARGIN, 1 - EDGE_MARGIN, 2)
         near = self.rng.uniform(EDGE_MARGIN, CORNER_SIZE, 2)
-        return np.where(self.rng.random(2) < 0.5, near, 1 - near)
+        right, low = self._corner % 2, (self._corner // 2) % 2
+        return np.where(np.array([right, low]) == 1, 1 - near, near)
 
     def _reach(self, origin: np.ndarray, ray: np.ndarray) -> float:
         """How far along the ray the wand may go before it comes too near the floor."""

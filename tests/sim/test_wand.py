@@ -55,6 +55,19 @@ def test_at_the_widest_zoom_the_points_reach_the_pictures_corners() -> None:
     assert sum(corners) >= 3
 
 
+def test_the_corners_are_taken_in_turn() -> None:
+    """A person goes round the picture's corners, not by dice (a corner left out for minutes
+    held a collection up)."""
+    intr = LENS.intrinsics(1)
+    points = np.array(_dwells(_carrier([(MOUNT, intr)], seed=5), 600.0))[1:]
+    uv = project(points, MOUNT, intr)
+    corner = [(int(u > 352), int(v > 288)) for u, v in uv
+              if min(u, 704 - u) < 0.12 * 704 and min(v, 576 - v) < 0.12 * 576]
+    assert len(corner) >= 20
+    for i in range(len(corner) - 5):  # each corner within any six in a row (four in turn,
+        assert len(set(corner[i:i + 6])) == 4, corner[i:i + 6]  # some points near one anyway)
+
+
 def test_without_a_camera_in_calibration_mode_it_wanders_over_the_crater() -> None:
     points = np.array(_dwells(_carrier([]), 60.0))
     assert len(points) >= 5 and np.all(points[1:, 2] == 600.0)
