@@ -26,7 +26,7 @@ from typing import IO, Any
 
 from mcap.exceptions import EndOfFile, McapError
 from mcap.reader import make_reader
-from mcap.records import Channel, Message
+from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
@@ -177,6 +177,68 @@ def recorded_keys(path: Path) -> dict[str, int]:
     return {c.topic: counts.get(cid, 0) for cid, c in summary.channels.items() if _is_bus(c)}
 
 
+def topics_of(path: Path) -> dict[str, str]:
+    """Every channel's topic and its schema's name ("" without one), from the summary or, in a
+    recording that was never finished, from the channels written before it breaks off."""
+    if not _finished(path):
+        schemas: dict[int, str] = {}
+        found: dict[str, str] = {}
+        for record in _records_until_broken(path):
+            if isinstance(record, Schema):
+                schemas[record.id] = record.name
+            elif isinstance(record, Channel):
+                found[record.topic] = schemas.get(record.schema_id, "")
+        return found
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None  # checked by _finished
+    return {c.topic: (s.name if (s := summary.schemas.get(c.schema_id)) else "")
+            for c in summary.channels.values()}
+
+
+def messages_of(path: Path, topics: Iterable[str], start_ns: int | None = None,
+                end_ns: int | None = None) -> Iterator[tuple[Schema | None, Channel, Message]]:
+    """The messages on ``topics`` logged between two times, both included (None: from the
+    start, to the end), in log time order; a recording that was never finished (the recorder
+    was killed) in file order up to where it breaks off."""
+    wanted = set(topics)
+    if _finished(path):
+        with open(path, "rb") as f:
+            yield from make_reader(f).iter_messages(topics=sorted(wanted), starting_at=start_ns,
+                                                    ending_at=end_ns, log_time_order=True)
+        return
+    for schema, channel, message in _salvaged_messages(path, wanted):
+        if (start_ns is None or message.log_time >= start_ns) and \
+                (end_ns is None or message.log_time <= end_ns):
+            yield schema, channel, message
+
+
+def _salvaged_messages(path: Path, wanted: set[str] | None
+                       ) -> Iterator[tuple[Schema | None, Channel, Message]]:
+    """An unfinished file's messages on ``wanted`` topics (None: all), in file order."""
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    for record in _records_until_broken(path):
+        if isinstance(record, Schema):
+            schemas[record.id] = record
+        elif isinstance(record, Channel):
+            channels[record.id] = record
+        elif isinstance(record, Message):
+            channel = channels.get(record.channel_id)
+            if channel is not None and (wanted is None or channel.topic in wanted):
+                yield schemas.get(channel.schema_id), channel, record
+
+
+def _records_until_broken(path: Path) -> Iterator[object]:
+    """An unfinished file's records in file order, up to where it breaks off."""
+    try:
+        with open(path, "rb") as f:
+            yield from StreamReader(f).records
+    except (*READ_ERRORS, EndOfFile) as err:
+        log.warning("%s was not finished: read up to where it breaks off (%s)", path,
+                    type(err).__name__)
+
+
 def _finished(path: Path) -> bool:
     """True if the file has its summary; False if it breaks off. RecordingError if it is no
     MCAP file at all."""
@@ -196,22 +258,9 @@ def _finished(path: Path) -> bool:
 
 
 def _salvage(path: Path, wanted: set[str] | None) -> Iterator[Sample]:
-    channels: dict[int, Channel] = {}
-    count = 0
-    try:
-        with open(path, "rb") as f:
-            for record in StreamReader(f).records:
-                if isinstance(record, Channel):
-                    channels[record.id] = record
-                elif isinstance(record, Message):
-                    channel = channels.get(record.channel_id)
-                    if channel and _is_bus(channel) and (wanted is None
-                                                         or channel.topic in wanted):
-                        count += 1
-                        yield _sample(channel, record)
-    except (*READ_ERRORS, EndOfFile) as err:
-        log.warning("%s was not finished: read %d samples up to where it breaks off (%s)",
-                    path, count, type(err).__name__)
+    for _, channel, message in _salvaged_messages(path, wanted):
+        if _is_bus(channel):
+            yield _sample(channel, message)
 
 
 def _is_bus(channel: Channel) -> bool:

@@ -11,11 +11,11 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from mcap.reader import make_reader
 
 from common import codec, keys
 from common import messages as m
 from common.files import write_atomically
+from common.mcap_file import messages_of, topics_of
 from services.report.video import still, video_topics
 
 PREVIEW_WITHIN_S = 2.0  # a PTZ preview taken this long before a moment still shows it
@@ -70,13 +70,7 @@ def _write(out_dir: Path, name: str, image: np.ndarray, moment: Moment, caption:
 
 
 def _bus_keys(paths: Sequence[Path]) -> set[str]:
-    found: set[str] = set()
-    for path in paths:
-        with open(path, "rb") as f:
-            summary = make_reader(f).get_summary()
-        if summary is not None:
-            found |= {c.topic for c in summary.channels.values()}
-    return found
+    return {topic for path in paths for topic in topics_of(path)}
 
 
 def _preview(paths: Sequence[Path], key: str, at_s: float) -> m.PtzPreview | None:
@@ -84,12 +78,10 @@ def _preview(paths: Sequence[Path], key: str, at_s: float) -> m.PtzPreview | Non
     last = None
     start, end = int((at_s - PREVIEW_WITHIN_S) * 1e9), int(at_s * 1e9)
     for path in paths:
-        with open(path, "rb") as f:
-            for _, _, message in make_reader(f).iter_messages(topics=[key], starting_at=start,
-                                                               ending_at=end):
-                try:
-                    last = codec.decode(m.PtzPreview, message.data,
-                                        max_bytes=keys.PTZ_PREVIEW.max_payload_bytes)
-                except codec.DecodeError:
-                    continue
+        for _, _, message in messages_of(path, [key], start, end):
+            try:
+                last = codec.decode(m.PtzPreview, message.data,
+                                    max_bytes=keys.PTZ_PREVIEW.max_payload_bytes)
+            except codec.DecodeError:
+                continue
     return last

@@ -21,7 +21,8 @@ import av
 import numpy as np
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from google.protobuf.message import DecodeError
-from mcap.reader import make_reader
+
+from common.mcap_file import messages_of, topics_of
 
 log = logging.getLogger(__name__)
 VIDEO_SCHEMA = "foxglove.CompressedVideo"
@@ -67,38 +68,28 @@ def is_keyframe(annex_b: bytes) -> bool:
 
 def video_topics(paths: Sequence[Path]) -> list[str]:
     """The recording's video channels (``/observation/video``, ``/gantry/image``, …)."""
-    topics: set[str] = set()
-    for path in paths:
-        with open(path, "rb") as f:
-            summary = make_reader(f).get_summary()
-        if summary is None:
-            continue
-        topics |= {c.topic for c in summary.channels.values()
-                   if (s := summary.schemas.get(c.schema_id)) is not None
-                   and s.name == VIDEO_SCHEMA}
-    return sorted(topics)
+    return sorted({topic for path in paths for topic, schema in topics_of(path).items()
+                   if schema == VIDEO_SCHEMA})
 
 
 def units(paths: Sequence[Path], topic: str, start_s: float | None = None,
           end_s: float | None = None) -> Iterator[Unit]:
     """The channel's access units between two times (None: from the start, to the end), in
-    order, file after file."""
+    order, file after file (an unfinished file up to where it breaks off)."""
     start = None if start_s is None else max(0, int(start_s * 1e9))
     end = None if end_s is None else int(end_s * 1e9)
     for path in paths:
-        with open(path, "rb") as f:
-            for schema, _, message in make_reader(f).iter_messages(
-                    topics=[topic], starting_at=start, ending_at=end, log_time_order=True):
-                if schema is None or schema.name != VIDEO_SCHEMA:
-                    continue
-                try:
-                    video = message_class(schema.name, schema.data).FromString(message.data)
-                except (KeyError, TypeError, DecodeError) as err:  # not Foxglove's schema
-                    log.warning("%s in %s: not a CompressedVideo (%s); left out", topic,
-                                path, err)
-                    return
-                if video.format == "h264":
-                    yield Unit(message.log_time / 1e9, bytes(video.data))
+        for schema, _, message in messages_of(path, [topic], start, end):
+            if schema is None or schema.name != VIDEO_SCHEMA:
+                continue
+            try:
+                video = message_class(schema.name, schema.data).FromString(message.data)
+            except (KeyError, TypeError, DecodeError) as err:  # not Foxglove's schema
+                log.warning("%s in %s: not a CompressedVideo (%s); left out", topic,
+                            path, err)
+                return
+            if video.format == "h264":
+                yield Unit(message.log_time / 1e9, bytes(video.data))
 
 
 def decoded(stream: Iterator[Unit]) -> Iterator[tuple[float, np.ndarray]]:
