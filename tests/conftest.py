@@ -24,6 +24,8 @@ from common.settings import BusSettings, ZenohSettings
 from tests.ports import free_port
 from tests.simlab import crater, crater_file, lab  # noqa: F401 - shared fixtures
 
+pytest_plugins = ["tests.scheduling"]  # how make test-system shares its tests
+
 ROOT = Path(__file__).resolve().parent.parent
 T = TypeVar("T")
 M = TypeVar("M", bound=Message)
@@ -107,28 +109,6 @@ def open_when_up(settings: ZenohSettings, timeout: float = 15.0) -> zenoh.Sessio
 def rng() -> np.random.Generator:
     """A seeded generator: every test's randomness is reproducible."""
     return np.random.default_rng(1234)
-
-
-SHARED_LABS = ("tests/operator/",)
-"""Packages whose tests share one lab (a package-scoped fixture such as ``live_lab``)."""
-
-
-def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
-    """On two workers (``make test-system``: ``--dist loadgroup``) each package of
-    ``SHARED_LABS`` runs on one worker, so that its lab runs once and not beside itself; every
-    other test is a unit of its own. xdist's own grouping (the ``xdist_group`` mark) does not
-    work under pytest 9 (it renames ``item._nodeid``, which pytest 9 no longer reads): the
-    operator package ran on both workers, two labs and two browsers at once on two cores, and a
-    CI run failed on it."""
-    if config.getvalue("dist") != "loadgroup":
-        return None
-    from xdist.scheduler import LoadScopeScheduling
-
-    class SharedLabScheduling(LoadScopeScheduling):
-        def _split_scope(self, nodeid: str) -> str:
-            return next((p for p in SHARED_LABS if nodeid.startswith(p)), nodeid)
-
-    return SharedLabScheduling(config, log)
 
 
 @pytest.fixture(scope="session", autouse=True)
