@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import signal
+import time
 from collections import defaultdict
 from pathlib import Path
 
@@ -40,14 +41,31 @@ pytestmark = pytest.mark.system  # a whole lab recorded on real time: make test-
 
 
 @pytest.fixture(scope="module")
-def recording(live_lab: LiveLab, tmp_path_factory: pytest.TempPathFactory) -> Path:
+def birdseye_carried(live_lab: LiveLab) -> list[float]:
+    """When the bird's-eye pictures reached a subscriber beside the recorder while
+    ``recording`` was made (wall clock; filled as they come)."""
+    return []
+
+
+@pytest.fixture(scope="module")
+def recording(live_lab: LiveLab, birdseye_carried: list[float],
+              tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("rec") / "run.mcap"
-    proc = stb_process("record", str(out), "--lab", str(live_lab.lab), "--duration",
-                       str(RECORD_S), "--set", "progress_s=2",
-                       "--set", f"height_map={live_lab.crater_file}",
-                       "--video", "ptz1", "--video", "ptz2", "--video-fps", str(VIDEO_FPS),
-                       "--raw-frames")
-    assert proc.wait(timeout=RECORD_S + 30) == 0, proc.stderr.read()
+    settings = client_settings(live_lab.endpoint)
+    session = open_when_up(settings.zenoh)
+    bus = Bus(session, settings)
+    try:
+        bus.subscribe(keys.VIDEO, lambda _: birdseye_carried.append(time.time()), latest=False,
+                      camera="observation")
+        proc = stb_process("record", str(out), "--lab", str(live_lab.lab), "--duration",
+                           str(RECORD_S), "--set", "progress_s=2",
+                           "--set", f"height_map={live_lab.crater_file}",
+                           "--video", "ptz1", "--video", "ptz2", "--video-fps",
+                           str(VIDEO_FPS), "--raw-frames")
+        assert proc.wait(timeout=RECORD_S + 30) == 0, proc.stderr.read()
+    finally:
+        bus.close()
+        session.close()
     log = proc.stderr.read()
     assert "wrote" in log and "samples" in log
     print(log)
@@ -75,7 +93,8 @@ def test_the_recording_has_every_key_in_order_and_decodable(recording: Path) -> 
     assert received[-1] - received[0] > RECORD_S - 1.5
 
 
-def test_the_recording_opens_in_foxglove_with_typed_channels(recording: Path) -> None:
+def test_the_recording_opens_in_foxglove_with_typed_channels(
+        recording: Path, birdseye_carried: list[float]) -> None:
     """What Foxglove's 3D, image and plot panels read: typed (protobuf) channels with their
     schemas, whose content is the run's — read with the mcap library, decoded by the file's own
     schemas."""
@@ -84,7 +103,7 @@ def test_the_recording_opens_in_foxglove_with_typed_channels(recording: Path) ->
     assert summary is not None
     typed = {c.topic: summary.schemas[c.schema_id] for c in summary.channels.values()
              if c.message_encoding == "protobuf"}
-    assert {t: s.name for t, s in typed.items()} == {
+    expected = {
         "/scene": "foxglove.SceneUpdate", "/crater": "foxglove.SceneUpdate",
         "/tf": "foxglove.FrameTransforms", "/gantry/image": "foxglove.CompressedVideo",
         "/ptz1/image": "foxglove.CompressedImage", "/ptz2/image": "foxglove.CompressedImage",
@@ -92,7 +111,20 @@ def test_the_recording_opens_in_foxglove_with_typed_channels(recording: Path) ->
         "/ptz2/annotations": "foxglove.ImageAnnotations",
         "/ptz1/video": "foxglove.CompressedVideo", "/ptz2/video": "foxglove.CompressedVideo",
         "/observation/video": "foxglove.CompressedVideo"}  # the bird's-eye view
-    for topic in ("/gantry/image", "/ptz1/video", "/ptz2/video", "/observation/video"):
+    # the bird's-eye pictures come as the sim's observation camera renders them, on the
+    # processor time the lab leaves (SCHED_IDLE): beside a lab ahead of this one (nice −10) a
+    # CI run's eight seconds had none at all. Its channel is asked for when the bus carried one
+    # well inside the recording (a second from either end); that every one the bus carried is
+    # recorded is test_demo_recording's
+    received = [s.received_s for s in read_samples(recording, ["stb/tracker/robot"])]
+    inside = [t for t in birdseye_carried if received[0] + 1 <= t <= received[-1] - 1]
+    print(f"bird's-eye pictures carried well inside the recording: {len(inside)}")
+    names = {t: s.name for t, s in typed.items()}
+    if not inside:
+        expected.pop("/observation/video")
+        names.pop("/observation/video", None)
+    assert names == expected
+    for topic in [t for t in expected if t.endswith("/video") or t == "/gantry/image"]:
         decoder = av.CodecContext.create("h264", "r")
         units = decoded_typed(recording, topic)
         frames = [f for u in units for f in decoder.decode(av.Packet(u.data))]
