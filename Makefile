@@ -40,7 +40,7 @@ test: $(STAMP)
 ## The long whole-lab runs on real time (fault campaign, demo calibration, live vs experiment,
 ## commissioning, collection and recording end to end, the lens at several zooms, the page in a
 ## browser against the whole lab, several hosts):
-## 11–15 minutes (12.6 in the last clean-clone run) on 2 cores (docs/benchmarks.md, "Where CI's time goes"). CI runs both.
+## 11–15 minutes (11.7 in the last clean-clone run) on 2 cores (docs/benchmarks.md, "Where CI's time goes"). CI runs both.
 test-system: $(KERNEL)
 	$(BIN)/python -m pytest -q -m system -n 2 --dist loadgroup --durations=25
 
