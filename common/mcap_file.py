@@ -28,6 +28,7 @@ from mcap.exceptions import EndOfFile, McapError
 from mcap.reader import make_reader
 from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
+from mcap.summary import Summary
 from mcap.writer import CompressionType, Writer
 
 log = logging.getLogger(__name__)
@@ -168,11 +169,10 @@ def run_keys(paths: Path | Sequence[Path]) -> dict[str, int]:
 
 def recorded_keys(path: Path) -> dict[str, int]:
     """Every recorded key and its number of samples."""
-    if not _finished(path):
+    summary = _summary(path)
+    if summary is None:
         return dict(Counter(s.key for s in _salvage(path, None)))
-    with open(path, "rb") as f:
-        summary = make_reader(f).get_summary()
-    assert summary is not None and summary.statistics is not None  # checked by _finished
+    assert summary.statistics is not None  # checked by _summary
     counts = summary.statistics.channel_message_counts
     return {c.topic: counts.get(cid, 0) for cid, c in summary.channels.items() if _is_bus(c)}
 
@@ -180,7 +180,8 @@ def recorded_keys(path: Path) -> dict[str, int]:
 def topics_of(path: Path) -> dict[str, str]:
     """Every channel's topic and its schema's name ("" without one), from the summary or, in a
     recording that was never finished, from the channels written before it breaks off."""
-    if not _finished(path):
+    summary = _summary(path)
+    if summary is None:
         schemas: dict[int, str] = {}
         found: dict[str, str] = {}
         for record in _records_until_broken(path):
@@ -189,9 +190,6 @@ def topics_of(path: Path) -> dict[str, str]:
             elif isinstance(record, Channel):
                 found[record.topic] = schemas.get(record.schema_id, "")
         return found
-    with open(path, "rb") as f:
-        summary = make_reader(f).get_summary()
-    assert summary is not None  # checked by _finished
     return {c.topic: (s.name if (s := summary.schemas.get(c.schema_id)) else "")
             for c in summary.channels.values()}
 
@@ -240,8 +238,12 @@ def _records_until_broken(path: Path) -> Iterator[object]:
 
 
 def _finished(path: Path) -> bool:
-    """True if the file has its summary; False if it breaks off. RecordingError if it is no
-    MCAP file at all."""
+    return _summary(path) is not None
+
+
+def _summary(path: Path) -> Summary | None:
+    """The file's summary, with its statistics; None if it breaks off before them.
+    RecordingError if it is no MCAP file at all."""
     try:
         with open(path, "rb") as f:
             header = f.read(len(MCAP0_MAGIC))
@@ -253,8 +255,8 @@ def _finished(path: Path) -> bool:
         with open(path, "rb") as f:
             summary = make_reader(f).get_summary()
     except READ_ERRORS:
-        return False
-    return summary is not None and summary.statistics is not None
+        return None
+    return summary if summary is not None and summary.statistics is not None else None
 
 
 def _salvage(path: Path, wanted: set[str] | None) -> Iterator[Sample]:
